@@ -1,0 +1,74 @@
+"""Entry point of the ``cutkit`` console command.
+
+The group is built from :data:`cutkit.cli.commands.COMMANDS`.  User errors
+(:class:`cutkit.errors.CutkitError`) become one line on stderr and exit
+code 2; Ctrl-C exits with 130.
+"""
+
+from __future__ import annotations
+
+import importlib
+import importlib.util
+import sys
+
+import click
+
+from cutkit import __version__
+from cutkit.cli.commands import COMMANDS
+from cutkit.errors import CutkitError
+
+
+class _TableGroup(click.Group):
+    """A click group whose commands are the entries of ``COMMANDS``, imported lazily."""
+
+    def list_commands(self, ctx):
+        return [name for name, (module, _) in COMMANDS.items() if _module_exists(module)]
+
+    def get_command(self, ctx, name):
+        entry = COMMANDS.get(name)
+        if entry is None or not _module_exists(entry[0]):
+            return None
+        module = importlib.import_module(entry[0])
+        return module.command
+
+    def format_commands(self, ctx, formatter):
+        # Help text comes from the table so that --help imports no command module.
+        rows = [(name, COMMANDS[name][1]) for name in self.list_commands(ctx)]
+        if rows:
+            with formatter.section("Commands"):
+                formatter.write_dl(rows)
+
+    def invoke(self, ctx):
+        try:
+            return super().invoke(ctx)
+        except CutkitError as err:
+            message = " ".join(str(err).split())  # exactly one line
+            click.echo(f"cutkit: error: {message}", err=True)
+            ctx.exit(err.exit_code)
+        except KeyboardInterrupt:
+            click.echo("cutkit: interrupted", err=True)
+            ctx.exit(130)
+
+
+def _module_exists(module: str) -> bool:
+    return importlib.util.find_spec(module) is not None
+
+
+@click.group(cls=_TableGroup, context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(__version__, "--version", prog_name="cutkit")
+def cli():
+    """cutkit: tetrahedral soft-tissue models from medical volumes, cut with a virtual scalpel."""
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the command line and return its exit code."""
+    try:
+        cli.main(args=argv, prog_name="cutkit", standalone_mode=True)
+    except SystemExit as exc:  # click exits through SystemExit
+        code = exc.code
+        return code if isinstance(code, int) else (0 if code is None else 1)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,1 @@
+"""File input and output: the model file, mesh import/export, atomic writes."""

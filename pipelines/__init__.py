@@ -1,0 +1,1 @@
+"""Build recipes (TOML) shipped with cutkit; see ``cutkit build-model --recipe``."""
