@@ -63,3 +63,35 @@ def box_mesh(shape=(4, 4, 4), spacing=(1.0, 1.0, 1.0), origin=(0.0, 0.0, 0.0)):
     neg = det < 0
     tets[neg, 2], tets[neg, 3] = tets[neg, 3].copy(), tets[neg, 2].copy()
     return points, tets
+
+
+def voxel_mesh(mask, spacing=(1.0, 1.0, 1.0), origin=(0.0, 0.0, 0.0), labels=None):
+    """Tetrahedralise the voxels of a mask, six Kuhn tets per voxel (a staircase boundary).
+
+    Voxel (i, j, k) becomes the cube with corners ``origin + (i..i+1, j..j+1, k..k+1) * spacing``.
+
+    Parameters
+    ----------
+    mask : (nx, ny, nz) bool or integer
+        Voxels to mesh (non-zero).
+    spacing, origin : (3,) float
+    labels : (nx, ny, nz) integer, optional
+        Label of each voxel; defaults to ``mask`` itself when it is integer, else 1.
+
+    Returns
+    -------
+    points : (n_points, 3) float64
+        Only the nodes used by a tet.
+    tets : (6 * n_voxels, 4) int64
+        Positively oriented.
+    tet_labels : (6 * n_voxels,) int32
+    """
+    mask = np.asarray(mask)
+    if labels is None:
+        labels = mask.astype(np.int32) if mask.dtype.kind in "iu" else np.ones(mask.shape, np.int32)
+    points, tets = box_mesh(mask.shape, spacing, origin)
+    keep = np.repeat(mask.ravel() != 0, 6)
+    tets = tets[keep]
+    tet_labels = np.repeat(np.asarray(labels).ravel(), 6)[keep].astype(np.int32)
+    used, inverse = np.unique(tets, return_inverse=True)
+    return points[used], inverse.reshape(tets.shape).astype(np.int64), tet_labels

@@ -1,0 +1,156 @@
+"""Relaxation throughput (paper section 5): spring updates per second, 1M-tet sweep, adaptive lists.
+
+Usage: python benchmarks/relax.py [--json] [--big N] [--small N]
+
+Prints one JSON object with ``--json``:
+  spring_updates_per_s                  semi-implicit Jacobi sweep (numba, all threads), spring ends per s
+  numpy_baseline_spring_updates_per_s   vectorised NumPy explicit step on the same mesh, same process
+  speedup_vs_numpy
+  sweep_ms_1m_tets                      one Jacobi sweep of all nodes of a ~1M-tet Kuhn grid, ms
+  gauss_seidel_sweep_ms_1m_tets         the same as a coloured parallel Gauss-Seidel sweep
+  adaptive_steps_per_s_100k_tets        finest steps dt_0 of simulated time per wall second,
+                                        adaptive node lists, local load on a ~100k-tet grid
+  adaptive_update_fraction_100k_tets    node updates of the adaptive run / those of a uniform run at dt_0
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+
+import numpy as np
+
+from cutkit.model.tetmodel import MATERIAL_FIELDS, BoundaryConditions, Materials, TetModel
+from cutkit.relax import Control, build_spring_model, initial_state
+from cutkit.relax import _kernels as K
+from cutkit.relax.adaptive import NodeLists
+from cutkit.relax.integrate import advance_nodes, colour_classes
+from cutkit.relax.run import explicit_time_limit
+
+_KUHN = np.array([[0, 1, 3, 7], [0, 3, 2, 7], [0, 2, 6, 7], [0, 6, 4, 7], [0, 4, 5, 7], [0, 5, 1, 7]])
+
+
+def kuhn_grid(nx, ny, nz, h=1.0):
+    """Box of nx ny nz cubes, six positively oriented tets each."""
+    ii, jj, kk = np.meshgrid(np.arange(nx + 1), np.arange(ny + 1), np.arange(nz + 1), indexing="ij")
+    points = np.stack([ii, jj, kk], -1).reshape(-1, 3) * float(h)
+    ci, cj, ck = (a.ravel() for a in np.meshgrid(np.arange(nx), np.arange(ny), np.arange(nz), indexing="ij"))
+    nid = lambda i, j, k: (i * (ny + 1) + j) * (nz + 1) + k  # noqa: E731
+    corners = np.stack([nid(ci + (c & 1), cj + ((c >> 1) & 1), ck + ((c >> 2) & 1)) for c in range(8)], 1)
+    tets = corners[:, _KUHN].reshape(-1, 4)
+    p = points[tets]
+    det = np.einsum("ij,ij->i", np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), p[:, 3] - p[:, 0])
+    tets[det < 0] = tets[det < 0][:, [0, 2, 1, 3]]
+    return points, tets
+
+
+def block_model(n_cubes_side, nz=None, damping=200.0):
+    nz = nz or n_cubes_side
+    pts, tets = kuhn_grid(n_cubes_side, n_cubes_side, nz, 1.0)
+    row = {k: 0.0 for k in MATERIAL_FIELDS}
+    row.update(label=1, name="tissue", E=1e4, density=1000.0, damping=damping)
+    fixed = np.flatnonzero(pts[:, 2] == 0)
+    return TetModel.from_arrays(pts, tets, materials=Materials.from_rows([row]),
+                                boundary=BoundaryConditions(fixed_nodes=fixed))
+
+
+def numpy_explicit_step(x, v, springs, rest, k, mass, dt):
+    """Vectorised NumPy symplectic Euler step (the baseline)."""
+    d = x[springs[:, 1]] - x[springs[:, 0]]
+    length = np.sqrt(np.einsum("ij,ij->i", d, d))
+    fs = (k * (length - rest) / length)[:, None] * d
+    f = np.zeros_like(x)
+    for c in range(3):
+        f[:, c] = np.bincount(springs[:, 0], fs[:, c], minlength=len(x)) - np.bincount(springs[:, 1], fs[:, c], minlength=len(x))
+    v = v + dt * f / mass[:, None]
+    return x + dt * v, v
+
+
+def best_of(fn, repeats):
+    best = np.inf
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn()
+        best = min(best, time.perf_counter() - t0)
+    return best
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--json", action="store_true")
+    ap.add_argument("--big", type=int, default=55, help="cubes per side of the ~1M-tet grid (55 -> 998k tets)")
+    ap.add_argument("--small", type=int, default=26, help="cubes per side of the ~100k-tet grid (26 -> 105k tets)")
+    args = ap.parse_args(argv)
+    out = {}
+
+    tm = block_model(args.big)
+    sm = build_spring_model(tm)
+    st = initial_state(sm)
+    rng = np.random.default_rng(0)
+    st.positions += rng.normal(scale=1e-3, size=st.positions.shape) * ~sm.fixed[:, None]
+    nodes = sm.free_nodes
+    f = np.zeros((sm.n_nodes, 3))
+    g = np.array([0.0, 0.0, -9806.65])
+    dt = explicit_time_limit(sm)
+    ends = int(sm.adj_offsets[nodes + 1].sum() - sm.adj_offsets[nodes].sum())
+    out["n_tets_big"] = tm.n_tets
+    out["n_nodes_big"] = sm.n_nodes
+    out["n_springs_big"] = sm.n_springs
+    t = [0.0]
+
+    def jacobi():
+        t[0] += dt
+        advance_nodes(sm, st, nodes, t[0], f, g, K.MODE_AXIAL, None)
+
+    jacobi()
+    sweep = best_of(jacobi, 10)
+    out["sweep_ms_1m_tets"] = sweep * 1e3
+    out["spring_updates_per_s"] = ends / sweep
+    classes = colour_classes(sm, nodes)
+
+    def gs():
+        t[0] += dt
+        advance_nodes(sm, st, nodes, t[0], f, g, K.MODE_AXIAL, classes)
+
+    gs()
+    out["gauss_seidel_sweep_ms_1m_tets"] = best_of(gs, 5) * 1e3
+    x, v = st.positions.copy(), st.velocities.copy()
+    np_step = best_of(lambda: numpy_explicit_step(x, v, sm.springs, sm.rest_length, sm.stiffness, sm.masses, dt), 3)
+    # the NumPy step touches every spring once (both ends): 2 s spring-end updates
+    out["numpy_baseline_spring_updates_per_s"] = 2 * sm.n_springs / np_step
+    out["speedup_vs_numpy"] = out["spring_updates_per_s"] / out["numpy_baseline_spring_updates_per_s"]
+    del sm, st, tm
+
+    tm = block_model(args.small)
+    sm = build_spring_model(tm)
+    dt0 = explicit_time_limit(sm)
+    pts = tm.points
+    f = np.zeros((sm.n_nodes, 3))
+    top = np.flatnonzero((pts[:, 2] == args.small) & (np.abs(pts[:, 0] - args.small / 2) <= 2)
+                        & (np.abs(pts[:, 1] - args.small / 2) <= 2))
+    f[top, 2] = -1e-3 / len(top)
+    control = Control(external_forces=f)
+    st = initial_state(sm)
+    lists = NodeLists(sm, st, dt0, 6, displacement_tolerance=1e-5)
+    lists.advance(control, 8 * dt0)  # warm-up (compile) and settle the lists
+    n_steps = 400
+    t0 = time.perf_counter()
+    lists.advance(control, (8 + n_steps) * dt0)
+    wall = time.perf_counter() - t0
+    out["n_tets_small"] = tm.n_tets
+    out["adaptive_steps_per_s_100k_tets"] = n_steps / wall
+    out["adaptive_update_fraction_100k_tets"] = float(st.n_updates.sum() / ((8 + n_steps) * len(sm.free_nodes)))
+    out["adaptive_list_sizes"] = [int(len(x)) for x in lists.node_lists]
+    import numba
+
+    out["threads"] = numba.get_num_threads()
+    if args.json:
+        print(json.dumps(out))
+    else:
+        for key, val in out.items():
+            print(f"{key:40s} {val:.4g}" if isinstance(val, float) else f"{key:40s} {val}")
+
+
+if __name__ == "__main__":
+    main()

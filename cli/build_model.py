@@ -1,0 +1,100 @@
+"""``cutkit build-model``: volume -> segmentation -> mesh -> materials -> texture -> model.h5."""
+
+import click
+
+
+@click.command(name="build-model")
+@click.argument("volume", required=False, type=click.Path())
+@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="Output model file (.h5).")
+@click.option("--recipe", "recipe_path", type=click.Path(dir_okay=False), help="TOML recipe (pipelines/*.toml).")
+@click.option("--threshold", help="LOW[:HIGH] intensity threshold (overrides the recipe).")
+@click.option("--channel", help="Colour channel of an RGB volume to threshold (red, green, blue).")
+@click.option("--labels", "labels_path", type=click.Path(), help="Use this label map as the segmentation, as-is.")
+@click.option("--voxel-size", type=float, help="Resample to this isotropic voxel size, mm.")
+@click.option("--smooth", type=float, help="Gaussian smoothing sigma, mm.")
+@click.option("--spacing", help="SX,SY,SZ voxel spacing in mm for formats without one (.npy).")
+@click.option("--ratio", type=float, help="Decimation ratio of tets kept (overrides the recipe).")
+@click.option("--no-decimate", is_flag=True, help="Skip the decimation stage.")
+@click.option("--texture", "texture_path", type=click.Path(), help="Texture volume (defaults to the recipe's, if any).")
+def command(volume, output, recipe_path, threshold, channel, labels_path, voxel_size, smooth, spacing, ratio, no_decimate, texture_path):
+    """Build a cuttable model from VOLUME (or the recipe's volume)."""
+    import numpy as np
+
+    from cutkit.build import STAGES, run_build
+    from cutkit.cli._ui import console, parse_vec3, progress, stage_reporter, table
+    from cutkit.errors import InputError
+    from cutkit.io.model_h5 import write_model
+    from cutkit.recipe import load_recipe, validate_recipe
+
+    recipe = load_recipe(recipe_path) if recipe_path else {"_path": None, "_sha256": None}
+    seg = dict(recipe.get("segment", {}))
+    if threshold is not None:
+        seg["threshold"] = _parse_threshold(threshold)
+        seg.pop("labels", None)
+        seg.pop("otsu", None)
+    if channel is not None:
+        seg["channel"] = channel
+    if voxel_size is not None:
+        seg["voxel_size_mm"] = voxel_size
+    if smooth is not None:
+        seg["smooth_mm"] = smooth
+    recipe["segment"] = seg
+    if ratio is not None:
+        recipe["decimate"] = {**recipe.get("decimate", {}), "ratio": ratio}
+        recipe["decimate"].pop("target_tets", None)
+    if no_decimate:
+        recipe.pop("decimate", None)
+    if texture_path is not None:
+        recipe["texture"] = {**recipe.get("texture", {}), "volume": texture_path}
+    validate_recipe({k: v for k, v in recipe.items() if not k.startswith("_")}, "command-line options")
+
+    volume = volume or recipe.get("recipe", {}).get("volume")
+    if volume is None:
+        raise InputError("no input volume: give VOLUME or a recipe with [recipe] volume")
+    if not (seg.get("labels") or labels_path or "threshold" in seg or seg.get("otsu") or seg.get("channel")):
+        raise InputError("no segmentation: give --threshold, --channel, --labels or a recipe [segment] table")
+
+    with progress() as bar:
+        task = bar.add_task("build-model", total=len(STAGES))
+        ctx = run_build(volume, recipe, on_stage=stage_reporter(bar, task), spacing=parse_vec3(spacing, "--spacing"), labels_path=labels_path)
+        bar.update(task, description="build-model: write")
+        write_model(output, ctx.model)
+
+    from cutkit.mesh.quality import min_dihedral_angles, signed_volumes
+
+    m = ctx.model
+    mind = min_dihedral_angles(m.points, m.tets)
+    vols = signed_volumes(m.points, m.tets)
+    seg_vols = ctx.report.get("segment", {}).get("labels")
+    if seg_vols is None:
+        sv = ctx.segmentation
+        lab, cnt = np.unique(sv.data[sv.data > 0], return_counts=True)
+        seg_vols = {int(a): float(c) * float(np.prod(sv.spacing)) for a, c in zip(lab, cnt)}
+    mesh_total = float(vols.sum())
+    seg_total = float(sum(seg_vols.values()))
+    rows = [
+        ["tets", m.n_tets],
+        ["nodes", m.n_points],
+        ["min dihedral [deg]", f"{mind.min():.2f}"],
+        ["1st percentile dihedral [deg]", f"{np.percentile(mind, 1):.2f}"],
+        ["volume error", f"{100 * (mesh_total - seg_total) / seg_total:+.2f} % ({mesh_total:.0f} vs {seg_total:.0f} mm^3)"],
+    ]
+    tex = ctx.report.get("texture", {})
+    if "residual_after_mm" in tex:
+        rows.append(["registration residual [mm]", f"{tex['residual_before_mm']:.3f} -> {tex['residual_after_mm']:.3f}"])
+    for name, figures in ctx.report.items():
+        rows.append([f"time: {name} [s]", f"{figures['seconds']:.2f}"])
+    console.print(table(f"build-model -> {output}", ["", "value"], rows))
+
+
+def _parse_threshold(text: str):
+    from cutkit.errors import InputError
+
+    parts = text.split(":")
+    try:
+        values = [float(p) for p in parts]
+    except ValueError:
+        values = []
+    if not 1 <= len(values) <= 2:
+        raise InputError(f"--threshold must be LOW or LOW:HIGH (got {text!r})")
+    return values

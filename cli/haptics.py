@@ -1,0 +1,73 @@
+"""``cutkit haptics``: the 1 kHz haptic scalpel service and its benchmark client."""
+
+import click
+
+
+@click.group(name="haptics")
+def command():
+    """The 1 kHz haptic scalpel service (serve) and its benchmark client (bench)."""
+
+
+@command.command(name="serve")
+@click.option("--host", default="127.0.0.1", show_default=True, help="Address to bind (loopback by default).")
+@click.option("--port", default=4711, show_default=True, type=click.IntRange(0, 65535),
+              help="TCP port; 0 picks a free one (printed on start).")
+@click.option("--model", "model_path", type=click.Path(dir_okay=False), default=None,
+              help="Model file whose material sets the scalpel's default cut parameters.")
+@click.option("--material", default="muscle", show_default=True, help="Material name (or label number) to take from --model.")
+@click.option("--priority", type=click.Choice(["normal", "high", "realtime"]), default="high", show_default=True,
+              help="Scheduling priority of the loop (high = nice -10, realtime = SCHED_FIFO); falls back if refused.")
+@click.option("-v", "--verbose", is_flag=True, help="Log every connection, not only rejected frames.")
+def serve(host, port, model_path, material, priority, verbose):
+    """Serve the scalpel force model at 1 kHz until Ctrl-C or SIGTERM."""
+    import logging
+
+    from cutkit.haptics.priority import raise_priority
+    from cutkit.haptics.server import HapticsServer, material_from_model
+    from cutkit.scalpel import ScalpelParams
+
+    logging.basicConfig(level=logging.INFO if verbose else logging.WARNING,
+                        format="cutkit haptics: %(levelname)s: %(message)s")
+    params = ScalpelParams()
+    if model_path is not None:
+        params = ScalpelParams.from_material(material_from_model(model_path, material))
+    server = HapticsServer(host, port, params)
+    got = raise_priority(priority)
+    h, p = server.address
+    # one plain line, flushed: scripts and `bench --spawn` read the port from it
+    click.echo(f"cutkit haptics: listening on {h}:{p}", nl=True)
+    click.get_text_stream("stdout").flush()
+    stats = server.serve(install_signals=True)
+    click.echo(f"cutkit haptics: stopped after {stats['ticks']} ticks, {stats['resyncs']} resyncs, "
+               f"{stats['connections']} connections, {stats['rejected']} rejected frames ({got} priority)")
+
+
+@command.command(name="bench")
+@click.option("--host", default="127.0.0.1", show_default=True)
+@click.option("--port", default=4711, show_default=True, type=click.IntRange(1, 65535))
+@click.option("--seconds", default=3.0, show_default=True, type=click.FloatRange(0.1, 3600))
+@click.option("--spawn", is_flag=True, help="Start a server subprocess on a free port for the run.")
+@click.option("--priority", type=click.Choice(["normal", "high", "realtime"]), default="high", show_default=True,
+              help="Scheduling priority of the device loop (and of a --spawn server).")
+@click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
+def bench(host, port, seconds, spawn, priority, as_json):
+    """Drive a 1 kHz device loop against a server and report rate, jitter and round trip."""
+    import contextlib
+    import json
+
+    from cutkit.haptics.client import run_bench, spawned_server
+    from cutkit.haptics.priority import raise_priority
+
+    with contextlib.ExitStack() as stack:
+        if spawn:
+            host, port, _ = stack.enter_context(spawned_server("--priority", priority, host=host))
+        got = raise_priority(priority)
+        result = run_bench(host, port, seconds)
+    result.update(host=host, port=port, spawned=bool(spawn), client_priority=got)
+    if as_json:
+        click.echo(json.dumps(result))
+        return
+    from cutkit.cli._ui import console, table
+
+    rows = [[k, f"{v:.4g}" if isinstance(v, float) else v] for k, v in result.items()]
+    console.print(table("haptics bench", ["figure", "value"], rows))

@@ -1,0 +1,104 @@
+"""``cutkit info FILE``: describe a model file or a volume."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+#: At most this many distinct values are listed as labels of a volume.
+MAX_VOLUME_LABELS = 64
+
+
+@click.command("info", help="Describe a volume or a model file.")
+@click.argument("path", type=click.Path(path_type=str))
+def command(path: str) -> None:
+    from cutkit.errors import InputError, ModelFormatError
+
+    p = Path(path)
+    if not p.exists():
+        raise InputError(f"file not found: {path}")
+    if p.is_file() and p.suffix.lower() in (".h5", ".hdf5"):
+        from cutkit.io.model_h5 import read_schema_version
+
+        try:
+            version = read_schema_version(p)
+        except ModelFormatError:
+            version = None
+        if version is not None:
+            _model_info(path, version)
+            return
+    _volume_info(path)
+
+
+def _model_info(path: str, version: int) -> None:
+    import numpy as np
+
+    from cutkit.cli._ui import console, table
+    from cutkit.io.model_h5 import read_model
+    from cutkit.mesh.quality import signed_volumes
+
+    m = read_model(path)
+    vol = signed_volumes(m.points, m.tets)
+    lo, hi = (m.points.min(axis=0), m.points.max(axis=0)) if m.n_points else (np.zeros(3), np.zeros(3))
+    console.print(f"[bold]model[/] {path}  (schema version {version})")
+    console.print(f"  {m.n_points} nodes, {m.n_tets} tets, total volume {vol.sum():.6g} mm^3")
+    console.print(f"  bounding box [{', '.join(f'{v:.6g}' for v in lo)}] .. [{', '.join(f'{v:.6g}' for v in hi)}] mm")
+    labels, inv = np.unique(m.labels, return_inverse=True)
+    counts = np.bincount(inv, minlength=labels.size)
+    volumes = np.bincount(inv, weights=vol, minlength=labels.size)
+    names = {int(l): n for l, n in zip(m.materials.label, m.materials.name)}
+    rows = [[int(l), names.get(int(l), "-"), int(c), f"{v:.6g}"] for l, c, v in zip(labels, counts, volumes)]
+    console.print(table("labels", ["label", "material", "tets", "volume mm^3"], rows))
+    if m.materials.n_materials:
+        cols = list(m.materials.values)
+        mrows = [[int(l), n] + [f"{m.materials.values[c][i]:.4g}" for c in cols]
+                 for i, (l, n) in enumerate(zip(m.materials.label, m.materials.name))]
+        console.print(table("materials", ["label", "name"] + cols, mrows))
+    else:
+        console.print("  no materials assigned")
+    extras = []
+    if m.texture is not None:
+        extras.append(f"texture {tuple(m.texture.volume.shape)}")
+    if m.texcoords is not None:
+        extras.append("texture coordinates")
+    if m.boundary.fixed_nodes.size:
+        extras.append(f"{m.boundary.fixed_nodes.size} fixed nodes")
+    if m.boundary.prescribed_nodes.size:
+        extras.append(f"{m.boundary.prescribed_nodes.size} prescribed nodes")
+    if m.prestress.label.size:
+        extras.append(f"prestress on {m.prestress.label.size} labels")
+    if m.point_data:
+        extras.append("point data: " + ", ".join(m.point_data))
+    if m.cell_data:
+        extras.append("cell data: " + ", ".join(m.cell_data))
+    if extras:
+        console.print("  " + "; ".join(extras))
+
+
+def _volume_info(path: str) -> None:
+    import numpy as np
+
+    from cutkit.cli._ui import console
+    from cutkit.errors import InputError
+
+    try:
+        from cutkit.volumes import read_volume
+    except ImportError:
+        raise InputError(f"{path} is not a cutkit model file (volume reading is not available)") from None
+    v = read_volume(path)
+    data = v.data
+    console.print(f"[bold]volume[/] {path}")
+    console.print(f"  dims {tuple(int(s) for s in data.shape[:3])}"
+                  + (f" x {data.shape[3]} channels" if data.ndim == 4 else "") + f", dtype {data.dtype}")
+    console.print(f"  spacing {tuple(float(s) for s in v.spacing)} mm, origin {tuple(float(s) for s in v.origin)} mm")
+    if not np.allclose(v.direction, np.eye(3)):
+        console.print(f"  direction {np.asarray(v.direction).round(6).tolist()}")
+    if data.size and np.issubdtype(data.dtype, np.integer):
+        vals, counts = np.unique(data, return_counts=True)
+        if vals.size <= MAX_VOLUME_LABELS:
+            console.print("  labels (voxels): " + ", ".join(f"{int(a)}: {int(c)}" for a, c in zip(vals, counts)))
+        else:
+            console.print(f"  {vals.size} distinct values in [{vals.min()}, {vals.max()}] (intensity image)")
+    elif data.size:
+        console.print(f"  values in [{float(np.nanmin(data)):.6g}, {float(np.nanmax(data)):.6g}]")

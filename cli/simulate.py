@@ -1,0 +1,72 @@
+"""``cutkit simulate``: cut and relax a model along a blade trajectory."""
+
+import click
+
+
+@click.command(name="simulate")
+@click.argument("model", type=click.Path(dir_okay=False))
+@click.option("--trajectory", required=True, type=click.Path(dir_okay=False), help="Blade trajectory CSV.")
+@click.option("-o", "--output", "out_dir", required=True, type=click.Path(file_okay=False),
+              help="Output folder (frames/, cut.pvd, cut_surface.pvd, forces.csv, summary.json, model.h5).")
+@click.option("--fps", default=30.0, show_default=True, type=float, help="Frames per simulated second.")
+@click.option("--png", is_flag=True, help="Off-screen pictures of selected frames (pictures/NNNN.png).")
+@click.option("--realtime", is_flag=True, help="Pace to the wall clock and report the rate of each task.")
+@click.option("--haptics", metavar="HOST:PORT", help="Use a running `cutkit haptics serve` for the force model.")
+@click.option("--hold", "hold_s", default=0.5, show_default=True, type=float,
+              help="Simulated seconds after the trajectory's end (the cut opens).")
+@click.option("--geometry-rate", "geometry_rate_hz", default=50.0, show_default=True, type=float,
+              help="Cut and relaxation updates per simulated second.")
+@click.option("--blade-length", default=None, type=float, help="Blade length, mm (default: the trajectory's).")
+def command(model, trajectory, out_dir, fps, png, realtime, haptics, hold_s, geometry_rate_hz, blade_length):
+    """Cut MODEL along TRAJECTORY with the scalpel force model and relax it; write frames and logs."""
+    from cutkit.cli._ui import console
+    from cutkit.cutting.trajectory import read_trajectory
+    from cutkit.io.model_h5 import read_model
+    from cutkit.simulate import SimulateOptions
+
+    opt = SimulateOptions(fps=fps, png=png, realtime=realtime, haptics=haptics, hold_s=hold_s,
+                          geometry_rate_hz=geometry_rate_hz, blade_length=blade_length)
+    opt.check()
+    tet_model = read_model(model)
+    traj = read_trajectory(trajectory)
+    summary = run_with_progress(tet_model, traj, out_dir, opt, model_path=str(model))
+    report(console, summary, out_dir)
+    return 0
+
+
+def run_with_progress(tet_model, traj, out_dir, opt, model_path=None):
+    """:func:`cutkit.simulate.simulate` under a rich progress bar."""
+    from cutkit.cli._ui import progress
+    from cutkit.simulate import simulate
+
+    with progress() as bar:
+        task = bar.add_task("simulating", total=1.0)
+
+        def on_progress(t, total):
+            bar.update(task, completed=t / total if total > 0 else 1.0,
+                       description=f"simulating {t:.2f}/{total:.2f} s")
+
+        return simulate(tet_model, traj, out_dir, opt, progress=on_progress, model_path=model_path)
+
+
+def report(console, summary, out_dir) -> None:
+    """Print the closing lines: warnings, counts, rates, what to open."""
+    for w in summary["warnings"]:
+        console.print(f"[yellow]warning:[/yellow] {w}")
+    t = summary["time_per_task_s"]
+    console.print(
+        f"{summary['cut_tets']} tets cut into {summary['new_tets']} "
+        f"({summary['new_tets_per_cut_tet']:.1f} per cut tet); states {' -> '.join(summary['states'])}; "
+        f"cut opening {summary['cut_opening_mm']['final_mean']:.2f} mm mean")
+    console.print(
+        f"{summary['simulated_s']:.2f} s simulated in {summary['wall_s']:.1f} s "
+        f"(simulated/wall {summary['simulated_per_wall']:.2f}; relaxation {t['relaxation']:.1f} s, "
+        f"cutting {t['collision_and_cut']:.1f} s, output {t['output']:.1f} s)")
+    if "rates_hz" in summary:
+        r = summary["rates_hz"]
+        console.print(f"rates: haptics {r['haptics']:.0f} Hz, geometry {r['geometry_updates']:.0f} Hz, "
+                      f"relaxation list passes {r['relaxation_list_passes']:.0f}/s, frames {r['frames']:.1f}/s")
+    console.print(f"ParaView: open {out_dir}/cut.pvd (tissue) and {out_dir}/cut_surface.pvd (cut surface); "
+                  f"forces in {out_dir}/forces.csv, summary in {out_dir}/summary.json")
+    for p in summary["pictures"]:
+        console.print(f"picture: {out_dir}/{p}")

@@ -1,0 +1,54 @@
+"""Default tissue materials for ``cutkit assign`` (one row per tissue name).
+
+Units as in :data:`cutkit.model.MATERIAL_FIELDS`.  Sources of the mechanical
+figures (order-of-magnitude values for soft tissue at small strain; real
+tissue varies by a factor of several between studies, sites and subjects):
+
+* E, skin 0.15 MPa: within the 0.1-0.9 MPa range of in-vivo measurements
+  (Agache et al. 1980, Arch. Dermatol. Res. 269:221; Pailler-Mattei et al.
+  2008, Med. Eng. Phys. 30:599).
+* E, fat 3 kPa: Samani, Zubovits & Plewes 2007, Phys. Med. Biol. 52:1565
+  (normal fat, 3.25 kPa).
+* E, muscle 30 kPa: passive skeletal muscle along the fibres, shear modulus
+  about 10 kPa from shear-wave elastography (Gennisson et al. 2010,
+  Ultrasound Med. Biol. 36:789) times 3 for an incompressible solid.
+* E, tendon 1.2 GPa: human tendon in vivo (Maganaris & Paul 1999,
+  J. Physiol. 521:307).
+* E, bone 17 GPa: cortical bone (Reilly & Burstein 1975, J. Biomech. 8:393).
+  Bone is normally held rigid by a boundary condition instead.
+* density: IT'IS Foundation tissue property database v4 (Hasgall et al.
+  2018): skin 1109, fat 911, muscle 1090, tendon 1142, cortical bone
+  1908 kg/m^3.
+
+The damping and the cut parameters of section 6 (F_enter, mu, rho, alpha,
+c_edge, c_shape) have no published values for this model; the paper gives
+none.  They are chosen so that a sharp scalpel (c_edge = 1) needs about
+1-2 N to enter skin and well under 1 N to go on cutting fat and muscle,
+the range reported for scalpel and needle insertion into soft tissue
+(e.g. Okamura, Simone & O'Leary 2004, IEEE TBME 51:1707, 0.5-2 N).  With
+eta = E and the blade depth d in mm, F_open = mu * E * c_edge * d (eq. 13),
+so mu is about F / (E * d).
+"""
+
+from __future__ import annotations
+
+from cutkit.model.tetmodel import MATERIAL_FIELDS
+
+#: Default material of each tissue name (without label).
+DEFAULT_MATERIALS: dict[str, dict[str, float]] = {
+    "skin": dict(E=150e3, density=1109.0, damping=8.0, F_enter=1.5, mu_static=1.0e-6, mu_dynamic=4.0e-7,
+                 rho_dynamic=2.0e-8, alpha_static=0.3, alpha_dynamic=0.15, c_edge=1.0, c_shape=1.0),
+    "fat": dict(E=3e3, density=911.0, damping=8.0, F_enter=0.3, mu_static=1.0e-5, mu_dynamic=4.0e-6,
+                rho_dynamic=2.0e-7, alpha_static=0.2, alpha_dynamic=0.1, c_edge=1.0, c_shape=1.0),
+    "muscle": dict(E=30e3, density=1090.0, damping=8.0, F_enter=0.8, mu_static=2.5e-6, mu_dynamic=1.0e-6,
+                   rho_dynamic=5.0e-8, alpha_static=0.3, alpha_dynamic=0.15, c_edge=1.0, c_shape=1.0),
+    "tendon": dict(E=1.2e9, density=1142.0, damping=8.0, F_enter=3.0, mu_static=2.0e-10, mu_dynamic=8.0e-11,
+                   rho_dynamic=4.0e-12, alpha_static=0.3, alpha_dynamic=0.15, c_edge=1.0, c_shape=1.0),
+    "bone": dict(E=17e9, density=1908.0, damping=8.0, F_enter=50.0, mu_static=3.0e-10, mu_dynamic=3.0e-10,
+                 rho_dynamic=1.0e-12, alpha_static=0.5, alpha_dynamic=0.5, c_edge=1.0, c_shape=1.0),
+}
+
+#: Material used for a label the recipe names but does not describe.
+GENERIC_SOFT_TISSUE = dict(DEFAULT_MATERIALS["muscle"])
+
+assert all(set(v) == set(MATERIAL_FIELDS) for v in DEFAULT_MATERIALS.values())

@@ -1,0 +1,324 @@
+"""Numba kernels of one cut step (paper section 4.2) and of the cut nodes.
+
+* :func:`tet_bary` / :func:`walk`: barycentric coordinates (Cramer's rule)
+  and the paper's findTrajectoryTetra walk across faces;
+* :func:`sweep`: the markSwapFace-style local traversal; it tests the
+  tetrahedra around the blade and returns the *events* of the step (edges
+  met by the swept surface, faces crossed by the blade) in visit order, so
+  the cut state machine (Python, :mod:`cutkit.cutting.cutmesh`) replays
+  them exactly as a per-tet Python loop would;
+* :func:`clamp_bary`, :func:`set_node`, :func:`min_volume`: the small
+  per-node / per-candidate work of the subdivision.
+
+Slow, obviously correct NumPy twins: ``tests/_twins_cut.py``.
+"""
+
+import numpy as np
+from numba import njit
+
+from cutkit.cutting._kernels import seg_tet, tet_sweep
+
+#: The walk stops in a tet whose barycentric coordinates of the target are all >= -WALK_EPS.
+WALK_EPS = 1e-12
+#: Event kinds returned by :func:`sweep`.
+EV_EDGE, EV_FACE = 0, 1
+
+
+@njit(cache=True, nogil=True)
+def tet_bary(x, tv, p, out):
+    """Barycentric coordinates of ``p`` in the tet ``x[tv]`` (Cramer's rule).
+
+    Parameters
+    ----------
+    x : (n, 3) float64  node positions
+    tv : (4,) int64  the tet's vertices
+    p : (3,) float64  the point
+    out : (4,) float64  written: (1 - l1 - l2 - l3, l1, l2, l3); all -1 if the tet is flat
+
+    Returns
+    -------
+    bool  False when the tet is flat (zero determinant)
+    """
+    a = x[tv[0]]
+    b1x, b1y, b1z = x[tv[1], 0] - a[0], x[tv[1], 1] - a[1], x[tv[1], 2] - a[2]
+    b2x, b2y, b2z = x[tv[2], 0] - a[0], x[tv[2], 1] - a[1], x[tv[2], 2] - a[2]
+    b3x, b3y, b3z = x[tv[3], 0] - a[0], x[tv[3], 1] - a[1], x[tv[3], 2] - a[2]
+    rx, ry, rz = p[0] - a[0], p[1] - a[1], p[2] - a[2]
+    # c23 = b2 x b3, det = b1 . c23
+    cx, cy, cz = b2y * b3z - b2z * b3y, b2z * b3x - b2x * b3z, b2x * b3y - b2y * b3x
+    det = b1x * cx + b1y * cy + b1z * cz
+    if det == 0.0:
+        out[:] = -1.0
+        return False
+    l1 = (rx * cx + ry * cy + rz * cz) / det
+    # l2 = b1 . (r x b3) / det, l3 = b1 . (b2 x r) / det
+    l2 = (b1x * (ry * b3z - rz * b3y) + b1y * (rz * b3x - rx * b3z) + b1z * (rx * b3y - ry * b3x)) / det
+    l3 = (b1x * (b2y * rz - b2z * ry) + b1y * (b2z * rx - b2x * rz) + b1z * (b2x * ry - b2y * rx)) / det
+    out[0] = 1.0 - (l1 + l2 + l3)
+    out[1] = l1
+    out[2] = l2
+    out[3] = l3
+    return True
+
+
+@njit(cache=True, nogil=True)
+def walk(x, tets, neighbors, start, target, max_walk):
+    """The paper's findTrajectoryTetra: original tet containing ``target``, or -1.
+
+    From ``start``, cross the face opposite the most negative barycentric
+    coordinate (not back into the tet we came from) until every coordinate
+    is >= -WALK_EPS.
+
+    Parameters
+    ----------
+    x : (n, 3) float64
+    tets : (m, 4) int64  original tets
+    neighbors : (m, 4) int64  tet across local face i, -1 on the boundary
+    start : int  start tet
+    target : (3,) float64
+    max_walk : int  maximum number of face crossings
+
+    Returns
+    -------
+    int  tet containing ``target``; -1 when the walk leaves the mesh
+    """
+    b = np.empty(4)
+    order = np.empty(4, np.int64)
+    t = start
+    prev = -1
+    for _ in range(max_walk):
+        tet_bary(x, tets[t], target, b)
+        if min(b[0], b[1], b[2], b[3]) >= -WALK_EPS:
+            return t
+        # ascending coordinates (insertion sort: stable, like argsort on 4 items)
+        for i in range(4):
+            order[i] = i
+        for i in range(1, 4):
+            j = i
+            while j > 0 and b[order[j - 1]] > b[order[j]]:
+                order[j - 1], order[j] = order[j], order[j - 1]
+                j -= 1
+        moved = False
+        for q in range(4):
+            i = order[q]
+            if b[i] >= 0.0:
+                break
+            nb = neighbors[t, i]
+            if nb >= 0 and nb != prev:
+                prev = t
+                t = nb
+                moved = True
+                break
+        if not moved:
+            return -1
+    return -1
+
+
+@njit(cache=True, nogil=True)
+def _face_bary(x, fv, px, py, pz, out, row):
+    """Barycentric coordinates (3,) of a point in the plane of triangle x[fv].
+
+    Closed-form 2x2 normal equations of the least-squares fit
+    ``p - x0 = u (x1 - x0) + v (x2 - x0)``, written to ``out[row]``.
+    """
+    x0 = x[fv[0]]
+    e1x, e1y, e1z = x[fv[1], 0] - x0[0], x[fv[1], 1] - x0[1], x[fv[1], 2] - x0[2]
+    e2x, e2y, e2z = x[fv[2], 0] - x0[0], x[fv[2], 1] - x0[1], x[fv[2], 2] - x0[2]
+    dx, dy, dz = px - x0[0], py - x0[1], pz - x0[2]
+    g11 = e1x * e1x + e1y * e1y + e1z * e1z
+    g12 = e1x * e2x + e1y * e2y + e1z * e2z
+    g22 = e2x * e2x + e2y * e2y + e2z * e2z
+    r1 = e1x * dx + e1y * dy + e1z * dz
+    r2 = e2x * dx + e2y * dy + e2z * dz
+    det = g11 * g22 - g12 * g12
+    if det > 0.0:
+        u = (g22 * r1 - g12 * r2) / det
+        v = (g11 * r2 - g12 * r1) / det
+    else:  # flat face: cannot be crossed (seg_tri refuses it); keep a valid value
+        u = v = 1.0 / 3.0
+    out[row, 0] = 1.0 - (u + v)
+    out[row, 1] = u
+    out[row, 2] = v
+
+
+@njit(cache=True, nogil=True)
+def sweep(x, tets, neighbors, tet_edges, tet_faces, edges, faces, edge_t, stamp, step,
+          swept, blade, p0, stack, active, ev_id, ev_val, counts):
+    """Local traversal of one step (markSwapFace, paper 4.2) and its events.
+
+    Tets are popped from ``stack`` (last-in first-out; the caller pushes
+    the seeds) and marked ``stamp[o] = step``.  A tet is *active* when the
+    swept surface meets one of its edges, or the blade ``blade`` or the tip
+    path ``p0 - blade[1]`` meets it; the unvisited neighbours of an active
+    tet are pushed.  Per visited tet, in order: an EV_EDGE event for each
+    uncut edge (``edge_t`` NaN) met by the swept surface; then, if active, an
+    EV_FACE event for each face crossed by the blade.
+
+    The buffers are the caller's (no allocation here).  When one might
+    overflow, the kernel returns False *before* visiting the next tet with
+    its progress in ``counts``; the caller enlarges the buffers and calls
+    again to resume.
+
+    Parameters
+    ----------
+    x : (n, 3) float64  node positions
+    tets, neighbors, tet_edges, tet_faces : (m, 4|6) int64  original mesh tables
+    edges : (ne, 2) int64;  faces : (nf, 3) int64  global edges and faces
+    edge_t : (ne,) float64  cut parameter, NaN when uncut
+    stamp : (m,) int64  visit stamps (modified)
+    step : int  this step's stamp
+    swept : (2, 3, 3) float64  the two swept triangles
+    blade : (2, 3) float64  blade segment (back Q1, tip P1)
+    p0 : (3,) float64  previous tip P0
+    stack : (cs,) int64  tets to visit, ``stack[:counts[0]]``
+    active : (ca,) int64  written: active tets in visit order, ``active[:counts[1]]``
+    ev_id : (ce, 2) int64  written: (kind EV_EDGE | EV_FACE, global edge | face), ``[:counts[2]]``
+    ev_val : (ce, 3) float64  written: EV_EDGE: [s, 0, 0], s along the edge from
+        edges[e, 0]; EV_FACE: barycentric coordinates (on faces[f]) of the blade crossing
+    counts : (3,) int64  (stack size, active count, event count), read and written
+
+    Returns
+    -------
+    bool  True when done; False when a buffer must grow (then call again)
+    """
+    n_stack, n_active, n_ev = counts[0], counts[1], counts[2]
+    edge_par = np.empty(6)
+    face_par = np.empty(4)
+    q0, p1 = blade[0], blade[1]
+    done = True
+    while n_stack > 0:
+        if n_stack + 4 > stack.size or n_active >= active.size or n_ev + 10 > ev_id.shape[0]:
+            done = False
+            break
+        n_stack -= 1
+        o = stack[n_stack]
+        if stamp[o] == step:
+            continue
+        stamp[o] = step
+        tv = tets[o]
+        tet_sweep(x, tv, swept, blade, edge_par, face_par)
+        touched = False
+        k = 0
+        for i in range(4):
+            for j in range(i + 1, 4):
+                if edge_par[k] >= 0.0:
+                    touched = True
+                    e = tet_edges[o, k]
+                    if np.isnan(edge_t[e]):
+                        ev_id[n_ev, 0] = EV_EDGE
+                        ev_id[n_ev, 1] = e
+                        ev_val[n_ev, 0] = edge_par[k] if tv[i] == edges[e, 0] else 1.0 - edge_par[k]
+                        ev_val[n_ev, 1] = 0.0
+                        ev_val[n_ev, 2] = 0.0
+                        n_ev += 1
+                k += 1
+        if not touched:
+            touched = seg_tet(q0, p1, x, tv) or seg_tet(p0, p1, x, tv)
+        if not touched:
+            continue
+        active[n_active] = o
+        n_active += 1
+        # blade crossings of this tet's faces move the crack front (notch nodes F)
+        for lf in range(4):
+            fp = face_par[lf]
+            if fp < 0.0:
+                continue
+            f = tet_faces[o, lf]
+            ev_id[n_ev, 0] = EV_FACE
+            ev_id[n_ev, 1] = f
+            _face_bary(x, faces[f], q0[0] + fp * (p1[0] - q0[0]), q0[1] + fp * (p1[1] - q0[1]),
+                       q0[2] + fp * (p1[2] - q0[2]), ev_val, n_ev)
+            n_ev += 1
+        for lf in range(4):
+            nb = neighbors[o, lf]
+            if nb >= 0 and stamp[nb] != step:
+                stack[n_stack] = nb
+                n_stack += 1
+    counts[0] = n_stack
+    counts[1] = n_active
+    counts[2] = n_ev
+    return done
+
+
+@njit(cache=True, nogil=True)
+def clamp_bary(b, lo):
+    """Barycentric weights made valid and kept >= ``lo``.
+
+    Negative weights are set to 0 and the rest normalised (all equal if
+    none is positive); then the weights are mixed with the centroid just
+    enough that the smallest is ``lo``.
+
+    Parameters
+    ----------
+    b : (k,) float64
+    lo : float  smallest weight allowed, < 1 / k
+
+    Returns
+    -------
+    (k,) float64  new array
+    """
+    k = b.size
+    out = np.empty(k)
+    s = 0.0
+    for i in range(k):
+        out[i] = max(b[i], 0.0)
+        s += out[i]
+    m = np.inf
+    for i in range(k):
+        out[i] = out[i] / s if s > 0.0 else 1.0 / k
+        m = min(m, out[i])
+    if m < lo:
+        c = 1.0 / k
+        w = (lo - m) / (c - m)
+        for i in range(k):
+            out[i] = (1.0 - w) * out[i] + w * c
+    return out
+
+
+@njit(cache=True, nogil=True)
+def set_node(x, X, uvw, def_nodes, def_w, i, nodes, w):
+    """Define node ``i`` by weights on original nodes and interpolate it.
+
+    Parameters
+    ----------
+    x, X : (cap, 3) float64  current and rest positions (row i written)
+    uvw : (cap, 3) or (0, 3) float64  texture coordinates (written if it has row i)
+    def_nodes : (cap, 4) int64;  def_w : (cap, 4) float64  node definitions (row i written)
+    i : int
+    nodes : (k,) int64  defining original nodes, k <= 4
+    w : (k,) float64  weights
+    """
+    for c in range(4):
+        def_nodes[i, c] = -1
+        def_w[i, c] = 0.0
+    for c in range(nodes.size):
+        def_nodes[i, c] = nodes[c]
+        def_w[i, c] = w[c]
+    has_uvw = uvw.shape[0] > i
+    for d in range(3):
+        sx = 0.0
+        sX = 0.0
+        su = 0.0
+        for c in range(nodes.size):
+            sx += w[c] * x[nodes[c], d]
+            sX += w[c] * X[nodes[c], d]
+            if has_uvw:
+                su += w[c] * uvw[nodes[c], d]
+        x[i, d] = sx
+        X[i, d] = sX
+        if has_uvw:
+            uvw[i, d] = su
+
+
+@njit(cache=True, nogil=True)
+def min_volume(x, tets):
+    """Smallest signed volume of the tets (k, 4) int64 over positions x (n, 3); +inf if none."""
+    m = np.inf
+    for r in range(tets.shape[0]):
+        a = x[tets[r, 0]]
+        b1x, b1y, b1z = x[tets[r, 1], 0] - a[0], x[tets[r, 1], 1] - a[1], x[tets[r, 1], 2] - a[2]
+        b2x, b2y, b2z = x[tets[r, 2], 0] - a[0], x[tets[r, 2], 1] - a[1], x[tets[r, 2], 2] - a[2]
+        b3x, b3y, b3z = x[tets[r, 3], 0] - a[0], x[tets[r, 3], 1] - a[1], x[tets[r, 3], 2] - a[2]
+        v = ((b1y * b2z - b1z * b2y) * b3x + (b1z * b2x - b1x * b2z) * b3y + (b1x * b2y - b1y * b2x) * b3z) / 6.0
+        m = min(m, v)
+    return m

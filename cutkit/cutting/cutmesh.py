@@ -1,0 +1,490 @@
+"""Kinematic cutting of a tetrahedral model: cut state and topology update.
+
+``CutMesh`` holds what never changes (the original tetrahedra, their
+edges, faces and adjacency, rest positions) and the cut state that grows
+step by step (current tetrahedra, node positions, per-edge intersection
+parameters, per-face nodes, per-original-tet tip node).  ``cut_step``
+(in :mod:`cutkit.cutting.step`) moves the blade and calls
+:meth:`CutMesh.resubdivide` on every original tetrahedron whose state
+changed.
+
+State machine of an original edge (Bielser et al. 2003 style, simplified):
+UNCUT -> CUT at its first intersection parameter (clamped into
+[EDGE_SNAP, 1 - EDGE_SNAP]); a cut edge never changes again, so blade
+reversal and tremor cannot create new slivers.  An edge cut that would
+give some face three cut edges (impossible for a planar cut) is refused.
+A face is UNCUT, NOTCHED (one cut edge: face node F on the crack front,
+moved with the blade while it crosses the face) or SPLIT (two cut edges:
+F's node id is reused as the lone-side centre node C and frozen).  A tet's
+tip node T follows the tip while the tip is inside and freezes after.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from cutkit.errors import InputError
+from cutkit.mesh.topology import TET_EDGES, TET_FACES, unique_edges, unique_faces, tet_neighbors
+from cutkit.cutting import subdivision as S
+from cutkit.cutting import _kernels_step as K
+
+#: Edge intersection parameters are clamped into [EDGE_SNAP, 1 - EDGE_SNAP]
+#: (a crossing near a vertex, or through it, becomes a crossing near it).
+EDGE_SNAP = 0.1
+#: Face nodes keep every barycentric coordinate >= FACE_BARY_MIN.
+FACE_BARY_MIN = 0.1
+#: Tip/centre nodes T keep every barycentric coordinate >= TET_BARY_MIN.
+TET_BARY_MIN = 0.05
+#: Compact complete splits accept only sub-tets of at least this fraction
+#: of the original tet's volume (else the always-valid T-cone is used).
+COMPACT_VOL_MIN = 1e-3
+
+
+_TET_EDGES_L = TET_EDGES.tolist()
+_TET_FACES_L = TET_FACES.tolist()
+_FACE_EDGES_L = S.FACE_EDGES.tolist()
+#: Texture coordinates placeholder for :func:`_kernels_step.set_node` (no texture).
+_NO_UVW = np.zeros((0, 3))
+
+
+def _vol(x, t):
+    """Signed volume of the tet t (4,) over positions x (n, 3)."""
+    return float(K.min_volume(x, np.asarray(t, np.int64).reshape(1, 4)))
+
+
+def _clamp_bary(b, lo):
+    """Valid barycentric weights (k,) float64, each >= lo (see ``_kernels_step.clamp_bary``)."""
+    return K.clamp_bary(np.asarray(b, np.float64), float(lo))
+
+
+class CutMesh:
+    """A tetrahedral model being cut.
+
+    Parameters
+    ----------
+    points : (n, 3) float64  current positions of the original nodes, mm
+    tets : (m, 4) int64  positively oriented
+    rest_points : (n, 3) float64, optional  rest positions (default: points)
+    texcoords : (n, 3) float64, optional
+    labels : (m,) int32, optional
+    blade_length : float  mm
+    centre_nodes : bool  use the Fig. 2c centre node in split faces (default False: fewer, better tets)
+    compact_splits : bool  cone complete splits to a vertex per side (see _compact_split)
+    """
+
+    def __init__(self, points, tets, rest_points=None, texcoords=None, labels=None,
+                 blade_length=20.0, centre_nodes=False, compact_splits=True):
+        points = np.ascontiguousarray(points, np.float64)
+        tets = np.ascontiguousarray(tets, np.int64)
+        if points.ndim != 2 or points.shape[1] != 3:
+            raise InputError(f"points: shape {points.shape}, expected (n, 3)")
+        if tets.ndim != 2 or tets.shape[1] != 4:
+            raise InputError(f"tets: shape {tets.shape}, expected (m, 4)")
+        if not blade_length > 0:
+            raise InputError(f"blade_length: {blade_length}, expected > 0")
+        self.blade_length = float(blade_length)
+        self.centre_nodes = bool(centre_nodes)
+        self.compact_splits = bool(compact_splits)
+        n0, m0 = points.shape[0], tets.shape[0]
+        self.n_orig_points = n0
+        self.orig_tets = tets
+        self.edges, self.tet_edges = unique_edges(tets)
+        self.faces, self.tet_faces, self.face_tets = unique_faces(tets)
+        self.neighbors = tet_neighbors(tets)
+        # edge -> tets ring (CSR), built once
+        flat = self.tet_edges.ravel()
+        order = np.argsort(flat, kind="stable")
+        self.edge_tet_idx = order // 6
+        self.edge_tet_off = np.zeros(self.edges.shape[0] + 1, np.int64)
+        np.cumsum(np.bincount(flat, minlength=self.edges.shape[0]), out=self.edge_tet_off[1:])
+        # face -> its 3 global edges
+        self.face_edges = np.zeros((self.faces.shape[0], 3), np.int64)
+        self.face_edges[self.tet_faces.ravel()] = self.tet_edges[:, S.FACE_EDGES].reshape(-1, 3)
+        # ---- state: nodes (growable)
+        cap = n0 + 1024
+        self._x = np.zeros((cap, 3)); self._x[:n0] = points
+        self._X = np.zeros((cap, 3)); self._X[:n0] = points if rest_points is None else rest_points
+        self._uvw = None
+        if texcoords is not None:
+            self._uvw = np.zeros((cap, 3)); self._uvw[:n0] = texcoords
+        self.n_points = n0
+        # node definition for re-interpolation: up to 4 original nodes + weights
+        self._def_nodes = -np.ones((cap, 4), np.int64)
+        self._def_w = np.zeros((cap, 4))
+        # ---- state: tets (growable, with alive flag); tet i < m0 is original i
+        tcap = m0 + 4096
+        self._tets = np.zeros((tcap, 4), np.int64); self._tets[:m0] = tets
+        self._alive = np.zeros(tcap, bool); self._alive[:m0] = True
+        self._tet_orig = np.zeros(tcap, np.int64); self._tet_orig[:m0] = np.arange(m0)
+        self.n_tets_total = m0
+        self.labels = np.zeros(m0, np.int32) if labels is None else np.asarray(labels, np.int32)
+        self.subtets = {}  # original tet -> list of current tet ids (only for cut tets)
+        # ---- cut state
+        self.edge_t = np.full(self.edges.shape[0], np.nan)
+        self.edge_node = -np.ones((self.edges.shape[0], 2), np.int64)
+        self.face_node = -np.ones((self.faces.shape[0], 2), np.int64)
+        self.face_ncut = np.zeros(self.faces.shape[0], np.int64)  # cut edges per face (kept by try_cut_edge)
+        self.face_bary = {}  # face -> (3,) bary of the latest blade crossing
+        self.tip_bary = {}  # original tet -> (4,) tip bary while inside
+        self.tet_T = -np.ones((m0, 2), np.int64)
+        self.stamp = np.zeros(m0, np.int64)  # visited stamps (no per-step reset)
+        self.step_count = 0
+        self.active_tets = np.zeros(0, np.int64)
+        self.previous_active_tets = np.zeros(0, np.int64)
+        self.tip_tet = -1
+        self.prev_pose = None
+        self._delta_reset()
+
+    @classmethod
+    def from_model(cls, model, blade_length=20.0, centre_nodes=False, compact_splits=True):
+        """Cut state of a :class:`~cutkit.model.tetmodel.TetModel` (rest = current positions)."""
+        return cls(model.points, model.tets, texcoords=model.texcoords, labels=model.labels,
+                   blade_length=blade_length, centre_nodes=centre_nodes, compact_splits=compact_splits)
+
+    # ------------------------------------------------------------------ nodes
+    def _grow_nodes(self):
+        cap = self._x.shape[0]
+        if self.n_points < cap:
+            return
+        new = cap * 2
+        for name in ("_x", "_X", "_uvw", "_def_w"):
+            a = getattr(self, name)
+            if a is not None:
+                b = np.zeros((new,) + a.shape[1:]); b[:cap] = a; setattr(self, name, b)
+        d = -np.ones((new, 4), np.int64); d[:cap] = self._def_nodes; self._def_nodes = d
+
+    def _new_node(self, nodes, w):
+        self._grow_nodes()
+        i = self.n_points
+        self.n_points += 1
+        self._set_node(i, nodes, w)
+        self._delta["added_nodes"].append(i)
+        return i
+
+    def _set_node(self, i, nodes, w):
+        """Define node i by weights w (k,) on original nodes (k,) and interpolate x, X, uvw."""
+        K.set_node(self._x, self._X, _NO_UVW if self._uvw is None else self._uvw, self._def_nodes, self._def_w,
+                   i, np.asarray(nodes, np.int64), np.asarray(w, np.float64))
+
+    def _move_node(self, i, nodes, w):
+        self._set_node(i, nodes, w)
+        self._delta["moved_nodes"].append(i)
+
+    @property
+    def points(self):
+        """(n_points, 3) float64 current positions (a view)."""
+        return self._x[:self.n_points]
+
+    @property
+    def rest_points(self):
+        return self._X[:self.n_points]
+
+    @property
+    def texcoords(self):
+        return None if self._uvw is None else self._uvw[:self.n_points]
+
+    @property
+    def tets(self):
+        """(k, 4) int64 alive tetrahedra (a copy)."""
+        return self._tets[:self.n_tets_total][self._alive[:self.n_tets_total]]
+
+    @property
+    def tet_origin(self):
+        """(k,) int64 original tet of each alive tet."""
+        return self._tet_orig[:self.n_tets_total][self._alive[:self.n_tets_total]]
+
+    # ------------------------------------------------------------------ deltas
+    def _delta_reset(self):
+        self._delta = {"added_nodes": [], "moved_nodes": [], "removed_tets": [], "added_tets": []}
+
+    # ------------------------------------------------------------------ cut state
+    def edge_ring(self, e):
+        return self.edge_tet_idx[self.edge_tet_off[e]:self.edge_tet_off[e + 1]]
+
+    def face_cut_count(self, f):
+        """Number of cut edges of global face f (0, 1 or 2)."""
+        return int(self.face_ncut[f])
+
+    def faces_of_edge(self, e):
+        """Set of the global faces around global edge e."""
+        out = set()
+        for t in self.edge_ring(e).tolist():
+            k = self.tet_edges[t].tolist().index(e)
+            i, j = _TET_EDGES_L[k]
+            for lf in range(4):
+                if lf != i and lf != j:
+                    out.add(int(self.tet_faces[t, lf]))
+        return out
+
+    def try_cut_edge(self, e, s):
+        """Cut global edge ``e`` at parameter ``s`` (from edges[e,0]); returns touched tets.
+
+        Refused (returns an empty list) when already cut or when some face
+        around the edge would get three cut edges.
+        """
+        if np.isfinite(self.edge_t[e]):
+            return []
+        faces = self.faces_of_edge(e)
+        if any(self.face_ncut[f] >= 2 for f in faces):
+            return []
+        s = min(max(float(s), EDGE_SNAP), 1.0 - EDGE_SNAP)
+        self.edge_t[e] = s
+        for f in faces:
+            self.face_ncut[f] += 1
+        a, b = self.edges[e]
+        for c in range(2):
+            self.edge_node[e, c] = self._new_node([a, b], [1 - s, s])
+        for f in faces:
+            self._update_face_node(f)
+        return self.edge_ring(e).tolist()
+
+    def _edge_bary_on_face(self, e, fv, b, weight):
+        """Add ``weight`` x the edge node of cut edge e to the face bary b (3,) over vertices fv (list)."""
+        a_, b_ = self.edges[e].tolist()
+        s = float(self.edge_t[e])
+        b[fv.index(a_)] += weight * (1 - s)
+        b[fv.index(b_)] += weight * s
+        return a_, b_
+
+    def _update_face_node(self, f):
+        """Create or move the node(s) of global face f after its cut state or crossing changed."""
+        n = self.face_cut_count(f)
+        if n == 1:
+            fv = self.faces[f].tolist()
+            b = self.face_bary.get(f)
+            if b is None:
+                # default crack tip: halfway from the edge node to the opposite vertex
+                e = next(e for e in self.face_edges[f].tolist() if self.edge_t[e] == self.edge_t[e])
+                b = [0.0, 0.0, 0.0]
+                a_, b_ = self._edge_bary_on_face(e, fv, b, 0.5)
+                opp = [i for i in range(3) if fv[i] != a_ and fv[i] != b_][0]
+                b[opp] += 0.5
+            b = _clamp_bary(b, FACE_BARY_MIN)
+            if self.face_node[f, 0] < 0:
+                self.face_node[f, 0] = self._new_node(fv, b)
+            else:
+                self._move_node(self.face_node[f, 0], fv, b)
+        elif n == 2 and self.centre_nodes:
+            # centre node C on the cut line: midpoint of the two edge nodes (Fig. 2c)
+            fv = self.faces[f].tolist()
+            b = [0.0, 0.0, 0.0]
+            for e in self.face_edges[f].tolist():
+                if self.edge_t[e] == self.edge_t[e]:  # cut (not NaN)
+                    self._edge_bary_on_face(e, fv, b, 0.5)
+            b = _clamp_bary(b, 1e-3)  # already interior: edge params are snapped
+            if self.face_node[f, 0] < 0:
+                self.face_node[f, 0] = self._new_node(fv, b)
+            else:
+                self._move_node(self.face_node[f, 0], fv, b)
+            if self.face_node[f, 1] < 0:
+                self.face_node[f, 1] = self._new_node(fv, b)
+
+    def set_face_crossing(self, f, bary):
+        """Record where the blade crosses face ``f``; moves a notch node F.  Returns changed."""
+        self.face_bary[f] = np.asarray(bary, np.float64)
+        if self.face_ncut[f] == 1:
+            self._update_face_node(f)
+            return True
+        return False
+
+    def move_tip_node(self, o):
+        """Move the T node(s) of a cut tet to its recorded tip (no topology change)."""
+        if self.tet_T[o, 0] < 0 or o not in self.tip_bary:
+            return
+        tb = _clamp_bary(self.tip_bary[o], TET_BARY_MIN)
+        for c in range(2):
+            if self.tet_T[o, c] >= 0:
+                self._move_node(self.tet_T[o, c], self.orig_tets[o], tb)
+
+    # ------------------------------------------------------------------ subdivision
+    def tet_mask(self, o):
+        """6-bit mask of the cut edges of original tet o (bit k = local edge TET_EDGES[k])."""
+        mask = 0
+        edge_t = self.edge_t
+        for k, e in enumerate(self.tet_edges[o].tolist()):
+            if edge_t[e] == edge_t[e]:  # not NaN: cut
+                mask |= 1 << k
+        return mask
+
+    def _tip_centre_bary(self, o, mask, v):
+        """(4,) bary of T without a recorded tip: mean of the tet's cut nodes (edge and face nodes)."""
+        acc = [0.0, 0.0, 0.0, 0.0]
+        n = 0
+        for k, e in enumerate(self.tet_edges[o].tolist()):
+            if mask >> k & 1:
+                i, j = _TET_EDGES_L[k]
+                s = float(self.edge_t[e])
+                if self.edges[e, 0] == v[i]:
+                    acc[i] += 1 - s; acc[j] += s
+                else:
+                    acc[i] += s; acc[j] += 1 - s
+                n += 1
+        for f in self.tet_faces[o].tolist():
+            fn = int(self.face_node[f, 0])
+            if fn >= 0 and self.face_ncut[f] >= 1:
+                nodes = self._def_nodes[fn, :3].tolist()
+                w = self._def_w[fn, :3].tolist()
+                for q in range(3):
+                    acc[v.index(nodes[q])] += w[q]
+                n += 1
+        return np.array(acc) / n
+
+    def resubdivide(self, o):
+        """Re-subdivide original tet ``o`` from scratch from its cut state."""
+        mask = S.REDUCE_TABLE[self.tet_mask(o)]
+        case, group = S.CLASSIFY_TABLE[mask]
+        if case == "uncut":
+            return
+        v = self.orig_tets[o].tolist()
+        # tip / centre node T
+        tb = self.tip_bary.get(o)
+        if tb is None:
+            tb = self._tip_centre_bary(o, mask, v)
+        tb = _clamp_bary(tb, TET_BARY_MIN)
+        complete = case in ("corner", "quad")
+        vgroup = {v[i]: group[i] for i in range(4)}
+        edges, edge_node, face_node = self.edges, self.edge_node, self.face_node
+        te = self.tet_edges[o].tolist()
+        tf = self.tet_faces[o].tolist()
+        tris = []
+        for lf in range(4):
+            gv = [v[i] for i in _TET_FACES_L[lf]]
+            le = _FACE_EDGES_L[lf]
+            ge = [te[k] for k in le]
+            cut = [bool(mask >> k & 1) for k in le]
+            f = tf[lf]
+
+            def edge_copy(k, vert, ge=ge):
+                e = ge[k]
+                return int(edge_node[e, 0 if edges[e, 0] == vert else 1])
+
+            def f_node(side, f=f):
+                return int(face_node[f, side])
+
+            tris.extend((tri, ow, lf) for tri, ow in S.face_triangles(gv, cut, edge_copy, f_node, self.centre_nodes))
+        new = None
+        if complete and self.compact_splits:
+            new = self._compact_split(o, tris, vgroup)
+        if new is None:
+            for c in range(2 if complete else 1):
+                if self.tet_T[o, c] < 0:
+                    self.tet_T[o, c] = self._new_node(v, tb)
+                else:
+                    self._move_node(self.tet_T[o, c], v, tb)
+            T = self.tet_T[o].tolist()
+            new = [(tri[0], tri[2], tri[1], T[vgroup[owner] if complete else 0]) for tri, owner, _ in tris]
+        # replace the old sub-tets
+        old = self.subtets.get(o, [o])
+        self._alive[old] = False
+        self._delta["removed_tets"].extend(old)
+        ids = self._add_tets(new, o)
+        self.subtets[o] = ids
+        self._delta["added_tets"].extend(ids)
+
+    def _compact_split(self, o, tris, vgroup):
+        """Fewer tets for a complete split: cone each side to one of its vertices.
+
+        The cut polygon (closed loop of face cut segments) is triangulated
+        once (fan from one loop node) and used by both sides with their own
+        node copies; each side is the cone of its face triangles (those not
+        containing the apex) and the cut triangles to an original vertex of
+        that side.  An apex is allowed only if every face triangle of its side
+        on a face through it contains it (the cone then reproduces the
+        face's Fig. 2 pattern, so neighbours still conform).  Every choice
+        of fan node and apex is checked (the role
+        of the Fig. 4 intersection tests): all cone tets must have volume
+        >= COMPACT_VOL_MIN * the original's, else None (the T-cone is used).
+        """
+        v = [int(x) for x in self.orig_tets[o]]
+        x = self._x
+        vol0 = _vol(x, v)
+        # canonical key of each cut node copy, so both sides' loops can be matched
+        key = {}
+        for e in self.tet_edges[o].tolist():
+            if self.edge_t[e] == self.edge_t[e]:  # cut (not NaN)
+                n0, n1 = self.edge_node[e].tolist()
+                key[n0] = key[n1] = ("e", e)
+        for f in self.tet_faces[o].tolist():
+            for c in self.face_node[f].tolist():
+                if c >= 0:
+                    key[c] = ("f", f)
+        nxt = [dict(), dict()]
+        copy = [dict(), dict()]
+        for tri, owner, _ in tris:
+            side = vgroup[owner]
+            for k in range(3):
+                a, b = tri[k], tri[(k + 1) % 3]
+                if a in key and b in key:
+                    nxt[side][b] = a  # the cut polygon runs the other way
+                    copy[side][key[a]] = a
+                    copy[side][key[b]] = b
+        if not nxt[0] or len(nxt[0]) != len(nxt[1]):
+            return None
+        start = next(iter(nxt[0]))
+        loop = [start]
+        while True:
+            n = nxt[0].get(loop[-1])
+            if n is None:
+                return None
+            if n == start:
+                break
+            loop.append(n)
+            if len(loop) > len(nxt[0]):
+                return None
+        if len(loop) != len(nxt[0]):
+            return None
+        keys = [key[n] for n in loop]
+        if any(k not in copy[1] for k in keys):
+            return None
+        # allowed apexes of each side (in vertex order) and their face-triangle cone tets;
+        # they do not depend on the fan node
+        apexes = ([], [])
+        for ia, apex in enumerate(v):
+            side = vgroup[apex]
+            # the cone tiles each face through the apex by a fan from the apex:
+            # conforming (crack-free) only if the face pattern is that fan
+            if any(vgroup[ow] == side and lf != ia and apex not in t for t, ow, lf in tris):
+                continue
+            # face triangles on a face through the apex are flat cones: skip them
+            apexes[side].append((apex, [(t[0], t[2], t[1], apex) for t, ow, lf in tris
+                                        if vgroup[ow] == side and lf == ia]))
+        vol_min = COMPACT_VOL_MIN * vol0
+        for r in range(len(loop)):
+            kk = keys[r:] + keys[:r]
+            poly = [(kk[0], kk[i], kk[i + 1]) for i in range(1, len(kk) - 1)]
+            out = []
+            for side in (0, 1):
+                cs = copy[side]
+                # cone tets of the cut triangles (side 1 sees them flipped)
+                if side == 0:
+                    cut_tris = [(cs[t[0]], cs[t[2]], cs[t[1]]) for t in poly]
+                else:
+                    cut_tris = [(cs[t[0]], cs[t[1]], cs[t[2]]) for t in poly]
+                best = None
+                for apex, face_cone in apexes[side]:
+                    cand = face_cone + [t + (apex,) for t in cut_tris]
+                    if K.min_volume(x, np.array(cand, np.int64)) >= vol_min:
+                        best = cand
+                        break
+                if best is None:
+                    break
+                out.extend(best)
+            else:
+                return out
+        return None
+
+    def _add_tets(self, new, o):
+        """Append the tets ``new`` (list of 4-tuples) as sub-tets of original ``o``; returns their ids."""
+        k = len(new)
+        n0 = self.n_tets_total
+        while n0 + k > self._tets.shape[0]:
+            cap = self._tets.shape[0] * 2
+            t = np.zeros((cap, 4), np.int64); t[:n0] = self._tets[:n0]
+            a = np.zeros(cap, bool); a[:n0] = self._alive[:n0]
+            g = np.zeros(cap, np.int64); g[:n0] = self._tet_orig[:n0]
+            self._tets, self._alive, self._tet_orig = t, a, g
+        self._tets[n0:n0 + k] = new
+        self._alive[n0:n0 + k] = True
+        self._tet_orig[n0:n0 + k] = o
+        self.n_tets_total = n0 + k
+        return list(range(n0, n0 + k))

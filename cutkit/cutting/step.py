@@ -1,0 +1,209 @@
+"""One cut step: volume collision (paper section 4.2) and the topology update.
+
+The blade is the segment from the tip P back to Q = P - blade_length * a.
+Between two poses it sweeps the quad (P0, Q0, Q1, P1), taken as the two
+triangles (P0, Q0, Q1) and (P0, Q1, P1).
+
+Per step:
+
+1. ``find_trajectory_tetra``: walk from the previous tip tetrahedron across
+   faces towards the new tip (the paper's findTrajectoryTetra, numba
+   kernel ``_kernels_step.walk``).  With no tip tetrahedron (tip outside),
+   the entry comes from the surface collision: boundary faces met by the
+   blade or the tip's path (``SurfaceBVH``, refitted to moved nodes).
+2. ``markSwapFace``-style local traversal (numba kernel
+   ``_kernels_step.sweep``): from the seeds (tip tetrahedra, entry
+   tetrahedra, previous active tetrahedra), visit neighbours while the
+   swept surface or the blade meets them.  The kernel returns the step's
+   events in visit order (edges met by the swept surface, faces crossed by
+   the blade); they are replayed here through the cut state machine of
+   :mod:`cutkit.cutting.cutmesh` (every original edge met is cut, notch
+   nodes F follow the blade).  Visits are marked with a per-tet stamp =
+   step counter (no reset); the kernel's buffers live on the CutMesh.
+3. Every original tetrahedron whose cut state changed is re-subdivided.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from cutkit.errors import InputError
+from cutkit.cutting import _kernels_step as KS
+from cutkit.cutting.cutmesh import CutMesh
+
+#: Maximum number of face crossings of the tip walk per step.
+MAX_WALK = 10000
+
+
+@dataclass
+class StepResult:
+    """Topology change of one step (flat arrays).
+
+    Attributes
+    ----------
+    added_nodes : (a,) int64   new node ids
+    moved_nodes : (b,) int64   existing cut nodes re-interpolated (tip/front)
+    removed_tets : (r,) int64  tet ids (CutMesh numbering) no longer alive
+    added_tets : (c,) int64    new tet ids
+    cut_edges : (e,) int64     original edges cut in this step
+    active_tets : (k,) int64   original tets the blade touches now
+    tip_tet : int              original tet containing the tip, -1 if outside
+    """
+
+    added_nodes: np.ndarray
+    moved_nodes: np.ndarray
+    removed_tets: np.ndarray
+    added_tets: np.ndarray
+    cut_edges: np.ndarray
+    active_tets: np.ndarray
+    tip_tet: int
+
+
+def find_trajectory_tetra(cm: CutMesh, start: int, target) -> int:
+    """Original tet containing ``target`` reached by walking from ``start``; -1 if it leaves.
+
+    The paper's findTrajectoryTetra (numba kernel ``_kernels_step.walk``):
+    cross the face opposite the most negative barycentric coordinate.
+    """
+    return int(KS.walk(cm._x, cm.orig_tets, cm.neighbors, int(start), np.asarray(target, np.float64), MAX_WALK))
+
+
+def _surface_seeds(cm, segs):
+    """Original tets of the boundary faces met by the segments (surface collision, 4.1).
+
+    The surface BVH is built on first contact; afterwards it is refitted
+    (``SurfaceBVH.update``: only nodes that left their tolerance box cost
+    anything) so surface entry follows a deforming mesh.
+    """
+    pts = cm._x[:cm.n_orig_points]
+    bvh = getattr(cm, "_bvh", None)
+    if bvh is None:
+        from cutkit.collision import SurfaceBVH
+        from cutkit.mesh.topology import boundary_faces
+        faces, face_tet = boundary_faces(cm.orig_tets)
+        cm._bvh = bvh = SurfaceBVH.build(pts.copy(), faces)
+        cm._bvh_face_tet = face_tet
+    else:
+        bvh.update(pts)
+    out = []
+    for p0, p1 in segs:
+        if np.allclose(p0, p1):
+            continue
+        hits = bvh.query_segment(pts, p0, p1)
+        out.extend(cm._bvh_face_tet[hits.face].tolist())
+    return out
+
+
+def _sweep(cm, stamp, seeds, swept, blade, P0):
+    """Run ``_kernels_step.sweep`` in buffers kept on ``cm`` (grown by doubling when short).
+
+    Returns views: active (k,) int64, events (q, 2) int64 (kind, id), values (q, 3) float64.
+    """
+    buf = getattr(cm, "_sweep_buf", None)
+    if buf is None:
+        cm._sweep_buf = buf = {"stack": np.empty(256, np.int64), "active": np.empty(64, np.int64),
+                               "ev_id": np.empty((128, 2), np.int64), "ev_val": np.empty((128, 3)),
+                               "counts": np.zeros(3, np.int64)}
+    seeds = list(dict.fromkeys(seeds))  # first occurrences, in order
+    while len(seeds) + 4 > buf["stack"].size:
+        buf["stack"] = np.empty(2 * buf["stack"].size, np.int64)
+    buf["stack"][:len(seeds)] = seeds
+    counts = buf["counts"]
+    counts[:] = (len(seeds), 0, 0)
+    while not KS.sweep(cm._x, cm.orig_tets, cm.neighbors, cm.tet_edges, cm.tet_faces, cm.edges, cm.faces,
+                       cm.edge_t, cm.stamp, stamp, swept, blade, P0, buf["stack"], buf["active"],
+                       buf["ev_id"], buf["ev_val"], counts):
+        for name in ("stack", "active", "ev_id", "ev_val"):  # grow, keep the progress
+            old = buf[name]
+            new = np.empty((2 * old.shape[0],) + old.shape[1:], old.dtype)
+            new[:old.shape[0]] = old
+            buf[name] = new
+    n_active, n_ev = int(counts[1]), int(counts[2])
+    return buf["active"][:n_active], buf["ev_id"][:n_ev], buf["ev_val"][:n_ev]
+
+
+def cut_step(cm: CutMesh, tip, a) -> StepResult:
+    """Move the blade to pose (tip, a) and update the cut.
+
+    Parameters
+    ----------
+    cm : CutMesh
+    tip : (3,) float64  blade tip, mm
+    a : (3,) float64  unit vector along the blade, handle to tip
+    """
+    tip = np.asarray(tip, np.float64).reshape(-1)
+    a = np.asarray(a, np.float64).reshape(-1)
+    if tip.shape != (3,) or a.shape != (3,) or not np.all(np.isfinite(tip)) or not np.all(np.isfinite(a)):
+        raise InputError("blade pose: tip and a must be finite 3-vectors")
+    na = np.linalg.norm(a)
+    if na == 0:
+        raise InputError("blade pose: a is the zero vector")
+    a = a / na
+    cm._delta_reset()
+    cm.step_count += 1
+    stamp = cm.step_count
+    P1, Q1 = tip, tip - cm.blade_length * a
+    if cm.prev_pose is None:
+        P0, Q0 = P1, Q1
+    else:
+        P0, Q0 = cm.prev_pose
+    # 1. seeds: the tip walk, then the surface entry
+    seeds = cm.active_tets.tolist()
+    tip_tet = -1
+    if cm.tip_tet >= 0:
+        tip_tet = find_trajectory_tetra(cm, cm.tip_tet, P1)
+    if tip_tet < 0:
+        ent = _surface_seeds(cm, [(Q1, P1), (P0, P1), (Q0, Q1)])
+        seeds.extend(ent)
+        for o in dict.fromkeys(ent):
+            tip_tet = find_trajectory_tetra(cm, o, P1)
+            if tip_tet >= 0:
+                break
+    if tip_tet >= 0:
+        seeds.append(tip_tet)
+    if cm.tip_tet >= 0:
+        seeds.append(cm.tip_tet)
+    swept = np.array([[P0, Q0, Q1], [P0, Q1, P1]])
+    blade = np.array([Q1, P1])
+    # 2. local traversal (numba); its events are replayed in visit order
+    active, ev_id, ev_val = _sweep(cm, stamp, seeds, swept, blade, P0)
+    changed = set()
+    cut_edges = []
+    for (kind, i), val in zip(ev_id.tolist(), ev_val):
+        if kind == KS.EV_EDGE:
+            ring = cm.try_cut_edge(i, val[0])
+            if ring:
+                cut_edges.append(i)
+                changed.update(ring)
+        else:
+            # the blade crosses face i: moves its notch node F (crack front);
+            # only positions change, the topology does not
+            cm.set_face_crossing(i, val.copy())
+    # tip node T follows the tip inside its tetrahedron (a move, unless the
+    # tet's topology changes anyway)
+    if tip_tet >= 0:
+        tb = np.empty(4)
+        KS.tet_bary(cm._x, cm.orig_tets[tip_tet], P1, tb)
+        cm.tip_bary[tip_tet] = tb
+        if tip_tet not in changed:
+            cm.move_tip_node(tip_tet)
+    # where the tip left a tet, its T node simply stays (freezes)
+    # 3. re-subdivide every original tet whose cut state changed
+    for o in sorted(changed):
+        cm.resubdivide(o)
+    cm.previous_active_tets = cm.active_tets
+    cm.active_tets = np.unique(active)
+    cm.tip_tet = tip_tet
+    cm.prev_pose = (P1, Q1)
+    d = cm._delta
+    return StepResult(
+        added_nodes=np.array(d["added_nodes"], np.int64),
+        moved_nodes=np.unique(np.array(d["moved_nodes"], np.int64)),
+        removed_tets=np.array(d["removed_tets"], np.int64),
+        added_tets=np.array(d["added_tets"], np.int64),
+        cut_edges=np.array(cut_edges, np.int64),
+        active_tets=cm.active_tets,
+        tip_tet=int(tip_tet),
+    )

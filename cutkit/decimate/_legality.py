@@ -1,0 +1,453 @@
+"""Numba legality test of one half-edge collapse ``u -> v`` (u removed, v kept).
+
+The rules (documented in docs/decimation.md) in the order they are tried,
+cheapest and most often failing first:
+
+1. shape: every tet of ``u`` that survives (does not contain ``v``) stays
+   positively oriented with ``6 V > vol_eps`` and its smallest dihedral angle
+   at least ``min(min_dihedral, smallest dihedral now in the star of u)``:
+   a collapse never creates an angle below the threshold and never makes the
+   local minimum worse;
+2. link condition of Edelsbrunner/Dey et al. for the tet complex: the common
+   neighbours of ``u`` and ``v`` are exactly the vertices of the tets around
+   the edge, every triangle ``u w x`` with a twin ``v w x`` spans a tet
+   ``u v w x``, and no face has ``u`` on one side and ``v`` on the other;
+   no other vertex loses its last tet;
+3. surface (boundary and tissue interfaces, "S-faces"), when ``u`` lies on S:
+   ``v`` lies on every sheet (label pair) that ``u`` lies on, the link
+   condition again with a virtual vertex coned to S, no S-face turns by more
+   than the normal limit, and the original surface points that ``u``
+   represents, plus samples of the new S-faces, stay within the surface
+   tolerance of the new/old S-faces.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from cutkit.decimate._geometry import point_triangle_dist2, tet_max_cos, tet_volume6
+from cutkit.decimate._pool import C_STAMP
+
+#: Slots of the ``params`` (float64) array.
+P_H = 0  # reference edge length, mm
+P_COS_MIN = 1  # cos(min_dihedral)
+P_TOL = 2  # surface tolerance, mm
+P_NORMAL_COS = 3  # cos of the largest turn of an S-face normal
+P_W_SURFACE = 4  # cost factor of a surface vertex
+P_W_TOUCH = 5  # cost factor of an interior vertex collapsing onto S
+P_VOL_EPS = 6  # smallest 6*volume of a tet, mm^3
+P_SURF_SAFETY = 7  # fraction of the tolerance one collapse may use
+N_PARAMS = 8
+
+
+@njit(cache=True, inline="always")
+def _has(tets, t, x):
+    return tets[t, 0] == x or tets[t, 1] == x or tets[t, 2] == x or tets[t, 3] == x
+
+
+@njit(cache=True, inline="always")
+def _swap(x, u, v):
+    return v if x == u else x
+
+
+@njit(cache=True)
+def surface_faces(x, tets, labels, adj_start, adj_len, pool, fa, fb, fs0, fs1):
+    """S-faces (boundary or tissue interface) around vertex ``x``.
+
+    Each S-face ``(x, fa[i], fb[i])`` is written once, with its sheet
+    ``(fs0[i], fs1[i])``: the two labels on its sides, sorted, ``-1`` for the
+    outside.  Returns the number of S-faces; the outputs need room for
+    ``3 * adj_len[x]`` entries.  ``(fa, fb)`` follow the order of the vertices
+    in the tet the face came from, so that ``cross(fa - x, fb - x)`` keeps its
+    sense when ``x`` is replaced by another point.
+    """
+    s0 = adj_start[x]
+    n = adj_len[x]
+    # Every tet of x has three faces through x, named by their other two
+    # vertices; a face inside the mesh shows up twice.  Sorting the names
+    # pairs the twins up in O(k log k) instead of searching the star.
+    k = 3 * n
+    key = np.empty(k, np.int64)
+    ea = np.empty(k, np.int64)
+    eb = np.empty(k, np.int64)
+    et = np.empty(k, np.int64)
+    big = adj_start.shape[0]
+    j = 0
+    for i in range(n):
+        t = pool[s0 + i]
+        o0 = -1
+        o1 = -1
+        o2 = -1
+        for c in range(4):
+            w = tets[t, c]
+            if w != x:
+                if o0 < 0:
+                    o0 = w
+                elif o1 < 0:
+                    o1 = w
+                else:
+                    o2 = w
+        for pair in range(3):
+            if pair == 0:
+                a, b = o0, o1
+            elif pair == 1:
+                a, b = o1, o2
+            else:
+                a, b = o0, o2
+            ea[j] = a
+            eb[j] = b
+            et[j] = t
+            key[j] = min(a, b) * big + max(a, b)
+            j += 1
+    order = np.argsort(key)
+    count = 0
+    i = 0
+    while i < k:
+        p = order[i]
+        lab = labels[et[p]]
+        if i + 1 < k and key[order[i + 1]] == key[p]:
+            lab2 = labels[et[order[i + 1]]]
+            if lab != lab2:  # interface: written once, from the lower label's side
+                q = p if lab < lab2 else order[i + 1]
+                fa[count] = ea[q]
+                fb[count] = eb[q]
+                fs0[count] = min(lab, lab2)
+                fs1[count] = max(lab, lab2)
+                count += 1
+            i += 2
+        else:
+            fa[count] = ea[p]
+            fb[count] = eb[p]
+            fs0[count] = -1
+            fs1[count] = lab
+            count += 1
+            i += 1
+    return count
+
+
+@njit(cache=True)
+def _new_stamp(counters):
+    counters[C_STAMP] += 1
+    return counters[C_STAMP]
+
+
+@njit(cache=True)
+def label_volume_change(u, v, points, tets, tet_lab, adj_start, adj_len, pool, dvol):
+    """Change of each label's volume (mm^3) by the collapse ``u -> v``, written to ``dvol``."""
+    dvol[:] = 0.0
+    s0 = adj_start[u]
+    pv = points[v]
+    for i in range(adj_len[u]):
+        t = pool[s0 + i]
+        a, b, c, d = tets[t, 0], tets[t, 1], tets[t, 2], tets[t, 3]
+        before = tet_volume6(points[a], points[b], points[c], points[d])
+        after = 0.0
+        if not _has(tets, t, v):
+            a, b, c, d = _swap(a, u, v), _swap(b, u, v), _swap(c, u, v), _swap(d, u, v)
+            after = tet_volume6(points[a], points[b], points[c], points[d])
+        dvol[tet_lab[t]] += (after - before) / 6.0
+
+
+@njit(cache=True)
+def can_collapse(u, v, points, tets, labels, tet_lab, tet_maxcos, adj_start, adj_len, pool, vclass, own_pts, own_next, mark, mark2, vol_drift, vol_budget, counters, params, new_maxcos):
+    """Whether the half-edge collapse ``u -> v`` is legal; returns ``(ok, surface_error_mm)``.
+
+    ``new_maxcos`` (>= adj_len[u],) float64 receives, when the collapse is
+    legal, the largest dihedral cosine of each tet of ``u``'s list after the
+    collapse (entries of the tets that die are left alone), for
+    :func:`cutkit.decimate._kernels.collapse`.
+
+    ``own_pts`` (n + k, 3) holds the original surface points: the n nodes,
+    then the centroids of the original S-faces; ``own_next`` links the ones
+    each vertex represents (a list that starts at the vertex itself and ends
+    with -1).
+    ``tet_lab`` (m,) is each tet's label as an index 0..L-1; ``vol_drift``
+    (L,) the volume each label has gained so far, ``vol_budget`` (L,) the
+    drift allowed.
+    """
+    su0 = adj_start[u]
+    nsu = adj_len[u]
+    sv0 = adj_start[v]
+    nsv = adj_len[v]
+    pv = points[v]
+
+    # 1. shape of the surviving tets of u.
+    old_worst = -1.0
+    for i in range(nsu):
+        old_worst = max(old_worst, tet_maxcos[pool[su0 + i]])
+    thr = max(params[P_COS_MIN], old_worst)
+    # Volumes first (cheap; a flat or inverted tet is the usual failure),
+    # dihedral angles only if every volume passes.
+    n_dying = 0
+    for i in range(nsu):
+        t = pool[su0 + i]
+        if _has(tets, t, v):
+            n_dying += 1
+            continue
+        a, b, c, d = _swap(tets[t, 0], u, v), _swap(tets[t, 1], u, v), _swap(tets[t, 2], u, v), _swap(tets[t, 3], u, v)
+        if tet_volume6(points[a], points[b], points[c], points[d]) <= params[P_VOL_EPS]:
+            return False, 0.0
+    if n_dying == 0:
+        return False, 0.0
+    for i in range(nsu):
+        t = pool[su0 + i]
+        if _has(tets, t, v):
+            continue
+        a, b, c, d = _swap(tets[t, 0], u, v), _swap(tets[t, 1], u, v), _swap(tets[t, 2], u, v), _swap(tets[t, 3], u, v)
+        mc = tet_max_cos(points[a], points[b], points[c], points[d])
+        if mc > thr:
+            return False, 0.0
+        new_maxcos[i] = mc
+
+    # 2a. vertex link: N(u) & N(v) == vertices of the tets around edge uv.
+    st1 = _new_stamp(counters)
+    for i in range(nsu):
+        t = pool[su0 + i]
+        for k in range(4):
+            mark[tets[t, k]] = st1
+    st2 = _new_stamp(counters)
+    for i in range(nsu):
+        t = pool[su0 + i]
+        if _has(tets, t, v):
+            for k in range(4):
+                mark2[tets[t, k]] = st2
+    for i in range(nsv):
+        t = pool[sv0 + i]
+        for k in range(4):
+            w = tets[t, k]
+            if w != u and w != v and mark[w] == st1 and mark2[w] != st2:
+                return False, 0.0
+
+    # 2b. no vertex of a dying tet may lose its last tet: every vertex w of a
+    # dying tet needs a tet without u or without v (usually its first one).
+    for i in range(nsu):
+        t = pool[su0 + i]
+        if not _has(tets, t, v):
+            continue
+        for k in range(4):
+            w = tets[t, k]
+            if w == u or w == v:
+                continue
+            keeps = False
+            sw0 = adj_start[w]
+            for i2 in range(adj_len[w]):
+                t2 = pool[sw0 + i2]
+                if not (_has(tets, t2, u) and _has(tets, t2, v)):
+                    keeps = True
+                    break
+            if not keeps:
+                return False, 0.0
+
+    # 2c. edge and triangle links.  A link edge w x (or triangle) shared by u
+    # and v has all its vertices in N(u) & N(v), which 2a showed to be the
+    # ring of the edge (mark2 == st2): only those few candidates are looked at.
+    for i in range(nsu):
+        t = pool[su0 + i]
+        if _has(tets, t, v):
+            continue
+        o0 = -1
+        o1 = -1
+        o2 = -1
+        for k in range(4):
+            w = tets[t, k]
+            if w != u:
+                if o0 < 0:
+                    o0 = w
+                elif o1 < 0:
+                    o1 = w
+                else:
+                    o2 = w
+        r0 = mark2[o0] == st2
+        r1 = mark2[o1] == st2
+        r2 = mark2[o2] == st2
+        if r0 and r1 and r2:
+            for i2 in range(nsv):
+                s = pool[sv0 + i2]
+                if _has(tets, s, o0) and _has(tets, s, o1) and _has(tets, s, o2):
+                    return False, 0.0  # face o has u on one side and v on the other
+        for pair in range(3):
+            if pair == 0:
+                w, x, ok_pair = o0, o1, r0 and r1
+            elif pair == 1:
+                w, x, ok_pair = o1, o2, r1 and r2
+            else:
+                w, x, ok_pair = o0, o2, r0 and r2
+            if not ok_pair:
+                continue
+            twin = False
+            for i2 in range(nsv):
+                s = pool[sv0 + i2]
+                if _has(tets, s, w) and _has(tets, s, x):
+                    twin = True
+                    break
+            if twin:
+                spans = False
+                for i2 in range(nsu):
+                    s = pool[su0 + i2]
+                    if _has(tets, s, v) and _has(tets, s, w) and _has(tets, s, x):
+                        spans = True
+                        break
+                if not spans:
+                    return False, 0.0
+
+    if vclass[u] == 0:
+        return True, 0.0
+
+    # 3. surface rules.
+    fa = np.empty(3 * nsu, np.int64)
+    fb = np.empty(3 * nsu, np.int64)
+    fs0 = np.empty(3 * nsu, np.int64)
+    fs1 = np.empty(3 * nsu, np.int64)
+    nu = surface_faces(u, tets, labels, adj_start, adj_len, pool, fa, fb, fs0, fs1)
+    # 3a. v lies on every sheet of u, along an S-edge of that sheet.
+    for i in range(nu):
+        found = False
+        for j in range(nu):
+            if fs0[j] == fs0[i] and fs1[j] == fs1[i] and (fa[j] == v or fb[j] == v):
+                found = True
+                break
+        if not found:
+            return False, 0.0
+    ga = np.empty(3 * nsv, np.int64)
+    gb = np.empty(3 * nsv, np.int64)
+    gs0 = np.empty(3 * nsv, np.int64)
+    gs1 = np.empty(3 * nsv, np.int64)
+    nv = surface_faces(v, tets, labels, adj_start, adj_len, pool, ga, gb, gs0, gs1)
+    # 3b. link condition with a virtual vertex coned to S: a common S-neighbour
+    # w of u and v needs the S-face u v w; no S-face pair u w x / v w x.
+    st3 = _new_stamp(counters)
+    for j in range(nv):
+        mark[ga[j]] = st3
+        mark[gb[j]] = st3
+    for i in range(nu):
+        for w in (fa[i], fb[i]):
+            if w == v or mark[w] != st3:
+                continue
+            spans = False
+            for j in range(nu):
+                if (fa[j] == v and fb[j] == w) or (fa[j] == w and fb[j] == v):
+                    spans = True
+                    break
+            if not spans:
+                return False, 0.0
+        if fa[i] != v and fb[i] != v:
+            for j in range(nv):
+                if (ga[j] == fa[i] and gb[j] == fb[i]) or (ga[j] == fb[i] and gb[j] == fa[i]):
+                    return False, 0.0
+    # 3c. no S-face turns by more than the normal limit (a local fold test).
+    pu = points[u]
+    for i in range(nu):
+        if fa[i] == v or fb[i] == v:
+            continue
+        a = points[fa[i]]
+        b = points[fb[i]]
+        n0x = (a[1] - pu[1]) * (b[2] - pu[2]) - (a[2] - pu[2]) * (b[1] - pu[1])
+        n0y = (a[2] - pu[2]) * (b[0] - pu[0]) - (a[0] - pu[0]) * (b[2] - pu[2])
+        n0z = (a[0] - pu[0]) * (b[1] - pu[1]) - (a[1] - pu[1]) * (b[0] - pu[0])
+        n1x = (a[1] - pv[1]) * (b[2] - pv[2]) - (a[2] - pv[2]) * (b[1] - pv[1])
+        n1y = (a[2] - pv[2]) * (b[0] - pv[0]) - (a[0] - pv[0]) * (b[2] - pv[2])
+        n1z = (a[0] - pv[0]) * (b[1] - pv[1]) - (a[1] - pv[1]) * (b[0] - pv[0])
+        l0 = math.sqrt(n0x * n0x + n0y * n0y + n0z * n0z)
+        l1 = math.sqrt(n1x * n1x + n1y * n1y + n1z * n1z)
+        if l1 == 0.0 or n0x * n1x + n0y * n1y + n0z * n1z < params[P_NORMAL_COS] * l0 * l1:
+            return False, 0.0
+    # 3d. volume balance: a surface collapse may not push any label's volume
+    # drift beyond its budget unless it brings the drift back towards zero.
+    dvol = np.empty(vol_drift.shape[0])
+    label_volume_change(u, v, points, tets, tet_lab, adj_start, adj_len, pool, dvol)
+    for lab in range(dvol.shape[0]):
+        after = vol_drift[lab] + dvol[lab]
+        if abs(after) > vol_budget[lab] and abs(after) > abs(vol_drift[lab]):
+            return False, 0.0
+    # 3e. distance, both ways: original points represented by u -> new S-faces,
+    # and samples of the new S-faces -> the S-faces now around u.
+    tol = params[P_TOL] * params[P_SURF_SAFETY]
+    tol2 = tol * tol
+    worst = 0.0
+    r = u
+    while r >= 0:
+        pr = own_pts[r]
+        best = np.inf
+        for i in range(nu):
+            if fa[i] == v or fb[i] == v:
+                continue
+            best = min(best, point_triangle_dist2(pr, pv, points[fa[i]], points[fb[i]]))
+        worst = max(worst, best)
+        if worst > tol2:
+            return False, math.sqrt(worst)
+        r = own_next[r]
+    # Points v represents: to the new S-faces and v's S-faces that stay.
+    r = own_next[v]
+    while r >= 0:
+        pr = own_pts[r]
+        best = np.inf
+        for i in range(nu):
+            if fa[i] == v or fb[i] == v:
+                continue
+            best = min(best, point_triangle_dist2(pr, pv, points[fa[i]], points[fb[i]]))
+        for j in range(nv):
+            if ga[j] == u or gb[j] == u:
+                continue
+            best = min(best, point_triangle_dist2(pr, pv, points[ga[j]], points[gb[j]]))
+        worst = max(worst, best)
+        if worst > tol2:
+            return False, math.sqrt(worst)
+        r = own_next[r]
+    # Points represented by the other S-neighbours w of u: to the S-faces
+    # around w after the collapse (u replaced by v, faces holding both gone).
+    st4 = _new_stamp(counters)
+    for i in range(nu):
+        for w in (fa[i], fb[i]):
+            if w == v or mark[w] == st4:
+                continue
+            mark[w] = st4
+            if own_next[w] < 0:
+                continue
+            nw = 3 * adj_len[w]
+            ha = np.empty(nw, np.int64)
+            hb = np.empty(nw, np.int64)
+            hs0 = np.empty(nw, np.int64)
+            hs1 = np.empty(nw, np.int64)
+            nfw = surface_faces(w, tets, labels, adj_start, adj_len, pool, ha, hb, hs0, hs1)
+            r = own_next[w]
+            while r >= 0:
+                pr = own_pts[r]
+                best = np.inf
+                for j in range(nfw):
+                    a = ha[j]
+                    b = hb[j]
+                    if (a == u and b == v) or (a == v and b == u):
+                        continue
+                    pa = pv if a == u else points[a]
+                    pb = pv if b == u else points[b]
+                    best = min(best, point_triangle_dist2(pr, points[w], pa, pb))
+                worst = max(worst, best)
+                if worst > tol2:
+                    return False, math.sqrt(worst)
+                r = own_next[r]
+    sample = np.empty(3)
+    for i in range(nu):
+        if fa[i] == v or fb[i] == v:
+            continue
+        a = points[fa[i]]
+        b = points[fb[i]]
+        for m in range(3):
+            if m == 0:
+                for c in range(3):
+                    sample[c] = (pv[c] + a[c] + b[c]) / 3.0
+            elif m == 1:
+                for c in range(3):
+                    sample[c] = 0.5 * (pv[c] + a[c])
+            else:
+                for c in range(3):
+                    sample[c] = 0.5 * (pv[c] + b[c])
+            best = np.inf
+            for j in range(nu):
+                best = min(best, point_triangle_dist2(sample, pu, points[fa[j]], points[fb[j]]))
+            worst = max(worst, best)
+        if worst > tol2:
+            return False, math.sqrt(worst)
+    return True, math.sqrt(worst)

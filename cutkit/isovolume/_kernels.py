@@ -1,0 +1,441 @@
+"""Numba kernels of the six-tetrahedra marching isovolume.
+
+The grid is a flat C-ordered array of ``nx * ny * nz`` samples, vertex
+``g = (i * ny + j) * nz + k``.  Every cube is split into the six Kuhn
+(Freudenthal) tetrahedra sharing the main diagonal (0,0,0)-(1,1,1); every
+cube uses the same diagonal, so the split is conforming across cubes.  The
+grid edges of that split go from a vertex to its seven forward neighbours
+``+d``, ``d`` in {0,1}^3 \\ {0}; edge ``(g, d)`` has direction index
+``code(d) - 1`` with ``code(dx, dy, dz) = 4 dx + 2 dy + dz``.
+
+Work is split into passes that never need a lock (parallel over x-slabs):
+
+1. :func:`classify_scalar` - per-vertex label and the ON flag of the
+   snapping rule (scalar fields only).
+2. :func:`edge_masks` - per vertex, the bit mask of its forward edges that
+   carry a crossing point (endpoints of different labels, neither ON).
+3. :func:`count_pieces` - per slab, the number of output tets and tet-centre
+   nodes; marks the grid vertices that a tet uses.
+4. prefix sums (NumPy) give every used vertex, crossing and centre its node id;
+5. :func:`fill_points` and :func:`fill_pieces` write nodes and tets.
+
+Inside a cube, a node is named by a *ref*: ``0..7`` a cube corner (its code),
+``8 + 7 * corner + dir`` a crossing on the forward edge ``dir`` of a corner,
+``REF_CENTRE + t`` the centre node of Kuhn tet ``t``.  The quad-split rule
+orders nodes by a global *key*: ``g`` for grid vertex ``g`` and
+``n_grid + 7 * g + dir`` for the crossing on edge ``(g, dir)``; both tets
+that share a quadrilateral see the same keys and so pick the same diagonal.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit, prange
+
+from cutkit.isovolume._clip import (  # noqa: F401  (tables re-exported for callers)
+    CORNER_OFFSETS,
+    EDGE_A,
+    EDGE_B,
+    KUHN_PATHS,
+    KUHN_POSITIVE,
+    LOCAL_EDGE,
+    MAX_PIECES,
+    MODE_LABELS,
+    MODE_SCALAR,
+    POPCOUNT,
+    REF_CENTRE,
+    _clip_side,
+    _cone,
+    _emit,
+    label_crossing,
+)
+
+
+# --------------------------------------------------------- vertex passes ---
+
+
+@njit(cache=True, parallel=True)
+def classify_scalar(f, nx, ny, nz, level, snap, label, lab, on):
+    """Label and ON flag of every vertex of a scalar field (the snapping rule).
+
+    A vertex is ON (on the surface) when its value equals ``level`` or when
+    a crossing on one of its 14 grid edges lies closer than ``snap`` (as a
+    fraction of that edge) to it: its value is then taken as ``level``, so
+    the crossing point coincides with the vertex and no sliver is made.
+
+    f : (n,) float64; lab : (n,) int32 out (``label`` where f >= level or ON,
+    else 0); on : (n,) uint8 out.
+    """
+    for i in prange(nx):
+        for j in range(ny):
+            for k in range(nz):
+                g = (i * ny + j) * nz + k
+                fu = f[g]
+                is_on = fu == level
+                if not is_on:
+                    for d in range(1, 8):
+                        if is_on:
+                            break
+                        dx = (d >> 2) & 1
+                        dy = (d >> 1) & 1
+                        dz = d & 1
+                        step = (dx * ny + dy) * nz + dz
+                        for s in range(2):
+                            if s == 0:
+                                if i + dx >= nx or j + dy >= ny or k + dz >= nz:
+                                    continue
+                                fv = f[g + step]
+                            else:
+                                if i - dx < 0 or j - dy < 0 or k - dz < 0:
+                                    continue
+                                fv = f[g - step]
+                            if (fu > level and fv < level) or (fu < level and fv > level):
+                                t = (level - fu) / (fv - fu)
+                                if t < snap:
+                                    is_on = True
+                                    break
+                on[g] = 1 if is_on else 0
+                lab[g] = label if (is_on or fu > level) else 0
+
+
+@njit(cache=True, parallel=True)
+def edge_masks(lab, on, nx, ny, nz, mask):
+    """Bit ``dir`` of ``mask[g]`` is set when forward edge ``(g, dir)`` has a crossing.
+
+    lab : (n,) int32; on : (n,) uint8; mask : (n,) uint8 out.
+    """
+    for i in prange(nx):
+        for j in range(ny):
+            for k in range(nz):
+                g = (i * ny + j) * nz + k
+                m = 0
+                if on[g] == 0:
+                    lu = lab[g]
+                    for d in range(1, 8):
+                        dx = (d >> 2) & 1
+                        dy = (d >> 1) & 1
+                        dz = d & 1
+                        if i + dx >= nx or j + dy >= ny or k + dz >= nz:
+                            continue
+                        gv = g + (dx * ny + dy) * nz + dz
+                        if on[gv] == 0 and lab[gv] != lu:
+                            m |= 1 << (d - 1)
+                mask[g] = m
+
+
+@njit(cache=True, nogil=True)
+def _cube_uniform(lab, on, g0, ny, nz):
+    """The label of a cube whose 8 samples share it and none is ON, else -1."""
+    l0 = lab[g0]
+    for c in range(1, 8):
+        g = g0 + (((c >> 2) & 1) * ny + ((c >> 1) & 1)) * nz + (c & 1)
+        if lab[g] != l0:
+            return -1
+    for c in range(8):
+        g = g0 + (((c >> 2) & 1) * ny + ((c >> 1) & 1)) * nz + (c & 1)
+        if on[g] != 0:
+            return -1
+    return l0
+
+
+@njit(cache=True, nogil=True)
+def _cube_pieces(i, j, k, ny, nz, n_grid, lab, on, f, level, mode, sgn,
+                 ref, key, pos, tlab, ton, sets, tmp, tmp_lab, out, out_lab):
+    """All tets of cube (i, j, k) into ``out`` (refs) and ``out_lab``; returns their count.
+
+    ref, key : (11,) int64, pos : (11, 3) float64, tlab : (4,) int64,
+    ton : (4,) bool, sets : (3, 4) int64, tmp : (MAX_PIECES, 4) int64, tmp_lab : (MAX_PIECES,) int32
+    are scratch; out : (6 * MAX_PIECES, 4) int64, out_lab : (6 * MAX_PIECES,) int32.
+    """
+    g0 = (i * ny + j) * nz + k
+    n = 0
+    # Fast path: a cube of one label and no ON vertex is six whole tets.
+    l0 = lab[g0]
+    uniform = True
+    for c in range(8):
+        g = g0 + (((c >> 2) & 1) * ny + ((c >> 1) & 1)) * nz + (c & 1)
+        if lab[g] != l0 or on[g] != 0:
+            uniform = False
+            break
+    if uniform:
+        if l0 == 0:
+            return 0
+        for t in range(6):
+            for v in range(4):
+                out[n, v] = KUHN_POSITIVE[t, v] if sgn > 0 else KUHN_POSITIVE[t, v ^ (v >> 1)]
+            out_lab[n] = l0
+            n += 1
+        return n
+    for t in range(6):
+        for v in range(4):
+            c = KUHN_PATHS[t, v]
+            g = g0 + (((c >> 2) & 1) * ny + ((c >> 1) & 1)) * nz + (c & 1)
+            tlab[v] = lab[g]
+            ton[v] = on[g] != 0
+            ref[v] = c
+            key[v] = g
+            pos[v, 0] = (c >> 2) & 1
+            pos[v, 1] = (c >> 1) & 1
+            pos[v, 2] = c & 1
+        # distinct labels among the corners
+        nlab = 1
+        for v in range(1, 4):
+            new = True
+            for w in range(v):
+                if tlab[w] == tlab[v]:
+                    new = False
+            if new:
+                nlab += 1
+        m = 0
+        if nlab == 1:
+            if tlab[0] != 0:
+                m = _emit(0, 1, 2, 3, tlab[0], ref, pos, sgn, tmp, tmp_lab, 0)
+        else:
+            for e in range(6):
+                a = EDGE_A[e]
+                b = EDGE_B[e]
+                ca = KUHN_PATHS[t, a]
+                cb = KUHN_PATHS[t, b]
+                d = (ca ^ cb) - 1
+                ref[4 + e] = 8 + 7 * ca + d
+                key[4 + e] = n_grid + 7 * key[a] + d
+                if tlab[a] != tlab[b] and not ton[a] and not ton[b]:
+                    if mode == MODE_SCALAR:
+                        fa = f[key[a]]
+                        s = (level - fa) / (f[key[b]] - fa)
+                    else:
+                        # Label pieces (corner cuts, cones) are valid for any
+                        # crossings in (0, 1), so their orientation is that at
+                        # the midpoints; fill_points places the true crossing.
+                        s = 0.5
+                    for q in range(3):
+                        pos[4 + e, q] = pos[a, q] + s * (pos[b, q] - pos[a, q])
+            split22 = False
+            if nlab == 2 and mode == MODE_LABELS:
+                n0 = 0
+                for v in range(4):
+                    if tlab[v] == tlab[0]:
+                        n0 += 1
+                # label crossings need not be coplanar: a 2|2 tet's cut quad may
+                # be skew, so it is coned from the centre like a 3-label tet
+                split22 = n0 == 2
+            if nlab == 2 and not split22:
+                x0 = tlab[0]
+                x1 = x0
+                for v in range(1, 4):
+                    if tlab[v] != x0:
+                        x1 = tlab[v]
+                if x0 != 0:
+                    m = _clip_side(x0, tlab, ton, x0, ref, key, pos, sgn, sets, tmp, tmp_lab, m)
+                if x1 != 0:
+                    m = _clip_side(x1, tlab, ton, x1, ref, key, pos, sgn, sets, tmp, tmp_lab, m)
+            else:
+                ref[10] = REF_CENTRE + t
+                for q in range(3):
+                    pos[10, q] = 0.25 * (pos[0, q] + pos[1, q] + pos[2, q] + pos[3, q])
+                m = _cone(tlab, ref, key, pos, sgn, tmp, tmp_lab, m)
+        for r in range(m):
+            for v in range(4):
+                out[n, v] = tmp[r, v]
+            out_lab[n] = tmp_lab[r]
+            n += 1
+    return n
+
+
+# ---------------------------------------------------------- cube passes ---
+
+
+@njit(cache=True, parallel=True)
+def count_pieces(lab, on, f, nx, ny, nz, level, mode, sgn, n_tets, n_centres, used):
+    """Per x-slab i, the number of tets and of centre nodes; marks used grid vertices.
+
+    n_tets, n_centres : (nx - 1,) int64 out; used : (n,) uint8, zeroed, out.
+    Two slabs may both set a shared vertex's flag to 1 (same value).
+    """
+    n_grid = nx * ny * nz
+    for i in prange(nx - 1):
+        ref = np.empty(11, np.int64)
+        key = np.empty(11, np.int64)
+        pos = np.zeros((11, 3), np.float64)
+        tlab = np.empty(4, np.int64)
+        ton = np.empty(4, np.bool_)
+        sets = np.empty((3, 4), np.int64)
+        tmp = np.empty((MAX_PIECES, 4), np.int64)
+        tmp_lab = np.empty(MAX_PIECES, np.int32)
+        out = np.empty((6 * MAX_PIECES, 4), np.int64)
+        out_lab = np.empty(6 * MAX_PIECES, np.int32)
+        seen = np.empty(6, np.bool_)
+        nt = 0
+        nc = 0
+        for j in range(ny - 1):
+            for k in range(nz - 1):
+                g0 = (i * ny + j) * nz + k
+                u = _cube_uniform(lab, on, g0, ny, nz)
+                if u == 0:
+                    continue
+                if u > 0:  # six whole Kuhn tets
+                    nt += 6
+                    for c in range(8):
+                        used[g0 + (((c >> 2) & 1) * ny + ((c >> 1) & 1)) * nz + (c & 1)] = 1
+                    continue
+                m = _cube_pieces(i, j, k, ny, nz, n_grid, lab, on, f, level, mode, sgn,
+                                 ref, key, pos, tlab, ton, sets, tmp, tmp_lab, out, out_lab)
+                nt += m
+                seen[:] = False
+                for r in range(m):
+                    for v in range(4):
+                        x = out[r, v]
+                        if x < 8:
+                            used[g0 + (((x >> 2) & 1) * ny + ((x >> 1) & 1)) * nz + (x & 1)] = 1
+                        elif x >= REF_CENTRE:
+                            seen[x - REF_CENTRE] = True
+                for t in range(6):
+                    if seen[t]:
+                        nc += 1
+        n_tets[i] = nt
+        n_centres[i] = nc
+
+
+@njit(cache=True, parallel=True)
+def fill_points(lab, on, f, mask, used, vmap, eoff, nx, ny, nz, level, mode, affine, points):
+    """World positions of the used grid vertices and of the crossing points.
+
+    vmap : (n,) int64 node id of each used vertex; eoff : (n,) int64 node id
+    of the first crossing of each vertex's forward edges; affine : (3, 4)
+    float64 index -> world; points : (n_nodes, 3) float64 out.
+    """
+    for i in prange(nx):
+        for j in range(ny):
+            for k in range(nz):
+                g = (i * ny + j) * nz + k
+                if used[g]:
+                    p = vmap[g]
+                    for q in range(3):
+                        points[p, q] = affine[q, 0] * i + affine[q, 1] * j + affine[q, 2] * k + affine[q, 3]
+                m = mask[g]
+                if m == 0:
+                    continue
+                r = 0
+                for d in range(7):
+                    if (m >> d) & 1:
+                        code = d + 1
+                        dx = (code >> 2) & 1
+                        dy = (code >> 1) & 1
+                        dz = code & 1
+                        if mode == MODE_SCALAR:
+                            fa = f[g]
+                            s = (level - fa) / (f[g + (dx * ny + dy) * nz + dz] - fa)
+                        else:
+                            s = label_crossing(lab, g, code, ny, nz)
+                        x = i + s * dx
+                        y = j + s * dy
+                        z = k + s * dz
+                        p = eoff[g] + r
+                        for q in range(3):
+                            points[p, q] = affine[q, 0] * x + affine[q, 1] * y + affine[q, 2] * z + affine[q, 3]
+                        r += 1
+
+
+@njit(cache=True, parallel=True)
+def fill_pieces(lab, on, f, mask, vmap, eoff, tet_off, centre_off, nx, ny, nz, level, mode, sgn,
+                affine, tets, tet_labels, points):
+    """Write the tets of every slab at ``tet_off[i]`` and its centre nodes at ``centre_off[i]``.
+
+    tet_off, centre_off : (nx - 1,) int64; tets : (m, 4) int64 out;
+    tet_labels : (m,) int32 out; points : (n_nodes, 3) float64 (centre rows out).
+    """
+    n_grid = nx * ny * nz
+    for i in prange(nx - 1):
+        ref = np.empty(11, np.int64)
+        key = np.empty(11, np.int64)
+        pos = np.zeros((11, 3), np.float64)
+        tlab = np.empty(4, np.int64)
+        ton = np.empty(4, np.bool_)
+        sets = np.empty((3, 4), np.int64)
+        tmp = np.empty((MAX_PIECES, 4), np.int64)
+        tmp_lab = np.empty(MAX_PIECES, np.int32)
+        out = np.empty((6 * MAX_PIECES, 4), np.int64)
+        out_lab = np.empty(6 * MAX_PIECES, np.int32)
+        centre_id = np.empty(6, np.int64)
+        corner_id = np.empty(8, np.int64)
+        nt = tet_off[i]
+        nc = centre_off[i]
+        for j in range(ny - 1):
+            for k in range(nz - 1):
+                g0 = (i * ny + j) * nz + k
+                u = _cube_uniform(lab, on, g0, ny, nz)
+                if u == 0:
+                    continue
+                if u > 0:  # six whole Kuhn tets
+                    for c in range(8):
+                        corner_id[c] = vmap[g0 + (((c >> 2) & 1) * ny + ((c >> 1) & 1)) * nz + (c & 1)]
+                    for t in range(6):
+                        tets[nt, 0] = corner_id[KUHN_POSITIVE[t, 0]]
+                        tets[nt, 1] = corner_id[KUHN_POSITIVE[t, 1]]
+                        if sgn > 0:
+                            tets[nt, 2] = corner_id[KUHN_POSITIVE[t, 2]]
+                            tets[nt, 3] = corner_id[KUHN_POSITIVE[t, 3]]
+                        else:
+                            tets[nt, 2] = corner_id[KUHN_POSITIVE[t, 3]]
+                            tets[nt, 3] = corner_id[KUHN_POSITIVE[t, 2]]
+                        tet_labels[nt] = u
+                        nt += 1
+                    continue
+                m = _cube_pieces(i, j, k, ny, nz, n_grid, lab, on, f, level, mode, sgn,
+                                 ref, key, pos, tlab, ton, sets, tmp, tmp_lab, out, out_lab)
+                if m == 0:
+                    continue
+                centre_id[:] = -1
+                for r in range(m):
+                    for v in range(4):
+                        x = out[r, v]
+                        if x < 8:
+                            node = vmap[g0 + (((x >> 2) & 1) * ny + ((x >> 1) & 1)) * nz + (x & 1)]
+                        elif x < REF_CENTRE:
+                            c = (x - 8) // 7
+                            d = (x - 8) - 7 * c
+                            g = g0 + (((c >> 2) & 1) * ny + ((c >> 1) & 1)) * nz + (c & 1)
+                            node = eoff[g] + POPCOUNT[mask[g] & ((1 << d) - 1)]
+                        else:
+                            t = x - REF_CENTRE
+                            if centre_id[t] < 0:
+                                centre_id[t] = nc
+                                # centre of Kuhn tet t: the mean of its crossings with the
+                                # background if it has background corners (so the outer
+                                # surface, coned from it, stays close to flat), else of
+                                # all its crossings.  Either set has a crossing on an edge
+                                # of every corner, so the mean is strictly inside, and
+                                # any inside point keeps every cone tet valid.
+                                has_bg = False
+                                for w in range(4):
+                                    cc = KUHN_PATHS[t, w]
+                                    if lab[g0 + (((cc >> 2) & 1) * ny + ((cc >> 1) & 1)) * nz + (cc & 1)] == 0:
+                                        has_bg = True
+                                cx = 0.0
+                                cy = 0.0
+                                cz = 0.0
+                                nw = 0
+                                for e in range(6):
+                                    ca = KUHN_PATHS[t, EDGE_A[e]]
+                                    cb = KUHN_PATHS[t, EDGE_B[e]]
+                                    ga = g0 + (((ca >> 2) & 1) * ny + ((ca >> 1) & 1)) * nz + (ca & 1)
+                                    gb = g0 + (((cb >> 2) & 1) * ny + ((cb >> 1) & 1)) * nz + (cb & 1)
+                                    if lab[ga] == lab[gb]:
+                                        continue
+                                    if has_bg and lab[ga] != 0 and lab[gb] != 0:
+                                        continue
+                                    sc = label_crossing(lab, ga, ca ^ cb, ny, nz)
+                                    cx += i + ((ca >> 2) & 1) + sc * (((cb >> 2) & 1) - ((ca >> 2) & 1))
+                                    cy += j + ((ca >> 1) & 1) + sc * (((cb >> 1) & 1) - ((ca >> 1) & 1))
+                                    cz += k + (ca & 1) + sc * ((cb & 1) - (ca & 1))
+                                    nw += 1
+                                cx /= nw
+                                cy /= nw
+                                cz /= nw
+                                for q in range(3):
+                                    points[nc, q] = affine[q, 0] * cx + affine[q, 1] * cy + affine[q, 2] * cz + affine[q, 3]
+                                nc += 1
+                            node = centre_id[t]
+                        tets[nt, v] = node
+                    tet_labels[nt] = out_lab[r]
+                    nt += 1

@@ -1,0 +1,338 @@
+"""Mass-spring model of a tetrahedral mesh (paper section 5).
+
+Springs sit on the mesh edges and masses on the nodes.  What never changes
+except by an explicit topology edit is the :class:`SpringModel`; what
+changes every step is the :class:`SpringState`; the inputs of a step are
+the :class:`Control`.
+
+Units (one consistent system, that of many FE codes): length mm, mass
+tonne (1 t = 1000 kg), time s, force N, stress MPa = N/mm^2, stiffness
+N/mm, density t/mm^3, acceleration mm/s^2.  The model file stores E in Pa
+and density in kg/m^3; :func:`build_spring_model` converts them
+(:data:`PA_TO_MPA`, :data:`KG_M3_TO_T_MM3`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from cutkit.errors import InputError, MeshError
+from cutkit.relax._kernels import greedy_colouring, spring_csr
+
+#: E [Pa] -> [N/mm^2].
+PA_TO_MPA = 1e-6
+#: density [kg/m^3] -> [t/mm^3].
+KG_M3_TO_T_MM3 = 1e-12
+#: Standard gravity as a vector in mm/s^2 (pass ``Control(gravity=...)``).
+STANDARD_GRAVITY_MM_S2 = 9806.65
+#: Calibration constant c of k_e = sum_t E V_t / (c l_e^2).  c = 1 makes an
+#: isotropic spring network have Young's modulus E (Poisson ratio 1/4),
+#: see docs/relaxation.md.
+STIFFNESS_CALIBRATION = 1.0
+#: Number of past updates averaged for the node-list assignment (section 5.2).
+ACCEL_WINDOW = 4
+#: |prestrain| at or above this would give springs nearly zero (or doubled) rest lengths.
+MAX_PRESTRAIN = 0.9
+
+
+@dataclass
+class SpringModel:
+    """What a step never changes (warp.sim's Model).
+
+    Attributes
+    ----------
+    rest_positions : (n, 3) float64
+        Node rest positions, mm.
+    masses : (n,) float64
+        Lumped node masses, t.
+    springs : (s, 2) int64
+        Node pair of each spring (a mesh edge), ``springs[:, 0] < springs[:, 1]``
+        for mesh-built springs.
+    rest_length : (s,) float64
+        Spring rest length, mm (shortened along fibres by the prestress).
+    stiffness : (s,) float64
+        Spring stiffness k_jk, N/mm.
+    damping : (n,) float64
+        Mass-proportional damping per node, 1/s (D_k = damping_k m_k in eq. 1).
+    fixed : (n,) bool
+        Nodes held where they are (at rest, or at their prescribed position).
+    prescribed_displacement : (n, 3) float64
+        Displacement imposed on fixed nodes, mm (zero for plainly fixed nodes).
+    adj_offsets, adj_nodes, adj_springs : CSR of the spring graph
+        ``(n + 1,) int64``, ``(2 s,) int32``, ``(2 s,) int32``: the springs of
+        node k are ``adj_springs[adj_offsets[k]:adj_offsets[k + 1]]``, their
+        other ends ``adj_nodes[...]`` (ascending).
+    adj_rest, adj_stiffness : (2 s,) float64
+        ``rest_length`` and ``stiffness`` in CSR order (contiguous for the kernel).
+    colour : (n,) int32
+        Greedy colouring of the spring graph (no spring joins two nodes of
+        one colour): the parallel Gauss-Seidel classes.
+    spring_a, spring_b : (s,) int32
+        ``springs[:, 0]`` and ``springs[:, 1]``, contiguous for the kernels.
+    node_stiffness : (n,) float64
+        Sum of the stiffness of each node's springs, N/mm.
+    """
+
+    rest_positions: np.ndarray
+    masses: np.ndarray
+    springs: np.ndarray
+    rest_length: np.ndarray
+    stiffness: np.ndarray
+    damping: np.ndarray
+    fixed: np.ndarray
+    prescribed_displacement: np.ndarray
+    adj_offsets: np.ndarray = field(default=None)
+    adj_nodes: np.ndarray = field(default=None)
+    adj_springs: np.ndarray = field(default=None)
+    adj_rest: np.ndarray = field(default=None)
+    adj_stiffness: np.ndarray = field(default=None)
+    colour: np.ndarray = field(default=None)
+    spring_a: np.ndarray = field(default=None)
+    spring_b: np.ndarray = field(default=None)
+    node_stiffness: np.ndarray = field(default=None)
+
+    def __post_init__(self):
+        if self.adj_offsets is None:
+            self.rebuild_adjacency()
+
+    @property
+    def n_nodes(self) -> int:
+        return int(self.rest_positions.shape[0])
+
+    @property
+    def n_springs(self) -> int:
+        return int(self.springs.shape[0])
+
+    @property
+    def free_nodes(self) -> np.ndarray:
+        """(f,) int64 nodes the integrator moves."""
+        return np.flatnonzero(~self.fixed)
+
+    def rebuild_adjacency(self, recolour: bool = True) -> None:
+        """Recompute the CSR spring graph (and the colouring) from ``springs``."""
+        n = self.n_nodes
+        s = self.springs
+        # counting sort, O(n + s): a cut rebuilds this every geometry update
+        self.adj_offsets, self.adj_nodes, self.adj_springs = spring_csr(
+            np.ascontiguousarray(s[:, 0], np.int64), np.ascontiguousarray(s[:, 1], np.int64), n)
+        self.spring_a = np.ascontiguousarray(s[:, 0], np.int32)
+        self.spring_b = np.ascontiguousarray(s[:, 1], np.int32)
+        self.refresh_spring_arrays()
+        if recolour:
+            self.colour = greedy_colouring(self.adj_offsets, self.adj_nodes, n)
+
+    def refresh_spring_arrays(self) -> None:
+        """Copy ``rest_length``/``stiffness`` into CSR order after editing them."""
+        self.adj_rest = np.ascontiguousarray(self.rest_length[self.adj_springs])
+        self.adj_stiffness = np.ascontiguousarray(self.stiffness[self.adj_springs])
+        self.node_stiffness = np.bincount(self.springs.ravel(), np.repeat(self.stiffness, 2), minlength=self.n_nodes)
+
+
+@dataclass
+class SpringState:
+    """What a step changes (warp.sim's State).
+
+    Attributes
+    ----------
+    positions : (n, 3) float64, mm
+    velocities : (n, 3) float64, mm/s
+    time_stamps : (n,) float64
+        Simulated time each node has been advanced to, s (section 5.2).
+    accel_window : (n, w) float64
+        Magnitude of the node's acceleration over its last w updates, mm/s^2.
+    n_updates : (n,) int64
+        Number of updates of each node so far.
+    node_list : (n,) int32
+        Index i of the node list (time step dt_0 2^i) holding each node;
+        -1 for fixed nodes.
+    time : float
+        Simulated time of the whole state, s.
+    """
+
+    positions: np.ndarray
+    velocities: np.ndarray
+    time_stamps: np.ndarray
+    accel_window: np.ndarray
+    n_updates: np.ndarray
+    node_list: np.ndarray
+    time: float = 0.0
+
+    def copy(self) -> "SpringState":
+        return SpringState(
+            self.positions.copy(), self.velocities.copy(), self.time_stamps.copy(),
+            self.accel_window.copy(), self.n_updates.copy(), self.node_list.copy(), self.time,
+        )
+
+
+@dataclass
+class Control:
+    """Inputs of a step (warp.sim's Control).
+
+    Attributes
+    ----------
+    external_forces : (n, 3) float64 or None
+        Forces on nodes, N (e.g. tool contact).
+    gravity : (3,) float64
+        Acceleration of gravity, mm/s^2 (zero by default).
+    """
+
+    external_forces: np.ndarray | None = None
+    gravity: np.ndarray = field(default_factory=lambda: np.zeros(3))
+
+
+def tet_edges(tets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Unique edges of a tet mesh and the edge index of each tet's six edges.
+
+    Returns
+    -------
+    edges : (e, 2) int64, ``edges[:, 0] < edges[:, 1]``, lexicographically sorted
+    tet_edge : (m, 6) int64
+    """
+    try:  # the shared mesh topology module when it is there
+        from cutkit.mesh.topology import unique_edges
+
+        return unique_edges(tets)
+    except ImportError:
+        pass
+    local = np.array([[0, 1], [0, 2], [0, 3], [1, 2], [1, 3], [2, 3]])
+    pairs = np.sort(tets[:, local].reshape(-1, 2), axis=1)
+    n = int(tets.max()) + 1 if tets.size else 1
+    keys, inverse = np.unique(pairs[:, 0] * n + pairs[:, 1], return_inverse=True)  # 1D keys: fast
+    edges = np.stack([keys // n, keys % n], axis=1)
+    return edges.astype(np.int64), inverse.reshape(-1, 6).astype(np.int64)
+
+
+def _tet_volumes(points: np.ndarray, tets: np.ndarray) -> np.ndarray:
+    p = points[tets]
+    return np.einsum("ij,ij->i", np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), p[:, 3] - p[:, 0]) / 6.0
+
+
+def build_spring_model(
+    model,
+    *,
+    calibration: float = STIFFNESS_CALIBRATION,
+    prestress: bool = True,
+) -> SpringModel:
+    """Mass-spring model of a :class:`~cutkit.model.tetmodel.TetModel`.
+
+    Masses are lumped (a quarter of each tet's mass to each of its nodes);
+    a spring on every edge with stiffness
+    ``k_e = sum_{t containing e} E_t V_t / (calibration * l_e^2)`` (Van Gelder
+    1998's area-weighted rule carried to volumes, see docs/relaxation.md);
+    the rest length along a prestressed label's fibre is shortened to
+    ``l_e (1 - prestrain cos^2(angle(e, fibre)))`` (paper section 7.3).
+
+    Parameters
+    ----------
+    model : TetModel
+        Needs a materials row (E, density, damping) for every tet label.
+    calibration : float
+        The constant c above.
+    prestress : bool
+        Apply the model's prestress to the rest lengths.
+
+    Returns
+    -------
+    SpringModel
+    """
+    points = np.ascontiguousarray(model.points, np.float64)
+    tets = np.ascontiguousarray(model.tets, np.int64)
+    n = points.shape[0]
+    if points.ndim != 2 or points.shape[1] != 3:
+        raise MeshError(f"points must have shape (n, 3), got {points.shape}")
+    if tets.ndim != 2 or tets.shape[1] != 4 or tets.shape[0] == 0:
+        raise MeshError(f"tets must have shape (m, 4) with m > 0, got {tets.shape}")
+    if tets.min() < 0 or tets.max() >= n:
+        raise MeshError(f"tets index nodes outside 0..{n - 1}")
+    if not calibration > 0:
+        raise InputError(f"stiffness calibration must be > 0, got {calibration}")
+    vol = _tet_volumes(points, tets)
+    if np.any(vol <= 0):
+        bad = int(np.flatnonzero(vol <= 0)[0])
+        raise MeshError(f"tet {bad} has non-positive volume {vol[bad]:.3g} mm^3 (inverted or degenerate)")
+    rows = model.materials.row_of(model.labels)
+    if np.any(rows < 0):
+        missing = int(model.labels[np.flatnonzero(rows < 0)[0]])
+        raise InputError(f"tet label {missing} has no row in the materials table")
+    E = model.materials["E"][rows] * PA_TO_MPA
+    rho = model.materials["density"][rows] * KG_M3_TO_T_MM3
+    damp_t = model.materials["damping"][rows]
+
+    tet_mass = rho * vol
+    masses = np.bincount(tets.ravel(), np.repeat(tet_mass / 4.0, 4), minlength=n)
+    # node damping: mass-weighted mean of the damping of its tets
+    damping = np.bincount(tets.ravel(), np.repeat(tet_mass * damp_t / 4.0, 4), minlength=n)
+    damping = np.divide(damping, masses, out=np.zeros(n), where=masses > 0)
+
+    edges, tet_edge = tet_edges(tets)
+    d = points[edges[:, 1]] - points[edges[:, 0]]
+    length = np.sqrt(np.einsum("ij,ij->i", d, d))
+    ev = np.bincount(tet_edge.ravel(), np.repeat(E * vol, 6), minlength=len(edges))
+    stiffness = ev / (calibration * length**2)
+
+    rest = length.copy()
+    ps = model.prestress
+    if prestress and len(ps.label):
+        strain = np.zeros(len(edges))
+        weight = np.zeros(len(edges))
+        fibre = np.asarray(ps.fibre_direction, np.float64)
+        fibre = fibre / np.linalg.norm(fibre, axis=1, keepdims=True)
+        prestrain = np.asarray(ps.prestrain, np.float64)
+        if np.any(np.abs(prestrain) >= MAX_PRESTRAIN):
+            raise InputError(f"prestrain must lie in (-{MAX_PRESTRAIN}, {MAX_PRESTRAIN}), got {prestrain.tolist()}")
+        for lab, f, eps in zip(ps.label, fibre, prestrain):
+            in_lab = model.labels == lab
+            if not in_lab.any():
+                continue
+            e_ids = tet_edge[in_lab].ravel()
+            cos2 = (d[e_ids] @ f / length[e_ids]) ** 2
+            w = np.repeat(vol[in_lab], 6)
+            np.add.at(strain, e_ids, w * eps * cos2)
+            np.add.at(weight, e_ids, w)
+        # an edge shared by prestressed and plain tets: volume-weighted mean over all its tets
+        all_w = np.bincount(tet_edge.ravel(), np.repeat(vol, 6), minlength=len(edges))
+        rest = length * (1.0 - strain / all_w)
+
+    fixed = np.zeros(n, bool)
+    presc = np.zeros((n, 3))
+    bc = model.boundary
+    fn = np.asarray(bc.fixed_nodes, np.int64)
+    pn = np.asarray(bc.prescribed_nodes, np.int64)
+    for name, idx in (("fixed", fn), ("prescribed", pn)):
+        if idx.size and (idx.min() < 0 or idx.max() >= n):
+            raise InputError(f"{name} node index outside 0..{n - 1}")
+    fixed[fn] = True
+    fixed[pn] = True
+    presc[pn] = np.asarray(bc.prescribed_displacement, np.float64).reshape(-1, 3)
+    return SpringModel(
+        rest_positions=points.copy(),
+        masses=masses,
+        springs=edges,
+        rest_length=rest,
+        stiffness=stiffness,
+        damping=damping,
+        fixed=fixed,
+        prescribed_displacement=presc,
+    )
+
+
+def initial_state(spring_model: SpringModel, n_lists: int = 1) -> SpringState:
+    """State at rest, with prescribed nodes at their displaced position.
+
+    Every free node starts in node list 0 (the finest step); fixed nodes
+    are in no list (-1).
+    """
+    n = spring_model.n_nodes
+    x = spring_model.rest_positions + spring_model.prescribed_displacement
+    node_list = np.where(spring_model.fixed, -1, 0).astype(np.int32)
+    return SpringState(
+        positions=np.ascontiguousarray(x),
+        velocities=np.zeros((n, 3)),
+        time_stamps=np.zeros(n),
+        accel_window=np.zeros((n, ACCEL_WINDOW)),
+        n_updates=np.zeros(n, np.int64),
+        node_list=node_list,
+        time=0.0,
+    )

@@ -1,0 +1,255 @@
+"""Numba kernel of the haptic scalpel model (paper section 6).
+
+One call advances the proxy by one fixed time step ``dt`` (1 ms at the
+haptic rate).  The kernel never checks its inputs: :mod:`cutkit.scalpel.model`
+builds and validates the arrays.
+
+Units: lengths in mm, forces in N, velocities in mm/s, masses in kg,
+stiffness eta in Pa.  An acceleration F/m in N/kg = m/s^2 is multiplied by
+``MM_PER_M`` to become mm/s^2.
+"""
+
+from __future__ import annotations
+
+import math
+
+from numba import njit
+
+# -- state codes -----------------------------------------------------------
+FREE = 0  # blade not in contact with tissue: the proxy follows the tip
+STATIC = 1  # static cut friction holds the proxy (eqs. 12-14)
+CUTTING = 2  # dynamic cut friction, the proxy moves (eqs. 15-18)
+WITHDRAWING = 3  # F_par . a < 0: the blade is pulled back, no cut force (6.5)
+
+STATE_NAMES = ("free", "static", "cutting", "withdrawing")
+
+# -- layout of the params vector (ScalpelParams.array()) -----------------------
+P_DT = 0  # time step, s
+P_K_SPRING = 1  # tip-proxy coupling spring in the blade plane, N/mm
+P_K_PLANE = 2  # restoring stiffness towards the blade plane, N/mm (6.5)
+P_MASS = 3  # proxy (blade) mass, kg, for F_m of eq. (15)
+P_ETA = 4  # material stiffness eta = E, Pa
+P_F_ENTER = 5  # N
+P_MU_STATIC = 6
+P_MU_DYNAMIC = 7
+P_RHO_DYNAMIC = 8
+P_ALPHA_STATIC = 9
+P_ALPHA_DYNAMIC = 10
+P_C_EDGE = 11
+P_C_SHAPE = 12
+P_BLADE_DEPTH = 13  # d_d of eq. (17), mm
+P_BLADE_TAPER = 14  # d_n = min(taper * d_a, breadth), dimensionless
+P_BLADE_BREADTH = 15  # widest breadth of the blade, mm
+N_PARAMS = 16
+
+# -- layout of the out vector ------------------------------------------------
+O_FORCE = 0  # (3) force to render on the device, N
+O_CUT = 3  # (3) cut friction F_cut acting on the blade, N (eqs. 10-12)
+O_PERP = 6  # (3) F_perp of eq. (9), N
+O_D_A = 9  # penetration depth d_a, mm
+O_D_N = 10  # blade breadth d_n, mm
+O_A = 11  # (3) blade direction a used this step (in the blade plane)
+O_N = 14  # (3) in-plane direction n used this step
+N_OUT = 17
+
+#: Below this length a projected blade axis is treated as degenerate.
+AXIS_EPS = 1e-9
+#: |F_par . a| below this (N) is no direction: a blade pressed straight along
+#: itself (a stab, F_par . a = 0 up to rounding) neither cuts forward nor withdraws.
+WITHDRAW_FORCE = 1e-3
+#: mm per m: converts F/m (m/s^2) into mm/s^2.
+MM_PER_M = 1000.0
+
+
+@njit(cache=True)
+def _sign(x):
+    return 1.0 if x > 0.0 else (-1.0 if x < 0.0 else 0.0)
+
+
+@njit(cache=True)
+def _dynamic_axis(f_x, v_x, d_x, p, abs_perp):
+    """New velocity along one blade axis under dynamic cut friction (eqs. 15-18).
+
+    F_open and F_friction are Coulomb-like: they oppose the motion (or the
+    applied force at rest) and can stop the blade but never reverse it.
+    F_displace is viscous, c_x * v_x, and is integrated implicitly so that a
+    stiff material cannot make the step unstable.
+    """
+    dt = p[P_DT]
+    inv_m = MM_PER_M / p[P_MASS]
+    coulomb = p[P_MU_DYNAMIC] * p[P_ETA] * p[P_C_EDGE] * d_x + p[P_ALPHA_DYNAMIC] * abs_perp  # (16) + (18)
+    viscous = p[P_RHO_DYNAMIC] * p[P_ETA] * p[P_C_SHAPE] * d_x * p[P_BLADE_DEPTH]  # (17) / v_x
+    s = _sign(v_x)
+    if s == 0.0:
+        if abs(f_x) <= coulomb:
+            return 0.0
+        s = _sign(f_x)
+        return dt * inv_m * (f_x - s * coulomb) / (1.0 + dt * inv_m * viscous)
+    v_new = (v_x + dt * inv_m * (f_x - s * coulomb)) / (1.0 + dt * inv_m * viscous)
+    if v_new * s < 0.0:
+        return 0.0
+    return v_new
+
+
+@njit(cache=True)
+def scalpel_step(params, proxy, velocity, code, entry, normal, tip, a_in, n_in, f_sim, out):
+    """Advance the scalpel proxy by one time step.
+
+    Parameters
+    ----------
+    params : (N_PARAMS,) float64
+    proxy : (3,) float64, in/out
+        The scalpel's actual position P_s, mm; kept in the blade plane.
+    velocity : (3,) float64, in/out
+        Proxy velocity, mm/s.
+    code : (1,) int64, in/out
+        FREE, STATIC, CUTTING or WITHDRAWING.
+    entry : (3,) float64
+        Entry point P_e, mm; a point of the blade plane.
+    normal : (3,) float64
+        Unit normal b of the blade plane.
+    tip : (3,) float64
+        Device tip, mm.
+    a_in, n_in : (3,) float64
+        Device blade direction a (the way the sharp edge faces) and the
+        in-plane direction n along the blade, need not be exactly unit.
+    f_sim : (3,) float64
+        External force from the tissue simulation, N.
+    out : (N_OUT,) float64, out
+    """
+    for i in range(N_OUT):
+        out[i] = 0.0
+    if code[0] == FREE:
+        for i in range(3):
+            proxy[i] = tip[i]
+            velocity[i] = 0.0
+            out[O_A + i] = a_in[i]
+            out[O_N + i] = n_in[i]
+        return
+
+    b0, b1, b2 = normal[0], normal[1], normal[2]
+    # a: the device's a projected into the blade plane (6.1)
+    ab = a_in[0] * b0 + a_in[1] * b1 + a_in[2] * b2
+    a0, a1, a2 = a_in[0] - ab * b0, a_in[1] - ab * b1, a_in[2] - ab * b2
+    la = math.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
+    if la < AXIS_EPS:
+        # a along the plane normal: fall back on n x b, which lies in the plane
+        a0 = n_in[1] * b2 - n_in[2] * b1
+        a1 = n_in[2] * b0 - n_in[0] * b2
+        a2 = n_in[0] * b1 - n_in[1] * b0
+        la = math.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
+        if la < AXIS_EPS:
+            # any direction perpendicular to b
+            if abs(b0) < 0.9:
+                a0, a1, a2 = 0.0, b2, -b1
+            else:
+                a0, a1, a2 = -b2, 0.0, b0
+            la = math.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
+    a0 /= la
+    a1 /= la
+    a2 /= la
+    # n = b x a completes the right-handed frame (a, n, b)
+    n0 = b1 * a2 - b2 * a1
+    n1 = b2 * a0 - b0 * a2
+    n2 = b0 * a1 - b1 * a0
+
+    # F_ext from the coupling springs: in-plane spring plus the plane
+    # restoring spring, proportional to the tip's distance from the plane (6.5)
+    dist = (tip[0] - entry[0]) * b0 + (tip[1] - entry[1]) * b1 + (tip[2] - entry[2]) * b2
+    o0, o1, o2 = tip[0] - proxy[0], tip[1] - proxy[1], tip[2] - proxy[2]
+    ob = o0 * b0 + o1 * b1 + o2 * b2
+    k = params[P_K_SPRING]
+    kp = params[P_K_PLANE]
+    s0 = k * (o0 - ob * b0) + kp * dist * b0
+    s1 = k * (o1 - ob * b1) + kp * dist * b1
+    s2 = k * (o2 - ob * b2) + kp * dist * b2
+    e0, e1, e2 = s0 + f_sim[0], s1 + f_sim[1], s2 + f_sim[2]
+    # eq. (9): F_ext = F_par_a + F_par_n + F_perp
+    f_perp = e0 * b0 + e1 * b1 + e2 * b2
+    fa = e0 * a0 + e1 * a1 + e2 * a2
+    fn = e0 * n0 + e1 * n1 + e2 * n2
+    abs_perp = abs(f_perp)
+
+    # d_a = |P_s - P_e|; d_n grows with d_a up to the blade's breadth
+    q0, q1, q2 = proxy[0] - entry[0], proxy[1] - entry[1], proxy[2] - entry[2]
+    d_a = math.sqrt(q0 * q0 + q1 * q1 + q2 * q2)
+    d_n = min(params[P_BLADE_TAPER] * d_a, params[P_BLADE_BREADTH])
+
+    c = code[0]
+    # forward-only cutting (6.5): the sign of F_par . a tells cutting from withdrawing
+    if c == WITHDRAWING:
+        if fa > WITHDRAW_FORCE:
+            c = STATIC
+    elif fa < -WITHDRAW_FORCE:
+        c = WITHDRAWING
+
+    dt = params[P_DT]
+    cut_a = 0.0
+    cut_n = 0.0
+    if c == WITHDRAWING:
+        # the proxy follows the tip within the plane; no cut force
+        p0 = tip[0] - dist * b0
+        p1 = tip[1] - dist * b1
+        p2 = tip[2] - dist * b2
+        velocity[0] = (p0 - proxy[0]) / dt
+        velocity[1] = (p1 - proxy[1]) / dt
+        velocity[2] = (p2 - proxy[2]) / dt
+        proxy[0], proxy[1], proxy[2] = p0, p1, p2
+    else:
+        if c == STATIC:
+            f_par = math.sqrt(fa * fa + fn * fn)
+            # eqs. (13)-(14): static opening and friction per axis; they raise
+            # the break-away threshold above F_enter inside the tissue
+            open_ = params[P_MU_STATIC] * params[P_ETA] * params[P_C_EDGE]
+            fric = params[P_ALPHA_STATIC] * abs_perp
+            threshold = params[P_F_ENTER]
+            if f_par > 0.0:
+                threshold += (abs(fa) * (open_ * d_a + fric) + abs(fn) * (open_ * d_n + fric)) / f_par
+            if f_par < threshold:
+                # eq. (12): F_cut_static = -F_par, the proxy holds still
+                cut_a = -fa
+                cut_n = -fn
+                velocity[0] = 0.0
+                velocity[1] = 0.0
+                velocity[2] = 0.0
+            else:
+                c = CUTTING
+                velocity[0] = 0.0
+                velocity[1] = 0.0
+                velocity[2] = 0.0
+        if c == CUTTING:
+            va = velocity[0] * a0 + velocity[1] * a1 + velocity[2] * a2
+            vn = velocity[0] * n0 + velocity[1] * n1 + velocity[2] * n2
+            va_new = _dynamic_axis(fa, va, d_a, params, abs_perp)
+            vn_new = _dynamic_axis(fn, vn, d_n, params, abs_perp)
+            # eq. (15): F_m = F_par + F_cut, so F_cut = m dv/dt - F_par
+            m_dt = params[P_MASS] / (MM_PER_M * dt)
+            cut_a = m_dt * (va_new - va) - fa
+            cut_n = m_dt * (vn_new - vn) - fn
+            for i in range(3):
+                ai = a0 if i == 0 else (a1 if i == 1 else a2)
+                ni = n0 if i == 0 else (n1 if i == 1 else n2)
+                velocity[i] = va_new * ai + vn_new * ni
+                proxy[i] += dt * velocity[i]
+            if va_new == 0.0 and vn_new == 0.0:
+                c = STATIC
+        # keep the proxy on the blade plane (6.5)
+        pd = (proxy[0] - entry[0]) * b0 + (proxy[1] - entry[1]) * b1 + (proxy[2] - entry[2]) * b2
+        proxy[0] -= pd * b0
+        proxy[1] -= pd * b1
+        proxy[2] -= pd * b2
+    code[0] = c
+
+    # the device feels the in-plane spring to the proxy and the plane spring
+    for i in range(3):
+        bi = b0 if i == 0 else (b1 if i == 1 else b2)
+        ai = a0 if i == 0 else (a1 if i == 1 else a2)
+        ni = n0 if i == 0 else (n1 if i == 1 else n2)
+        off = proxy[i] - tip[i]
+        out[O_FORCE + i] = k * (off + dist * bi) - kp * dist * bi
+        out[O_CUT + i] = cut_a * ai + cut_n * ni
+        out[O_PERP + i] = f_perp * bi
+        out[O_A + i] = ai
+        out[O_N + i] = ni
+    out[O_D_A] = d_a
+    out[O_D_N] = d_n

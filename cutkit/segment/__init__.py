@@ -1,0 +1,27 @@
+"""Segmentation of volumes into uint8 label maps (paper section 7.1, first step)."""
+
+from cutkit.segment.segment import (
+    CLEAN_BALL_RADIUS_VOXELS,
+    clean_mask,
+    fill_mask_holes,
+    largest_connected_component,
+    otsu_threshold,
+    resample_isotropic,
+    scalar_channel,
+    segment,
+    smooth_mm,
+    threshold_mask,
+)
+
+__all__ = [
+    "segment",
+    "scalar_channel",
+    "smooth_mm",
+    "resample_isotropic",
+    "threshold_mask",
+    "otsu_threshold",
+    "clean_mask",
+    "largest_connected_component",
+    "fill_mask_holes",
+    "CLEAN_BALL_RADIUS_VOXELS",
+]

@@ -1,0 +1,511 @@
+"""``cutkit simulate``: a blade trajectory in, cut and relaxed tissue out.
+
+The tasks of the paper's Fig. 1, on one simulated clock:
+
+* **haptics** (1 kHz, section 6): the trajectory's pose drives the scalpel
+  force model; the proxy is where the blade really is.  Before contact the
+  proxy follows the hand; at the first boundary face the hand's tip crosses
+  inwards the blade enters (``enter``) with the coefficients of that
+  tissue; below F_enter the proxy stays put (static friction), then it cuts.
+* **collision and geometry update** (``geometry_rate_hz``, sections 3-4):
+  while the scalpel cuts, the blade at the proxy cuts the mesh
+  (``cut_step``) and the topology change goes over to the springs
+  (:class:`~cutkit.simulate.tissue.Tissue`).  The reaction of the cut
+  force acts on the nodes around the blade tip.
+* **relaxation** (section 5): the node lists advance to the same time, so
+  the tissue opens under its prestress.
+* **output** at ``fps`` frames per simulated second.
+
+Offline (the default) everything runs on simulated time and the result is
+deterministic; ``realtime`` paces the loop to the wall clock and reports
+the rate each task reached.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from cutkit.errors import InputError
+
+#: The haptic step, s: the force model runs at 1 kHz whatever else happens (section 6).
+HAPTIC_DT = 1e-3
+#: The blade has left the tissue once the hand's tip is this far outside the
+#: entry face's plane, mm (a small margin so surface noise does not flicker).
+LEAVE_MARGIN_MM = 0.5
+
+
+@dataclass
+class SimulateOptions:
+    """Options of :func:`simulate` (the command line's, with the same names).
+
+    Attributes
+    ----------
+    fps : float
+        Frames per simulated second.
+    geometry_rate_hz : float
+        Collision, cut and relaxation updates per simulated second.
+    settle_iterations : int
+        Relaxation sweeps of the whole model at the large step
+        ``settle_step_s`` before the trajectory starts: the model settles
+        under its prestress and boundary conditions (at steps far beyond
+        the explicit limit the semi-implicit update is a Gauss-Seidel
+        relaxation towards equilibrium, docs/relaxation.md).
+    settle_step_s : float
+        s.
+    hold_s : float
+        Simulated seconds after the trajectory's last row (the cut opens).
+    dt0 : float
+        Finest relaxation step, s (node list 0).
+    n_lists : int
+        Node lists, steps dt0 .. dt0 2^(n_lists - 1) (section 5.2).
+    tolerance_fraction : float
+        Node-list displacement tolerance as a fraction of the mean edge length.
+    blade_length : float or None
+        mm; default: the trajectory's.
+    centre_nodes : bool
+        Fig. 2c centre nodes in split faces.
+    png : bool
+        Pictures of selected frames under ``pictures/``.
+    realtime : bool
+        Pace to the wall clock and report the rates reached.
+    haptics : str or None
+        ``HOST:PORT`` of a running ``cutkit haptics serve``.
+    write_model : bool
+        Write the cut model as ``model.h5``.
+    frames : bool
+        Write the frame series (off for benchmarks).
+    """
+
+    fps: float = 30.0
+    geometry_rate_hz: float = 50.0
+    settle_iterations: int = 100
+    settle_step_s: float = 0.02
+    hold_s: float = 0.5
+    dt0: float = 2e-3
+    n_lists: int = 3
+    tolerance_fraction: float = 1e-3
+    blade_length: float | None = None
+    centre_nodes: bool = False
+    png: bool = False
+    realtime: bool = False
+    haptics: str | None = None
+    write_model: bool = True
+    frames: bool = True
+
+    def check(self) -> None:
+        for name in ("fps", "geometry_rate_hz", "dt0", "tolerance_fraction"):
+            v = getattr(self, name)
+            if not (np.isfinite(v) and v > 0):
+                raise InputError(f"{name.replace('_', '-')} must be a positive number, got {v}")
+        if not 0 <= int(self.settle_iterations) <= 100000:
+            raise InputError(f"settle-iterations must lie in 0..100000, got {self.settle_iterations}")
+        for name in ("settle_step_s", "hold_s"):
+            v = getattr(self, name)
+            if not (np.isfinite(v) and v >= 0):
+                raise InputError(f"{name.replace('_', '-')} must be a number >= 0, got {v}")
+        if self.geometry_rate_hz > 1.0 / HAPTIC_DT:
+            raise InputError(f"geometry-rate-hz must be at most the haptic rate {1.0 / HAPTIC_DT:.0f} Hz")
+        if self.blade_length is not None and not (np.isfinite(self.blade_length) and self.blade_length > 0):
+            raise InputError(f"blade-length must be a positive number, got {self.blade_length}")
+        if not 1 <= int(self.n_lists) <= 12:
+            raise InputError(f"n-lists must lie in 1..12, got {self.n_lists}")
+        if self.haptics is not None:
+            from cutkit.simulate.blade import parse_host_port
+
+            parse_host_port(self.haptics)
+
+
+@dataclass
+class _Contact:
+    entry: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    inward: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    face_nodes: np.ndarray = field(default_factory=lambda: np.zeros(3, np.int64))
+    normal: np.ndarray = field(default_factory=lambda: np.zeros(3))
+
+
+def _cut_opening(cm, positions) -> np.ndarray:
+    """(p,) distances between the two copies of every duplicated cut node, mm."""
+    pairs = [cm.edge_node[np.all(cm.edge_node >= 0, axis=1)], cm.face_node[np.all(cm.face_node >= 0, axis=1)]]
+    pairs = np.concatenate(pairs)
+    if pairs.size == 0:
+        return np.zeros(0)
+    return np.linalg.norm(positions[pairs[:, 0]] - positions[pairs[:, 1]], axis=1)
+
+
+def simulate(model, trajectory, out_dir, options: SimulateOptions | None = None,
+             progress: Callable[[float, float], None] | None = None, model_path: str | None = None) -> dict:
+    """Cut ``model`` along ``trajectory`` and relax it; write the outputs into ``out_dir``.
+
+    Parameters
+    ----------
+    model : TetModel
+    trajectory : Trajectory
+    out_dir : path-like
+    options : SimulateOptions
+    progress : callable(t, t_end), optional
+        Called after every geometry update with the simulated time.
+    model_path : str, optional
+        Recorded in the summary.
+
+    Returns
+    -------
+    summary : dict
+        What ``summary.json`` holds.
+    """
+    from cutkit.collision import SurfaceBVH
+    from cutkit.cutting import cut_step, cut_surface_faces
+    from cutkit.io.model_h5 import write_model
+    from cutkit.io.series import SeriesWriter
+    from cutkit.mesh.topology import boundary_faces
+    from cutkit.relax import Control
+    from cutkit.scalpel import CUTTING, FREE, O_A, O_CUT, O_D_A, O_FORCE, O_N, STATE_NAMES
+    from cutkit.simulate.blade import InProcessScalpel, ServiceScalpel, parse_host_port
+    from cutkit.simulate.outputs import ForceLog, SurfaceSeries, render_picture
+    from cutkit.simulate.tissue import Tissue
+
+    opt = options or SimulateOptions()
+    opt.check()
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    blade_length = opt.blade_length or trajectory.blade_length
+    blade = {"blade_breadth": float(trajectory.blade_breadth)}
+    warnings: list[str] = []
+
+    wall0 = time.perf_counter()
+    task_s = {"setup": 0.0, "settle": 0.0, "haptics": 0.0, "collision_and_cut": 0.0, "relaxation": 0.0,
+              "output": 0.0}
+    tis = Tissue(model, blade_length=blade_length, dt0=opt.dt0, n_lists=opt.n_lists,
+                 tolerance_fraction=opt.tolerance_fraction, centre_nodes=opt.centre_nodes)
+    cm, sm, st = tis.cm, tis.springs, tis.state
+    n0, m0 = cm.n_orig_points, tis.n_orig_tets
+    faces, face_tet = boundary_faces(cm.orig_tets)
+    bvh = SurfaceBVH.build(st.positions[:n0].copy(), faces)
+    rows = model.materials.rows()
+    row_of_tet = model.materials.row_of(cm.labels)
+    texture = model.texture if (model.texture is not None and model.texcoords is not None) else None
+    rgb = np.asarray(texture.sample_rgb(cm.texcoords[:n0])) if texture is not None else None
+    task_s["setup"] = time.perf_counter() - wall0
+
+    # the model settles under its prestress and boundary conditions first
+    t1 = time.perf_counter()
+    if opt.settle_iterations > 0:
+        from cutkit.relax import step as relax_step
+        for _ in range(int(opt.settle_iterations)):
+            relax_step(sm, st, Control(), opt.settle_step_s, gauss_seidel=True)
+        # the settled state is the start: at rest, at time 0
+        st.velocities[:] = 0.0
+        st.time = 0.0
+        st.time_stamps[:] = 0.0
+        tis.lists.list_time[:] = 0.0
+        bvh.update(st.positions[:n0])
+    task_s["settle"] = time.perf_counter() - t1
+
+    if opt.haptics:
+        host, port = parse_host_port(opt.haptics)
+        scalpel = ServiceScalpel(host, port, **blade)
+        realtime = True  # the service runs on its own clock
+    else:
+        scalpel = InProcessScalpel(**blade)
+        realtime = bool(opt.realtime)
+
+    t_start = float(trajectory.t[0])
+    t_traj_end = float(trajectory.t[-1])
+    t_end = t_traj_end + opt.hold_s
+    n_ticks = int(round((t_end - t_start) / HAPTIC_DT))
+    geo_every = max(1, int(round(1.0 / (opt.geometry_rate_hz * HAPTIC_DT))))
+    frame_period = 1.0 / opt.fps
+    forces = ForceLog(n_ticks + 1)
+    contact = _Contact()
+    series = SeriesWriter(out_dir, "cut")
+    surface = SurfaceSeries(out_dir)
+    pictures: list[str] = []
+    picture_times = [t_start + 0.5 * (t_traj_end - t_start), t_traj_end, t_end] if opt.png else []
+    states_seen: list[str] = []
+    counts = {"cut_steps": 0, "geometry_updates": 0, "haptic_ticks": 0, "relax_passes": 0,
+              "nodes_added": 0, "springs_added": 0, "springs_removed": 0, "entries": 0}
+    opening_at_traj_end = None
+    cut_plane = {"entry": None, "a": None, "b": None, "n": None}
+
+    def tissue_time(t):
+        return t - t_start
+
+    def write_frame(t):
+        nonlocal rgb
+        t1 = time.perf_counter()
+        tets, ids = tis.alive_tets()
+        n = st.positions.shape[0]
+        if rgb is not None and rgb.shape[0] < n:
+            rgb = np.concatenate([rgb, np.asarray(texture.sample_rgb(cm.texcoords[rgb.shape[0]:n]))])
+        pd = {"displacement": st.positions - sm.rest_positions, "velocity": st.velocities,
+              "fixed": sm.fixed.astype(np.uint8), "node_list": st.node_list.astype(np.int32)}
+        if rgb is not None:
+            pd["texture_rgb"] = rgb
+        cd = {"label": cm.labels[cm._tet_orig[ids]].astype(np.int32), "new_tet": (ids >= m0).astype(np.uint8)}
+        series.write(t, st.positions, tets, point_data=pd, cell_data=cd)
+        surf_faces = cut_surface_faces(cm)
+        spd = {"displacement": pd["displacement"]}
+        if rgb is not None:
+            spd["texture_rgb"] = rgb
+        surface.write(t, st.positions, surf_faces, spd)
+        if picture_times and t >= picture_times[0] - 1e-9:
+            while picture_times and t >= picture_times[0] - 1e-9:
+                picture_times.pop(0)
+            pictures.append(_picture(out_dir, series.n_frames - 1, t, tets, rgb))
+        task_s["output"] += time.perf_counter() - t1
+
+    def _picture(out_dir, index, t, tets, rgb):
+        pts = st.positions
+        if cut_plane["entry"] is not None:
+            focal = cut_plane["entry"]
+            opened = _cut_opening(cm, pts)
+            cut_nodes = np.arange(n0, pts.shape[0])
+            if cut_nodes.size:
+                focal = pts[cut_nodes].mean(axis=0)
+            view = cut_plane["a"] + 0.35 * cut_plane["b"]
+            up = cut_plane["b"]
+            title = f"t = {t:.2f} s, {len(cm.subtets)} tets cut, opening {opened.mean() if opened.size else 0:.2f} mm"
+        else:
+            focal = pts.mean(axis=0)
+            view, up, title = np.array([0.0, 1.0, -0.3]), np.array([0.0, 0.0, 1.0]), f"t = {t:.2f} s (no cut)"
+        diag = float(np.linalg.norm(pts.max(axis=0) - pts.min(axis=0)))
+        path = out_dir / "pictures" / f"{index:04d}.png"
+        path.parent.mkdir(exist_ok=True)
+        render_picture(path, pts, tets, rgb, focal, view, up, 0.7 * diag, title=title)
+        return str(path.relative_to(out_dir))
+
+    prev_tip = None
+    cutting_pending = False
+    next_frame = t_start
+    interrupted = False
+    out = scalpel.out
+    loop0 = time.perf_counter()
+    tick_wall = 0.0
+    try:
+        for k in range(n_ticks + 1):
+            t = t_start + k * HAPTIC_DT
+            if realtime:
+                delay = loop0 + (t - t_start) - time.perf_counter()
+                if delay > 0:
+                    time.sleep(delay)
+            th = time.perf_counter()
+            tip, a_traj, n_traj = trajectory.pose_at(t)
+            if scalpel.code == FREE and prev_tip is not None and np.any(tip != prev_tip):
+                hits = bvh.query_segment(st.positions[:n0], prev_tip, tip)
+                for f, p in zip(hits.face, hits.point):
+                    fv = bvh.faces[f]
+                    x = st.positions[fv]
+                    normal = np.cross(x[1] - x[0], x[2] - x[0])
+                    if np.dot(normal, tip - prev_tip) < 0:  # crossing the boundary inwards
+                        contact.entry = np.asarray(p, np.float64).copy()
+                        contact.inward = -normal / np.linalg.norm(normal)
+                        contact.face_nodes = np.asarray(fv, np.int64).copy()
+                        b = np.cross(n_traj, a_traj)
+                        contact.normal = b / np.linalg.norm(b)
+                        material = rows[int(row_of_tet[face_tet[f]])]
+                        scalpel.enter(contact.entry, contact.normal, tip, material)
+                        counts["entries"] += 1
+                        if cut_plane["entry"] is None:
+                            cut_plane.update(entry=contact.entry.copy(), a=a_traj.copy(), b=contact.normal.copy(),
+                                             n=n_traj.copy())
+                        break
+            out = scalpel.tick(tip, a_traj, n_traj)
+            code = scalpel.code
+            if code != FREE and np.dot(tip - contact.entry, contact.inward) < -LEAVE_MARGIN_MM:
+                scalpel.leave()
+                code = FREE
+                cm.prev_pose = None
+                cm.tip_tet = -1
+                cm.active_tets = np.zeros(0, np.int64)
+            if not states_seen or states_seen[-1] != STATE_NAMES[code]:
+                states_seen.append(STATE_NAMES[code])
+            cutting_pending |= code == CUTTING
+            fa, fn = out[O_A:O_A + 3], out[O_N:O_N + 3]
+            cut = out[O_CUT:O_CUT + 3]
+            forces.add(t, code, -out[O_FORCE:O_FORCE + 3], float(cut @ fa), float(cut @ fn), out[O_D_A],
+                       tip, scalpel.proxy)
+            counts["haptic_ticks"] += 1
+            prev_tip = tip
+            tick_wall += time.perf_counter() - th
+
+            if k % geo_every:
+                continue
+            # ---- collision and geometry update (sections 3-4)
+            tg = time.perf_counter()
+            axis = out[O_N:O_N + 3].copy()
+            near = np.unique(cm.orig_tets[cm.active_tets]) if cm.active_tets.size else contact.face_nodes
+            blade_tip = tis.blade_to_rest(scalpel.proxy, near)
+            if cutting_pending:
+                res = cut_step(cm, blade_tip, axis)
+                c = tis.apply_cut(res)
+                for key in ("nodes_added", "springs_added", "springs_removed"):
+                    counts[key] += c[key]
+                counts["cut_steps"] += 1
+                cutting_pending = False
+            elif code != FREE:
+                # in tissue but not cutting: the blade rests or backs out, the sweep restarts here
+                cm.prev_pose = (blade_tip, blade_tip - cm.blade_length * axis)
+            f_ext = np.zeros((st.positions.shape[0], 3))
+            if code == CUTTING and cm.active_tets.size:
+                # the tissue along the blade feels the reaction of the cut force (eqs. 16-18);
+                # before the blade enters, the surface is not indented (the entry point stays
+                # where the surface was met, docs/simulate.md)
+                nodes = np.unique(cm.orig_tets[cm.active_tets])  # the cut step moved the blade
+                f_ext[nodes] -= out[O_CUT:O_CUT + 3] / len(nodes)
+            counts["geometry_updates"] += 1
+            task_s["collision_and_cut"] += time.perf_counter() - tg
+            # ---- relaxation (section 5)
+            tr = time.perf_counter()
+            control = Control(external_forces=f_ext)
+            # nodes in coarse lists stay at their own time stamps between frames (section 5.2);
+            # the whole state is brought to one time only where it is looked at
+            counts["relax_passes"] += tis.lists.advance(control, tissue_time(t), synchronise=False)
+            frame_due = opt.frames and (t >= next_frame - 1e-9 or k == n_ticks)
+            at_traj_end = opening_at_traj_end is None and t >= t_traj_end - 1e-9
+            if frame_due or at_traj_end or k == n_ticks:
+                tis.lists.synchronise(tissue_time(t), f_ext, control.gravity)
+            task_s["relaxation"] += time.perf_counter() - tr
+            if scalpel.code == FREE:  # the hierarchy serves the entry test: refit to the relaxed surface
+                tg = time.perf_counter()
+                bvh.update(st.positions[:n0])
+                task_s["collision_and_cut"] += time.perf_counter() - tg
+            if at_traj_end:
+                o = _cut_opening(cm, st.positions)
+                opening_at_traj_end = float(o.mean()) if o.size else 0.0
+            if frame_due:
+                write_frame(t)
+                next_frame += frame_period * max(1, int(np.floor((t - next_frame) / frame_period + 1e-9)) + 1)
+            if progress is not None:
+                progress(t - t_start, t_end - t_start)
+    except KeyboardInterrupt:
+        interrupted = True
+        raise
+    finally:
+        loop_wall = time.perf_counter() - loop0
+        task_s["haptics"] = tick_wall
+        series.close()
+        surface.close()
+        forces.write(out_dir / "forces.csv")
+        scalpel.close()
+        summary = _summary(locals_=dict(
+            model=model, model_path=model_path, trajectory=trajectory, tis=tis, counts=counts, task_s=task_s,
+            loop_wall=loop_wall, t_start=t_start, t_end=t_end, t_traj_end=t_traj_end, warnings=warnings,
+            states_seen=states_seen, pictures=pictures, frames=series.n_frames, interrupted=interrupted,
+            opening_at_traj_end=opening_at_traj_end, realtime=realtime, opt=opt, m0=m0, forces=forces))
+        if interrupted:
+            _write_json(out_dir / "summary.json", summary)
+    if counts["entries"] == 0:
+        warnings.append("the trajectory never touches the tissue: no cut")
+    elif not tis.cm.subtets:
+        warnings.append("the blade touched the tissue but never cut it (F_enter not reached)")
+    summary["warnings"] = warnings
+    if opt.write_model:
+        t1 = time.perf_counter()
+        write_model(out_dir / "model.h5", cut_model(tis, model, summary))
+        task_s["output"] += time.perf_counter() - t1
+        summary["time_per_task_s"] = dict(task_s)
+    _write_json(out_dir / "summary.json", summary)
+    return summary
+
+
+def cut_model(tis, model, summary: dict | None = None):
+    """The cut tissue as a model: rest configuration, cut topology, displacement as point data.
+
+    A model is defined in its rest configuration (the springs' rest lengths
+    follow from it), so ``points`` are the rest positions of the cut mesh,
+    where every tetrahedron is positively oriented; ``point_data
+    ["displacement"]`` (mm) holds the relaxed deformation (ParaView: Warp By
+    Vector).  Cut nodes no tetrahedron uses any more are dropped.
+    """
+    import dataclasses
+
+    from cutkit.cutting import to_model
+
+    cm, st, sm = tis.cm, tis.state, tis.springs
+    m = to_model(cm, model)
+    n = cm.n_points
+    keep = np.zeros(n, bool)
+    keep[m.tets.ravel()] = True
+    keep[:cm.n_orig_points] = True  # original nodes keep their numbers (boundary conditions name them)
+    new_index = np.cumsum(keep) - 1
+    pd = {k: np.asarray(v)[keep] for k, v in m.point_data.items()}
+    pd["displacement"] = (st.positions - sm.rest_positions)[keep]
+    provenance = dict(m.provenance)
+    stages = dict(provenance.get("stages", {}))
+    if summary is not None:
+        stages["simulate"] = {"options": summary.get("options"), "cut_tets": summary.get("cut_tets"),
+                              "simulated_s": summary.get("simulated_s")}
+    provenance["stages"] = stages
+    return dataclasses.replace(
+        m, points=cm.points[keep].copy(), tets=new_index[m.tets],
+        texcoords=None if m.texcoords is None else np.asarray(m.texcoords)[keep],
+        point_data=pd, provenance=provenance)
+
+
+def _summary(locals_: dict) -> dict:
+    L = locals_
+    tis, counts, task_s = L["tis"], L["counts"], L["task_s"]
+    cm, st, sm = tis.cm, tis.state, tis.springs
+    simulated = float(st.time)
+    n_cut = len(cm.subtets)
+    new_tets = int(sum(len(v) for v in cm.subtets.values()))
+    opening = _cut_opening(cm, st.positions)
+    loop_wall = max(L["loop_wall"], 1e-12)
+    work = task_s["haptics"] + task_s["collision_and_cut"] + task_s["relaxation"]
+    summary = {
+        "model": L["model_path"],
+        "tets_initial": int(L["m0"]),
+        "nodes_initial": int(cm.n_orig_points),
+        "tets_final": int(cm._alive[:cm.n_tets_total].sum()),
+        "nodes_final": int(st.positions.shape[0]),
+        "cut_tets": n_cut,
+        "new_tets": new_tets,
+        "new_tets_per_cut_tet": (new_tets / n_cut) if n_cut else 0.0,
+        "states": L["states_seen"],
+        "frames": int(L["frames"]),
+        "pictures": L["pictures"],
+        "simulated_s": simulated,
+        "wall_s": loop_wall,
+        "simulated_per_wall": simulated / loop_wall,
+        "simulated_per_wall_without_output": simulated / max(work, 1e-12),
+        "time_per_task_s": dict(task_s),
+        "counts": dict(counts),
+        "cut_opening_mm": {
+            "at_trajectory_end": L["opening_at_traj_end"],
+            "final_mean": float(opening.mean()) if opening.size else 0.0,
+            "final_max": float(opening.max()) if opening.size else 0.0,
+        },
+        "inverted_tets_deformed": _count_inverted(st.positions, cm.tets),
+        "max_displacement_mm": float(np.linalg.norm(st.positions - sm.rest_positions, axis=1).max(initial=0.0)),
+        "max_F_ext_N": float(np.linalg.norm(L["forces"].rows[:, 2:5], axis=1).max(initial=0.0)),
+        "interrupted": bool(L["interrupted"]),
+        "options": asdict(L["opt"]),
+        "warnings": list(L["warnings"]),
+    }
+    if L["realtime"]:
+        summary["rates_hz"] = {
+            "haptics": counts["haptic_ticks"] / loop_wall,
+            "geometry_updates": counts["geometry_updates"] / loop_wall,
+            "cut_steps": counts["cut_steps"] / loop_wall,
+            "relaxation_list_passes": counts["relax_passes"] / loop_wall,
+            "frames": L["frames"] / loop_wall,
+        }
+    return summary
+
+
+def _count_inverted(points, tets) -> int:
+    """Tets with non-positive volume in the deformed configuration (a mass-spring model does not forbid them)."""
+    from cutkit.mesh.quality import signed_volumes
+
+    return int((signed_volumes(points, tets) <= 0).sum()) if len(tets) else 0
+
+
+def _write_json(path, obj) -> None:
+    from cutkit.io.atomic import write_text_atomic
+
+    write_text_atomic(path, json.dumps(obj, indent=2, default=float) + "\n")

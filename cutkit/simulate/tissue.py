@@ -1,0 +1,347 @@
+"""The tissue being cut: a cut mesh and its mass-spring model on one node numbering.
+
+The paper's Fig. 1 runs collision and geometry update beside the
+relaxation.  Both work on the same nodes: node ``k`` of the
+:class:`~cutkit.cutting.CutMesh` is node ``k`` of the
+:class:`~cutkit.relax.SpringModel`.  After every cut step
+:meth:`Tissue.apply_cut` carries the topology change over to the springs
+in one batch:
+
+* new nodes (split edges, duplicated cut-surface nodes, section 3) are
+  appended with the position, rest position and velocity interpolated from
+  their defining nodes and enter the finest node list (section 5.2);
+* every tetrahedron keeps a record of what it contributed (rest volume,
+  and per edge the prestress term), so a removed tetrahedron takes back
+  exactly what it gave: lumped masses (rho V / 4 per node), the spring sums
+  ``sum E V`` (stiffness ``k = sum E V / (c l^2)``, docs/relaxation.md),
+  ``sum V`` and ``sum V p cos^2`` (prestressed rest length
+  ``l (1 - sum V p cos^2 / sum V)``, section 7.3);
+* a spring lives while at least one tetrahedron has its edge;
+* cut nodes the blade moves (tip and crack-front nodes) get their rest
+  position re-interpolated and their tetrahedra re-recorded.
+
+Total mass is the sum of rho V over the tetrahedra, and a subdivision
+keeps the rest volume, so a cut keeps the total mass exactly.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from cutkit.cutting import CutMesh
+from cutkit.mesh.topology import TET_EDGES, unique_edges
+from cutkit.relax import NodeLists, build_spring_model, initial_state
+from cutkit.relax.model import KG_M3_TO_T_MM3, PA_TO_MPA, STIFFNESS_CALIBRATION
+from cutkit.relax.topology import _recolour
+from cutkit.simulate._kernels import lookup_springs
+
+
+def _rest_volumes(X: np.ndarray, tets: np.ndarray) -> np.ndarray:
+    p = X[tets]
+    return np.einsum("ij,ij->i", np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), p[:, 3] - p[:, 0]) / 6.0
+
+
+class Tissue:
+    """Cut mesh + mass-spring model + node lists of one tissue model.
+
+    Parameters
+    ----------
+    model : TetModel
+        Needs a materials row for every label.
+    blade_length : float
+        mm.
+    dt0 : float
+        Finest relaxation step, s.
+    n_lists : int
+        Number of node lists (steps dt0 .. dt0 2^(n_lists - 1)).
+    tolerance_fraction : float
+        Displacement tolerance of the node-list assignment as a fraction of
+        the mean spring rest length.
+    centre_nodes : bool
+        Fig. 2c centre nodes in split faces.
+
+    Attributes
+    ----------
+    cm : CutMesh
+    springs : SpringModel
+    state : SpringState
+    lists : NodeLists
+    n_orig_tets : int
+    """
+
+    def __init__(self, model, *, blade_length: float, dt0: float, n_lists: int, tolerance_fraction: float,
+                 centre_nodes: bool = False, calibration: float = STIFFNESS_CALIBRATION):
+        self.model = model
+        self.calibration = float(calibration)
+        self.cm = cm = CutMesh.from_model(model, blade_length=blade_length, centre_nodes=centre_nodes)
+        self.springs = sm = build_spring_model(model, calibration=calibration)
+        self.state = initial_state(sm)
+        tolerance = tolerance_fraction * float(np.mean(sm.rest_length))
+        self.lists = NodeLists(sm, self.state, dt0, n_lists, displacement_tolerance=tolerance)
+        self.n_orig_tets = int(cm.orig_tets.shape[0])
+        self.bc_fixed = sm.fixed.copy()
+
+        # material of each original tet (a sub-tet has its original's)
+        rows = model.materials.row_of(cm.labels)
+        self.E = model.materials["E"][rows] * PA_TO_MPA
+        self.rho = model.materials["density"][rows] * KG_M3_TO_T_MM3
+        self.prestrain = np.zeros(self.n_orig_tets)
+        self.fibre = np.zeros((self.n_orig_tets, 3))
+        ps = model.prestress
+        for lab, f, eps in zip(ps.label, np.asarray(ps.fibre_direction, np.float64).reshape(-1, 3),
+                               np.asarray(ps.prestrain, np.float64)):
+            sel = cm.labels == lab
+            self.prestrain[sel] = eps
+            self.fibre[sel] = f / np.linalg.norm(f)
+
+        # per-tet records (indexed by CutMesh tet id), per-spring sums
+        tets = cm.orig_tets
+        cap = cm._tets.shape[0]
+        self.rec_V = np.zeros(cap)
+        self.rec_sv = np.zeros((cap, 6))
+        V, sv = self._contributions(np.arange(self.n_orig_tets))
+        self.rec_V[:self.n_orig_tets] = V
+        self.rec_sv[:self.n_orig_tets] = sv
+        edges, tet_edge = unique_edges(tets)
+        if not np.array_equal(edges, sm.springs):
+            raise RuntimeError("spring order differs from the mesh edge order")
+        s = len(edges)
+        flat = tet_edge.ravel()
+        self.spring_count = np.bincount(flat, minlength=s).astype(np.int64)
+        self.spring_ev = np.bincount(flat, np.repeat(self.E * V, 6), minlength=s)
+        self.spring_v = np.bincount(flat, np.repeat(V, 6), minlength=s)
+        self.spring_sv = np.bincount(flat, sv.ravel(), minlength=s)
+        # tets of each cut node (nodes >= n_orig_points), to re-record moved nodes
+        self._node_tets: dict[int, set] = {}
+        # number of live tets at each node: a node with none is an orphan and is held
+        self.node_tet_count = np.bincount(tets.ravel(), minlength=cm.n_points).astype(np.int64)
+
+    # ------------------------------------------------------------------ records
+    def _contributions(self, tet_ids: np.ndarray):
+        """Rest volume (t,) and prestress terms V p cos^2 per edge (t, 6) of CutMesh tets."""
+        cm = self.cm
+        q = cm._tets[tet_ids]
+        X = cm._X
+        V = _rest_volumes(X, q)
+        orig = cm._tet_orig[tet_ids]
+        d = X[q[:, TET_EDGES[:, 1]]] - X[q[:, TET_EDGES[:, 0]]]  # (t, 6, 3)
+        length = np.linalg.norm(d, axis=2)
+        cos = np.einsum("tkc,tc->tk", d, self.fibre[orig]) / np.where(length > 0, length, 1.0)
+        sv = V[:, None] * self.prestrain[orig][:, None] * cos**2
+        return V, sv
+
+    # ------------------------------------------------------------------ cut
+    def interpolate_positions(self, nodes: np.ndarray) -> np.ndarray:
+        """Current positions of cut nodes from their defining nodes, (p, 3) float64.
+
+        The cut mesh works in the rest configuration; a cut node's weights
+        over its defining original nodes carry over to the deformed ones.
+        """
+        cm = self.cm
+        par = cm._def_nodes[nodes]
+        w = np.where(par >= 0, cm._def_w[nodes], 0.0)
+        return np.einsum("pq,pqc->pc", w, self.state.positions[np.where(par >= 0, par, 0)])
+
+    def blade_to_rest(self, point, near_nodes: np.ndarray) -> np.ndarray:
+        """Carry a point of the deformed tissue into the rest configuration.
+
+        The cut is made in the rest configuration, where no original
+        tetrahedron is ever inverted, so the cut's topology does not depend
+        on how far the tissue has moved.  The blade is moved back by the mean
+        displacement of the nodes around it (first order: the local
+        rotation and stretch are neglected).
+
+        Parameters
+        ----------
+        point : (3,) float64
+        near_nodes : (k,) int64
+            Nodes around the blade.
+        """
+        if len(near_nodes) == 0:
+            return np.asarray(point, np.float64).copy()
+        u = self.state.positions[near_nodes] - self.springs.rest_positions[near_nodes]
+        return np.asarray(point, np.float64) - u.mean(axis=0)
+
+    def apply_cut(self, res) -> dict:
+        """Carry a :class:`~cutkit.cutting.StepResult` over to the springs.
+
+        Returns
+        -------
+        counts : dict
+            ``nodes_added``, ``springs_added``, ``springs_removed``.
+        """
+        cm, sm, st = self.cm, self.springs, self.state
+        n_old = sm.n_nodes
+        n_new = cm.n_points
+        added = [int(t) for t in res.added_tets]
+        removed = [int(t) for t in res.removed_tets]
+        moved = [int(k) for k in res.moved_nodes]
+        if not added and not removed and not moved and n_new == n_old:
+            return {"nodes_added": 0, "springs_added": 0, "springs_removed": 0}
+        if self.rec_V.shape[0] < cm._tets.shape[0]:
+            grow = cm._tets.shape[0] - self.rec_V.shape[0]
+            self.rec_V = np.concatenate([self.rec_V, np.zeros(grow)])
+            self.rec_sv = np.concatenate([self.rec_sv, np.zeros((grow, 6))])
+
+        # ---- nodes: append, and re-interpolate moved ones
+        new = np.arange(n_old, n_new)
+        if new.size:
+            self._append_nodes(new)
+        if moved:
+            mv = np.asarray(moved, np.int64)
+            sm.rest_positions[mv] = cm._X[mv]
+            st.positions[mv] = self.interpolate_positions(mv)
+
+        # ---- tets to take back and to (re)record
+        added_set = set(added)
+        removed_set = set(removed)
+        reweigh = set()
+        for k in moved:
+            for t in self._node_tets.get(k, ()):
+                if t not in added_set and t not in removed_set:
+                    reweigh.add(t)
+        take_back = np.array(sorted(removed_set | reweigh), np.int64)
+        record = np.array(sorted(added_set | reweigh), np.int64)
+        masses = sm.masses
+        keys, sums = [], []
+        key_base = np.int64(cm.n_points + 1)
+        for sign, ids in ((-1.0, take_back), (1.0, record)):
+            if ids.size == 0:
+                continue
+            if sign > 0:
+                V, sv = self._contributions(ids)
+                self.rec_V[ids] = V
+                self.rec_sv[ids] = sv
+            else:
+                V, sv = self.rec_V[ids], self.rec_sv[ids]
+            orig = cm._tet_orig[ids]
+            q = cm._tets[ids]
+            np.add.at(masses, q.ravel(), np.repeat(sign * self.rho[orig] * V / 4.0, 4))
+            np.add.at(self.node_tet_count, q.ravel(), int(sign))
+            ea, eb = q[:, TET_EDGES[:, 0]], q[:, TET_EDGES[:, 1]]  # (t, 6)
+            keys.append((np.minimum(ea, eb) * key_base + np.maximum(ea, eb)).ravel())
+            w = np.full(ea.shape, sign)
+            sums.append(np.stack([w, w * (self.E[orig] * V)[:, None], w * V[:, None], sign * sv],
+                                 axis=-1).reshape(-1, 4))
+            for r in range(ids.size):
+                for node in q[r]:
+                    if node >= cm.n_orig_points:
+                        owners = self._node_tets.setdefault(int(node), set())
+                        if sign > 0:
+                            owners.add(int(ids[r]))
+                        else:
+                            owners.discard(int(ids[r]))
+        if keys:
+            uk, inv = np.unique(np.concatenate(keys), return_inverse=True)
+            allsums = np.concatenate(sums)
+            acc = np.stack([np.bincount(inv, allsums[:, c], minlength=uk.size) for c in range(4)], axis=1)
+            ua, ub = uk // key_base, uk % key_base
+            sid = lookup_springs(sm.adj_offsets, sm.adj_nodes, sm.adj_springs, ua, ub)
+        else:
+            acc, ua, ub, sid = np.zeros((0, 4)), np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0, np.int64)
+        old = sid >= 0
+        so = sid[old]
+        self.spring_count[so] += np.rint(acc[old, 0]).astype(np.int64)
+        self.spring_ev[so] += acc[old, 1]
+        self.spring_v[so] += acc[old, 2]
+        self.spring_sv[so] += acc[old, 3]
+        touched = [so]
+        born = ~old & (acc[:, 0] > 0.5)
+        new_pairs = np.stack([ua[born], ub[born]], axis=1)
+        new_sums = acc[born]
+        n_spr = sm.n_springs
+        if len(new_pairs):
+            pairs = new_pairs
+            sums = new_sums
+            self.spring_count = np.concatenate([self.spring_count, np.rint(sums[:, 0]).astype(np.int64)])
+            self.spring_ev = np.concatenate([self.spring_ev, sums[:, 1]])
+            self.spring_v = np.concatenate([self.spring_v, sums[:, 2]])
+            self.spring_sv = np.concatenate([self.spring_sv, sums[:, 3]])
+            sm.springs = np.concatenate([sm.springs, pairs])
+            sm.rest_length = np.concatenate([sm.rest_length, np.zeros(len(pairs))])
+            sm.stiffness = np.concatenate([sm.stiffness, np.zeros(len(pairs))])
+            touched.append(np.arange(n_spr, n_spr + len(pairs)))
+        ts = np.concatenate(touched)
+        if ts.size:
+            X = sm.rest_positions
+            d = X[sm.springs[ts, 1]] - X[sm.springs[ts, 0]]
+            length = np.sqrt(np.einsum("ij,ij->i", d, d))
+            v = self.spring_v[ts]
+            strain = np.divide(self.spring_sv[ts], v, out=np.zeros_like(v), where=v > 0)
+            sm.rest_length[ts] = length * (1.0 - strain)
+            sm.stiffness[ts] = np.divide(self.spring_ev[ts], self.calibration * length**2,
+                                         out=np.zeros_like(v), where=length > 0)
+        dead = self.spring_count <= 0
+        n_dead = int(dead.sum())
+        if n_dead:
+            keep = ~dead
+            sm.springs = sm.springs[keep]
+            sm.rest_length = sm.rest_length[keep]
+            sm.stiffness = sm.stiffness[keep]
+            self.spring_count = self.spring_count[keep]
+            self.spring_ev = self.spring_ev[keep]
+            self.spring_v = self.spring_v[keep]
+            self.spring_sv = self.spring_sv[keep]
+
+        # ---- nodes left without tets (orphans) are held; nodes with tets are free unless BC-fixed
+        orphan = self.node_tet_count <= 0
+        masses[orphan] = 0.0  # exactly: what is left is rounding
+        fixed = self.bc_fixed | orphan
+        changed = np.flatnonzero(fixed != sm.fixed)
+        sm.fixed = fixed
+        if changed.size:
+            st.node_list[changed] = np.where(fixed[changed], -1, 0)
+            st.velocities[changed[fixed[changed]]] = 0.0
+            sm.prescribed_displacement[changed] = np.where(
+                fixed[changed, None], st.positions[changed] - sm.rest_positions[changed], 0.0)
+
+        sm.rebuild_adjacency(recolour=False)
+        if sm.colour.shape[0] < sm.n_nodes:
+            sm.colour = np.concatenate([sm.colour, np.full(sm.n_nodes - sm.colour.shape[0], -1, np.int32)])
+        if len(new_pairs):
+            _recolour(sm, np.unique(new_pairs))
+        self.lists.topology_changed()
+        return {"nodes_added": int(new.size), "springs_added": len(new_pairs), "springs_removed": n_dead}
+
+    def _append_nodes(self, new: np.ndarray) -> None:
+        cm, sm, st = self.cm, self.springs, self.state
+        p = new.size
+        par = cm._def_nodes[new]
+        w = cm._def_w[new]
+        valid = par >= 0
+        pz = np.where(valid, par, 0)
+        wz = np.where(valid, w, 0.0)
+        wsum = wz.sum(axis=1, keepdims=True)
+        wz = wz / np.where(wsum > 0, wsum, 1.0)
+        vel = np.einsum("pq,pqc->pc", wz, st.velocities[pz])
+        damp = (wz * sm.damping[pz]).sum(axis=1)
+        # a node between held nodes only (e.g. a cut into bone) is held too
+        held = np.all(~valid | self.bc_fixed[pz], axis=1)
+        X = cm._X[new]
+        x = self.interpolate_positions(new)
+        self.bc_fixed = np.concatenate([self.bc_fixed, held])
+        self.node_tet_count = np.concatenate([self.node_tet_count, np.zeros(p, np.int64)])
+        sm.rest_positions = np.concatenate([sm.rest_positions, X])
+        sm.masses = np.concatenate([sm.masses, np.zeros(p)])
+        sm.damping = np.concatenate([sm.damping, damp])
+        sm.fixed = np.concatenate([sm.fixed, held])
+        sm.prescribed_displacement = np.concatenate(
+            [sm.prescribed_displacement, np.where(held[:, None], x - X, 0.0)])
+        st.positions = np.concatenate([st.positions, x])
+        st.velocities = np.concatenate([st.velocities, np.where(held[:, None], 0.0, vel)])
+        st.time_stamps = np.concatenate([st.time_stamps, np.full(p, st.time)])
+        st.accel_window = np.concatenate([st.accel_window, np.zeros((p, st.accel_window.shape[1]))])
+        st.n_updates = np.concatenate([st.n_updates, np.zeros(p, np.int64)])
+        # section 5.2: nodes made by a cut enter the finest list
+        st.node_list = np.concatenate([st.node_list, np.where(held, -1, 0).astype(np.int32)])
+
+    # ------------------------------------------------------------------ views
+    @property
+    def n_nodes(self) -> int:
+        return int(self.springs.n_nodes)
+
+    def alive_tets(self) -> tuple[np.ndarray, np.ndarray]:
+        """(k, 4) int64 current tets and (k,) int64 their CutMesh ids."""
+        cm = self.cm
+        ids = np.flatnonzero(cm._alive[:cm.n_tets_total])
+        return cm._tets[ids], ids

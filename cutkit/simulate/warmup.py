@@ -1,0 +1,58 @@
+"""Compile (and cache) the numba kernels of decimation and simulation on a tiny model.
+
+``cutkit demo`` runs this in a second process while the first one builds
+the model: on a fresh installation numba compiles each kernel once (then
+loads it from its cache), and this way the two cores compile side by side.
+
+    python -m cutkit.simulate.warmup
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import tempfile
+
+import numpy as np
+
+
+def warm_up() -> None:
+    """Decimate and cut a small two-tissue slab (nothing is kept)."""
+    from cutkit.assign.defaults import DEFAULT_MATERIALS
+    from cutkit.cutting.trajectory import straight_incision
+    from cutkit.decimate import decimate
+    from cutkit.mesh.generate import box_mesh
+    from cutkit.model.tetmodel import BoundaryConditions, Materials, Prestress, TetModel
+    from cutkit.simulate import SimulateOptions, simulate
+
+    points, tets = box_mesh((8, 4, 6), spacing=(2.0, 2.0, 2.0))
+    centre = points[tets].mean(axis=1)
+    labels = np.where(centre[:, 1] < 2.0, 1, 3).astype(np.int32)  # a skin layer over muscle
+    rows = [dict(label=1, name="skin", **DEFAULT_MATERIALS["skin"]),
+            dict(label=3, name="muscle", **DEFAULT_MATERIALS["muscle"])]
+    model = TetModel.from_arrays(points, tets, labels, materials=Materials.from_rows(rows))
+    decimate(model, ratio=0.7)
+    ends = np.flatnonzero((points[:, 2] == 0) | (points[:, 2] == 12.0))
+    model = TetModel.from_arrays(points, tets, labels, materials=Materials.from_rows(rows),
+                                 boundary=BoundaryConditions(fixed_nodes=ends),
+                                 prestress=Prestress(label=np.array([3], np.int32),
+                                                     fibre_direction=np.array([[0.0, 0.0, 1.0]]),
+                                                     prestrain=np.array([0.08])))
+    traj = straight_incision([4.0, 0.0, 6.3], [12.0, 0.0, 6.3], inward=[0, 1, 0], depth=3.0, approach=2.0,
+                             press_time=0.2, cut_time=0.3, rate=100)
+    with tempfile.TemporaryDirectory() as d:
+        simulate(model, traj, d, SimulateOptions(frames=True, fps=2, write_model=True, hold_s=0.05,
+                                                 settle_iterations=2))
+
+
+def start_background() -> subprocess.Popen | None:
+    """Run :func:`warm_up` in a quiet child process; None if it cannot start."""
+    try:
+        return subprocess.Popen([sys.executable, "-m", "cutkit.simulate.warmup"],
+                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    except OSError:
+        return None
+
+
+if __name__ == "__main__":
+    warm_up()

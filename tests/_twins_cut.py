@@ -1,0 +1,174 @@
+"""Slow, obviously correct mesh checks for the cutting tests."""
+
+from collections import Counter
+
+import numpy as np
+
+
+def face_counts(tets):
+    c = Counter()
+    for t in tets:
+        for f in ((1, 2, 3), (0, 3, 2), (0, 1, 3), (0, 2, 1)):
+            c[tuple(sorted(int(t[i]) for i in f))] += 1
+    return c
+
+
+def boundary_edges_ok(tets):
+    """Every face in <= 2 tets and the boundary a closed 2-manifold (each edge in 2 faces)."""
+    fc = face_counts(tets)
+    if max(fc.values()) > 2:
+        return False, "face in more than two tets"
+    ec = Counter()
+    for f, n in fc.items():
+        if n == 1:
+            for i in range(3):
+                ec[tuple(sorted((f[i], f[(i + 1) % 3])))] += 1
+    bad = [e for e, n in ec.items() if n != 2]
+    return (not bad), f"{len(bad)} boundary edges not in exactly two boundary faces"
+
+
+def hanging_nodes(points, tets, tol=1e-9):
+    """Boundary nodes lying strictly inside a boundary edge they are not part of."""
+    fc = face_counts(tets)
+    bnodes = set()
+    bedges = set()
+    for f, n in fc.items():
+        if n == 1:
+            bnodes.update(f)
+            for i in range(3):
+                bedges.add(tuple(sorted((f[i], f[(i + 1) % 3]))))
+    bn = np.array(sorted(bnodes))
+    out = 0
+    for a, b in bedges:
+        d = points[b] - points[a]
+        L2 = d @ d
+        s = (points[bn] - points[a]) @ d / L2
+        r = np.linalg.norm(points[bn] - points[a] - s[:, None] * d, axis=1)
+        m = (s > 1e-6) & (s < 1 - 1e-6) & (r < tol * np.sqrt(L2))
+        m &= (bn != a) & (bn != b)
+        # coincident duplicate copies are expected (cut surface); only count distinct positions
+        out += int(m.sum())
+    return out
+
+
+def components(tets):
+    """Number of connected components of tets linked through shared faces."""
+    fc = {}
+    parent = list(range(len(tets)))
+
+    def find(i):
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = parent[i]
+        return i
+
+    for ti, t in enumerate(tets):
+        for f in ((1, 2, 3), (0, 3, 2), (0, 1, 3), (0, 2, 1)):
+            key = tuple(sorted(int(t[i]) for i in f))
+            if key in fc:
+                parent[find(ti)] = find(fc[key])
+            else:
+                fc[key] = ti
+    return len({find(i) for i in range(len(tets))})
+
+
+def volumes(points, tets):
+    p = points[tets]
+    return np.einsum("ij,ij->i", np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), p[:, 3] - p[:, 0]) / 6.0
+
+
+# ---------------------------------------------------------------- twins of cutkit.cutting._kernels_step
+
+def tet_bary_twin(x, tv, p):
+    """Barycentric coordinates (4,) of p in the tet x[tv] (np.linalg.solve)."""
+    from cutkit.cutting._geometry import barycentric
+    return barycentric(np.asarray(p, float), x[tv])
+
+
+def walk_twin(x, tets, neighbors, start, target, max_walk=10000):
+    """findTrajectoryTetra: cross the face opposite the most negative coordinate; -1 if it leaves."""
+    t, prev = int(start), -1
+    for _ in range(max_walk):
+        b = tet_bary_twin(x, tets[t], target)
+        if b.min() >= -1e-12:
+            return t
+        for i in np.argsort(b, kind="stable"):
+            if b[i] >= 0:
+                return -1
+            nb = int(neighbors[t, i])
+            if nb >= 0 and nb != prev:
+                prev, t = t, nb
+                break
+        else:
+            return -1
+    return -1
+
+
+def sweep_twin(x, tets, neighbors, tet_edges, tet_faces, edges, faces, edge_t, stamp, step, seeds, swept, blade, p0):
+    """The per-tet Python traversal of a cut step: (active, ev_kind, ev_id, ev_val); modifies stamp."""
+    from cutkit.cutting._geometry import segment_hits_tet, segment_triangle
+    from cutkit.mesh.topology import TET_EDGES
+    q1, p1 = blade
+    active, kinds, ids, vals = [], [], [], []
+    queue = list(dict.fromkeys(int(s) for s in seeds))
+    while queue:
+        o = queue.pop()
+        if stamp[o] == step:
+            continue
+        stamp[o] = step
+        tv = tets[o]
+        touched = False
+        for k, (i, j) in enumerate(TET_EDGES):
+            par = -1.0
+            for tri in swept:
+                par = segment_triangle(x[tv[i]], x[tv[j]], *tri)
+                if par >= 0:
+                    break
+            if par < 0:
+                continue
+            touched = True
+            e = int(tet_edges[o, k])
+            if np.isnan(edge_t[e]):
+                kinds.append(0); ids.append(e)
+                vals.append([par if tv[i] == edges[e, 0] else 1.0 - par, 0.0, 0.0])
+        if not touched:
+            touched = segment_hits_tet(q1, p1, x[tv]) or segment_hits_tet(p0, p1, x[tv])
+        if not touched:
+            continue
+        active.append(o)
+        for lf in range(4):
+            fp = segment_triangle(q1, p1, *x[tv[[(lf + 1) % 4, (lf + 2) % 4, (lf + 3) % 4]]])
+            if fp < 0:
+                continue
+            f = int(tet_faces[o, lf])
+            fv = faces[f]
+            m = np.stack([x[fv[1]] - x[fv[0]], x[fv[2]] - x[fv[0]]], 1)
+            uv = np.linalg.lstsq(m, q1 + fp * (p1 - q1) - x[fv[0]], rcond=None)[0]
+            kinds.append(1); ids.append(f); vals.append([1 - uv.sum(), uv[0], uv[1]])
+        queue.extend(int(nb) for nb in neighbors[o] if nb >= 0 and stamp[nb] != step)
+    return (np.array(active, np.int64), np.array(kinds, np.int64), np.array(ids, np.int64),
+            np.array(vals, float).reshape(-1, 3))
+
+
+def clamp_bary_twin(b, lo):
+    """Clip to >= 0, normalise, then mix with the centroid until the smallest weight is lo."""
+    b = np.maximum(np.asarray(b, np.float64), 0.0)
+    s = b.sum()
+    b = b / s if s > 0 else np.full(b.shape, 1.0 / b.size)
+    m = b.min()
+    if m < lo:
+        c = np.full(b.size, 1.0 / b.size)
+        w = (lo - m) / (1.0 / b.size - m)
+        b = (1 - w) * b + w * c
+    return b
+
+
+def set_node_twin(x, X, uvw, nodes, w):
+    """(x, X, uvw) of a node with weights w on nodes: w @ rows (uvw None when absent)."""
+    nodes = np.asarray(nodes, np.int64)
+    w = np.asarray(w, np.float64)
+    return w @ x[nodes], w @ X[nodes], (None if uvw is None else w @ uvw[nodes])
+
+
+def min_volume_twin(x, tets):
+    return float(volumes(x, np.asarray(tets).reshape(-1, 4)).min()) if len(tets) else np.inf

@@ -1,0 +1,267 @@
+"""Tests of kinematic cutting: subdivision (section 3) and volume collision (4.2)."""
+
+import numpy as np
+import pytest
+from hypothesis import given, settings, strategies as st, HealthCheck
+
+from _twins_cut import boundary_edges_ok, components, hanging_nodes, volumes
+from cutkit.cutting import CutMesh, cut_step, find_trajectory_tetra
+from cutkit.cutting import subdivision as S
+from cutkit.errors import InputError
+from cutkit.mesh.generate import box_mesh
+
+ONE_TET_P = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1.0]])
+ONE_TET_T = np.array([[0, 1, 2, 3]])
+
+
+def check_mesh(cm, v0):
+    tets = cm.tets
+    v = volumes(cm.points, tets)
+    assert v.min() > 0, "inverted or flat tet"
+    assert abs(v.sum() - v0) < 1e-9 * max(1.0, v0)
+    ok, msg = boundary_edges_ok(tets)
+    assert ok, msg
+    # rest configuration too
+    vr = volumes(cm.rest_points, tets)
+    assert vr.min() > 0
+
+
+@pytest.mark.parametrize("centre", [True, False])
+def test_all_64_edge_combinations(centre):
+    seen = set()
+    for mask in range(64):
+        cm = CutMesh(ONE_TET_P, ONE_TET_T, centre_nodes=centre)
+        for k in range(6):
+            if mask >> k & 1:
+                cm.try_cut_edge(int(cm.tet_edges[0, k]), 0.3 + 0.05 * k)
+        got = cm.tet_mask(0)
+        # refused cuts give the nearest valid pattern; valid masks are taken whole
+        assert S.face_ok(got)
+        if S.face_ok(mask):
+            assert got == mask
+        cm.resubdivide(0)
+        check_mesh(cm, 1 / 6)
+        case, _ = S.classify(got)
+        seen.add(case)
+        n_comp = components(cm.tets)
+        assert n_comp == (2 if case in ("corner", "quad") else 1), (mask, case)
+    assert seen == {"uncut", "partial", "corner", "quad"}
+
+
+def test_reduce_mask_all_64():
+    for mask in range(64):
+        r = S.reduce_mask(mask)
+        assert S.face_ok(r) and (r & ~mask) == 0
+        if S.face_ok(mask):
+            assert r == mask
+
+
+def test_five_cases_counts():
+    # Fig. 3: two complete splits (corner, quad) and partial cuts with 1, 2, 3 edges
+    cases = {0b000111: "corner", 0b011110: "quad", 0b000001: "partial", 0b000011: "partial", 0b101001: "partial"}
+    for mask, name in cases.items():
+        assert S.classify(mask)[0] == name, bin(mask)
+
+
+def bar():
+    p, t = box_mesh((6, 3, 3))
+    return p, t
+
+
+def run_path(cm, poses, v0):
+    for tip, a in poses:
+        cut_step(cm, tip, a)
+        check_mesh(cm, v0)
+
+
+def test_complete_cut_two_components_notch_one():
+    p, t = bar()
+    v0 = volumes(p, t).sum()
+    xs = np.linspace(-0.5, 6.5, 30)
+    cm = CutMesh(p, t, blade_length=10.0)
+    run_path(cm, [([x, 1.37, -0.5], [0, 0, -1.0]) for x in xs], v0)
+    assert components(cm.tets) == 2
+    assert hanging_nodes(cm.points, cm.tets) == 0
+    cm = CutMesh(p, t, blade_length=10.0)
+    run_path(cm, [([x, 1.37, 1.9], [0, 0, 1.0]) for x in xs], v0)
+    assert components(cm.tets) == 1
+
+
+def test_progressive_does_not_compound_and_reversal_is_stable():
+    p, t = bar()
+    v0 = volumes(p, t).sum()
+    cm = CutMesh(p, t, blade_length=10.0)
+    xs = list(np.linspace(-0.5, 3.2, 12))
+    run_path(cm, [([x, 1.37, 1.9], [0, 0, 1.0]) for x in xs], v0)
+    n_tets, n_edges = len(cm.tets), int(np.isfinite(cm.edge_t).sum())
+    params = cm.edge_t.copy()
+    # tremor: small back-and-forth around the stop point, then a reversal
+    tremor = [3.2 + 0.03 * np.sin(i) for i in range(20)] + list(np.linspace(3.2, 1.0, 8))
+    run_path(cm, [([x, 1.37 + 0.01 * np.cos(3 * x), 1.9], [0, 0, 1.0]) for x in tremor], v0)
+    cut = np.isfinite(params)
+    assert np.array_equal(cm.edge_t[cut], params[cut])  # first parameter kept
+    assert int(np.isfinite(cm.edge_t).sum()) <= n_edges + 4
+    assert len(cm.tets) <= n_tets + 60
+    # every cut tet is subdivided from its original: its sub-tets tile exactly the original
+    for o, subs in cm.subtets.items():
+        vo = volumes(cm.points, cm.orig_tets[[o]])[0]
+        alive = [s for s in subs if cm._alive[s]]
+        assert len(alive) == len(subs)
+        assert abs(volumes(cm.points, cm._tets[alive]).sum() - vo) < 1e-12
+
+
+def test_shared_nodes_crack_free_keys():
+    p, t = bar()
+    cm = CutMesh(p, t, blade_length=10.0)
+    for x in np.linspace(-0.5, 6.5, 15):
+        cut_step(cm, [x, 1.37, -0.5], [0, 0, -1.0])
+    # every cut edge has two copies at the same place, and both are used
+    used = set(np.unique(cm.tets))
+    for e in np.flatnonzero(np.isfinite(cm.edge_t)):
+        a, b = cm.edge_node[e]
+        assert np.allclose(cm.points[a], cm.points[b])
+        assert a in used and b in used
+
+
+@pytest.mark.parametrize("what", ["vertex", "edge", "face"])
+def test_degenerate_contacts(what):
+    p, t = box_mesh((3, 3, 3))
+    v0 = volumes(p, t).sum()
+    cm = CutMesh(p, t, blade_length=10.0)
+    if what == "vertex":  # the tip's path goes through grid nodes
+        poses = [([x, 1.0, 1.0], [0, 0, 1.0]) for x in np.linspace(-0.5, 3.5, 9)]
+    elif what == "edge":  # the blade lies along grid edges (x = 1, y = 1)
+        poses = [([1.0, y, -0.5], [0, 0, -1.0]) for y in np.linspace(-0.5, 3.5, 9)]
+    else:  # blade in the grid plane y = 1
+        poses = [([x, 1.0, -0.5], [0, 0, -1.0]) for x in np.linspace(-0.5, 3.5, 9)]
+    run_path(cm, poses, v0)
+    assert hanging_nodes(cm.points, cm.tets) == 0
+
+
+def fig7_poses(case):
+    """The blade poses of the nine situations of Fig. 7 on the bar (tip inside/outside)."""
+    inside = lambda x: ([x, 1.37, 1.6], [0, 0, 1.0])
+    outside_above = lambda x: ([x, 1.37, 6.5], [0, 0, 1.0])
+    through = lambda x: ([x, 1.37, -0.4], [0, 0, -1.0])
+    return {
+        "out_out_miss": [outside_above(x) for x in (2.0, 2.5)],
+        "out_out_through": [through(x) for x in (-0.5, 1.0, 2.5)],
+        "out_in_enter": [outside_above(2.0), inside(2.3), inside(2.6)],
+        "in_in": [inside(x) for x in np.linspace(-0.3, 2.5, 8)],
+        "in_out_leave_top": [inside(2.0), inside(2.4), outside_above(2.6)],
+        "in_out_leave_side": [inside(x) for x in np.linspace(4.0, 6.5, 8)],
+        "in_out_in_reenter": [inside(2.0), outside_above(2.5), inside(3.0), inside(3.4)],
+        "out_in_from_side": [inside(x) for x in np.linspace(-0.6, 1.5, 6)],
+        "through_then_in": [through(-0.5), through(1.0), inside(1.8), inside(2.6)],
+    }[case]
+
+
+@pytest.mark.parametrize("case", ["out_out_miss", "out_out_through", "out_in_enter", "in_in",
+                                  "in_out_leave_top", "in_out_leave_side", "in_out_in_reenter",
+                                  "out_in_from_side", "through_then_in"])
+def test_fig7_situations(case):
+    p, t = bar()
+    v0 = volumes(p, t).sum()
+    cm = CutMesh(p, t, blade_length=3.0)
+    res = []
+    for tip, a in fig7_poses(case):
+        res.append(cut_step(cm, tip, a))
+        check_mesh(cm, v0)
+    inside_last = 0 < fig7_poses(case)[-1][0][2] < 3 and 0 < fig7_poses(case)[-1][0][0] < 6
+    assert (res[-1].tip_tet >= 0) == inside_last
+    if case == "out_out_miss":
+        assert len(cm.tets) == len(t)
+    else:
+        assert np.isfinite(cm.edge_t).any()
+
+
+def test_find_trajectory_tetra_walk():
+    p, t = bar()
+    cm = CutMesh(p, t)
+    rng = np.random.default_rng(0)
+    for _ in range(20):
+        x = rng.uniform([0, 0, 0], [6, 3, 3])
+        o = find_trajectory_tetra(cm, 0, x)
+        from cutkit.cutting._geometry import barycentric
+        assert barycentric(x, p[t[o]]).min() >= -1e-9
+    assert find_trajectory_tetra(cm, 0, np.array([10.0, 1, 1])) == -1
+
+
+def test_bad_pose_message():
+    p, t = bar()
+    cm = CutMesh(p, t)
+    with pytest.raises(InputError, match="blade pose: tip and a must be finite 3-vectors"):
+        cut_step(cm, [0, np.nan, 0], [0, 0, 1])
+
+
+@settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.booleans(), st.lists(st.tuples(st.floats(-0.5, 4.5), st.floats(0.2, 2.8), st.floats(-0.5, 3.5),
+                          st.floats(-0.4, 0.4), st.floats(-0.4, 0.4), st.sampled_from([-1.0, 1.0])),
+                min_size=2, max_size=8))
+def test_random_paths(centre, path):
+    p, t = box_mesh((4, 3, 3))
+    v0 = volumes(p, t).sum()
+    cm = CutMesh(p, t, blade_length=2.5, centre_nodes=centre)
+    for x, y, z, ax, ay, sz in path:
+        a = np.array([ax, ay, sz])
+        cut_step(cm, [x, y, z], a / np.linalg.norm(a))
+        check_mesh(cm, v0)
+    assert hanging_nodes(cm.points, cm.tets) == 0
+
+
+@pytest.mark.parametrize("centre", [True, False])
+def test_cut_surface_area_matches_swept_area(centre):
+    from cutkit.cutting import cut_surface_faces
+    p, t = bar()
+    cm = CutMesh(p, t, blade_length=10.0, centre_nodes=centre)
+    for x in np.linspace(-0.5, 6.5, 30):
+        cut_step(cm, [x, 1.37, -0.5], [0, 0, -1.0])
+    f = cut_surface_faces(cm)
+    x = cm.points
+    area = 0.5 * np.linalg.norm(np.cross(x[f[:, 1]] - x[f[:, 0]], x[f[:, 2]] - x[f[:, 0]]), axis=1).sum()
+    # the plane y = 1.37 inside the 6 x 3 bar, counted once per side
+    assert area / 2 == pytest.approx(18.0, rel=0.1)
+
+
+def test_step_deltas_describe_the_topology_change():
+    p, t = bar()
+    cm = CutMesh(p, t, blade_length=10.0)
+    n_alive = len(t)
+    for x in np.linspace(-0.5, 6.5, 12):
+        n_pts = cm.n_points
+        r = cut_step(cm, [x, 1.37, 1.9], [0, 0, 1.0])
+        assert np.array_equal(r.added_nodes, np.arange(n_pts, cm.n_points))
+        assert not cm._alive[r.removed_tets].any()
+        assert cm._alive[r.added_tets].all()
+        n_alive += len(r.added_tets) - len(r.removed_tets)
+        assert n_alive == len(cm.tets)
+
+
+def test_long_incision_tets_per_cut_tet():
+    p, t = box_mesh((20, 4, 4))
+    v0 = volumes(p, t).sum()
+    counts = {}
+    for centre in (False, True):
+        cm = CutMesh(p, t, blade_length=10.0, centre_nodes=centre)
+        for x in np.linspace(-0.5, 20.5, 80):
+            cut_step(cm, [x, 1.37, -0.5 + 0.3 * np.sin(x)], [0.1, 0.05, -1.0])
+        check_mesh(cm, v0)
+        assert components(cm.tets) == 2
+        counts[centre] = sum(len(v) for v in cm.subtets.values()) / len(cm.subtets)
+    assert counts[False] <= 9.0  # the 1999 scheme makes 17
+    assert counts[False] < counts[True]
+
+
+def test_surface_entry_follows_a_deformed_mesh():
+    # the surface BVH is built on first contact and refitted when the original nodes move
+    p, t = bar()
+    v0 = volumes(p, t).sum()
+    cm = CutMesh(p, t, blade_length=10.0)
+    cut_step(cm, [2.0, 1.37, 6.5], [0, 0, 1.0])  # outside, misses: builds the BVH
+    assert cm._bvh is not None and not np.isfinite(cm.edge_t).any()
+    cm._x[:cm.n_orig_points] += [10.0, 0.0, 0.0]  # e.g. a simulation moved the model
+    for x in np.linspace(9.5, 13.0, 8):
+        r = cut_step(cm, [x, 1.37, -0.5], [0, 0, -1.0])
+        assert r.tip_tet == -1
+    assert np.isfinite(cm.edge_t).any()
+    check_mesh(cm, v0)

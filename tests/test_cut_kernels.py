@@ -1,0 +1,139 @@
+"""Numba cutting kernels (collision, step traversal, cut nodes) against their NumPy twins."""
+
+import numpy as np
+import pytest
+
+from _twins_cut import clamp_bary_twin, min_volume_twin, set_node_twin, sweep_twin, tet_bary_twin, walk_twin
+from cutkit.cutting import CutMesh
+from cutkit.cutting import _kernels as K
+from cutkit.cutting import _kernels_step as KS
+from cutkit.mesh.generate import box_mesh
+from cutkit.cutting._geometry import segment_hits_tet, segment_triangle
+
+
+def test_seg_tri_and_seg_tet_match_twins():
+    rng = np.random.default_rng(1)
+    x = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1.0]])
+    tv = np.arange(4)
+    hits = 0
+    for _ in range(400):
+        p0, p1, a, b, c = rng.uniform(-0.5, 1.2, (5, 3))
+        r = K.seg_tri(p0, p1, a, b, c)
+        assert np.isclose(r, segment_triangle(p0, p1, a, b, c))
+        hits += r >= 0
+        assert K.seg_tet(p0, p1, x, tv) == segment_hits_tet(p0, p1, x)
+    assert hits > 10
+
+
+def test_tet_sweep_matches_twin():
+    rng = np.random.default_rng(2)
+    x = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1.0]])
+    tv = np.arange(4)
+    oe, of = np.empty(6), np.empty(4)
+    for _ in range(100):
+        swept = rng.uniform(-0.5, 1.5, (2, 3, 3))
+        blade = rng.uniform(-0.5, 1.5, (2, 3))
+        K.tet_sweep(x, tv, swept, blade, oe, of)
+        k = 0
+        for i in range(4):
+            for j in range(i + 1, 4):
+                ref = -1.0
+                for s in range(2):
+                    r = segment_triangle(x[i], x[j], *swept[s])
+                    if r >= 0:
+                        ref = r
+                        break
+                assert np.isclose(oe[k], ref)
+                k += 1
+        for f in range(4):
+            idx = [(f + 1) % 4, (f + 2) % 4, (f + 3) % 4]
+            assert np.isclose(of[f], segment_triangle(blade[0], blade[1], *x[idx]))
+
+
+# ---------------------------------------------------------------- step kernels (_kernels_step)
+
+def _jittered_box(seed):
+    p, t = box_mesh((4, 3, 3))
+    rng = np.random.default_rng(seed)
+    return p + rng.uniform(-0.08, 0.08, p.shape), t
+
+
+def test_tet_bary_and_walk_match_twins():
+    p, t = _jittered_box(3)
+    cm = CutMesh(p, t)
+    rng = np.random.default_rng(4)
+    out = np.empty(4)
+    for _ in range(200):
+        target = rng.uniform([-0.5, -0.5, -0.5], [4.5, 3.5, 3.5])
+        o = int(rng.integers(len(t)))
+        assert KS.tet_bary(cm._x, t[o], target, out)
+        np.testing.assert_allclose(out, tet_bary_twin(cm._x, t[o], target), atol=1e-12)
+        assert KS.walk(cm._x, t, cm.neighbors, o, target, 10000) == walk_twin(cm._x, t, cm.neighbors, o, target)
+    flat = np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0], [0, 1, 0.0]])
+    assert not KS.tet_bary(flat, np.arange(4), np.zeros(3), out) and (out == -1).all()
+
+
+def _sweep_resumed(cm, edge_t, stamp, step, seeds, swept, blade, p0):
+    """KS.sweep from buffers far too small: every overflow returns, is grown, and resumes."""
+    seeds = list(dict.fromkeys(seeds.tolist()))
+    bufs = [np.array(seeds + [0] * 4, np.int64), np.empty(1, np.int64), np.empty((10, 2), np.int64), np.empty((10, 3))]
+    counts = np.array([len(seeds), 0, 0])
+    while not KS.sweep(cm._x, cm.orig_tets, cm.neighbors, cm.tet_edges, cm.tet_faces, cm.edges, cm.faces, edge_t,
+                       stamp, step, swept, blade, p0, *bufs, counts):
+        bufs = [np.concatenate([b, np.empty_like(b)]) for b in bufs]
+    return bufs[1][:counts[1]], bufs[2][:counts[2]], bufs[3][:counts[2]]
+
+
+def test_sweep_matches_twin():
+    p, t = _jittered_box(5)
+    cm = CutMesh(p, t)
+    rng = np.random.default_rng(6)
+    n_events = 0
+    for it in range(60):
+        edge_t = np.where(rng.random(cm.edges.shape[0]) < 0.2, 0.5, np.nan)
+        tip0, tip1 = rng.uniform([0, 0, 0], [4, 3, 3], (2, 3))
+        a = rng.normal(size=3)
+        a /= np.linalg.norm(a)
+        q0, q1 = tip0 - 2.0 * a, tip1 - 2.0 * a
+        swept = np.array([[tip0, q0, q1], [tip0, q1, tip1]])
+        blade = np.array([q1, tip1])
+        seeds = rng.integers(0, len(t), 3)
+        seeds = np.concatenate([seeds, seeds[:1]])  # duplicates keep their first place
+        s1 = np.zeros(len(t), np.int64)
+        s2 = s1.copy()
+        got = _sweep_resumed(cm, edge_t, s1, it + 1, seeds, swept, blade, tip0)
+        ref = sweep_twin(cm._x, t, cm.neighbors, cm.tet_edges, cm.tet_faces, cm.edges, cm.faces, edge_t,
+                         s2, it + 1, seeds, swept, blade, tip0)
+        np.testing.assert_array_equal(got[0], ref[0])
+        np.testing.assert_array_equal(got[1], np.stack([ref[1], ref[2]], 1).reshape(-1, 2))
+        np.testing.assert_allclose(got[2], ref[3], atol=1e-9)
+        np.testing.assert_array_equal(s1, s2)
+        n_events += len(got[1])
+    assert n_events > 100
+
+
+def test_clamp_set_node_min_volume_match_twins():
+    rng = np.random.default_rng(7)
+    for k, lo in ((3, 0.1), (4, 0.05), (3, 1e-3), (2, 0.0)):
+        for _ in range(50):
+            b = rng.uniform(-0.5, 1.0, k)
+            np.testing.assert_allclose(KS.clamp_bary(b, lo), clamp_bary_twin(b, lo), atol=1e-15)
+        np.testing.assert_allclose(KS.clamp_bary(-np.ones(k), lo), clamp_bary_twin(-np.ones(k), lo))
+    x, X, uvw = rng.normal(size=(3, 10, 3))
+    dn, dw = -np.ones((10, 4), np.int64), np.zeros((10, 4))
+    for k in (2, 3, 4):
+        nodes = rng.choice(6, k, replace=False).astype(np.int64)
+        w = rng.random(k)
+        for tex in (uvw, np.zeros((0, 3))):
+            KS.set_node(x, X, tex, dn, dw, 8, nodes, w)
+            rx, rX, ru = set_node_twin(x, X, tex if len(tex) else None, nodes, w)
+            np.testing.assert_allclose(x[8], rx, atol=1e-14)
+            np.testing.assert_allclose(X[8], rX, atol=1e-14)
+            if len(tex):
+                np.testing.assert_allclose(uvw[8], ru, atol=1e-14)
+            assert list(dn[8, :k]) == list(nodes) and (dn[8, k:] == -1).all() and (dw[8, k:] == 0).all()
+    p, t = _jittered_box(8)
+    t = t.copy()
+    t[::3] = t[::3, [1, 0, 2, 3]]  # some inverted
+    assert KS.min_volume(p, t) == pytest.approx(min_volume_twin(p, t), abs=1e-14)
+    assert KS.min_volume(p, t[:0]) == np.inf

@@ -1,0 +1,275 @@
+"""End to end: a short incision through a small prestressed slab (cutkit simulate)."""
+
+import csv
+import json
+
+import numpy as np
+import pytest
+
+from cutkit.assign.defaults import DEFAULT_MATERIALS
+from cutkit.cli.main import main
+from cutkit.cutting.trajectory import straight_incision, write_trajectory
+from cutkit.io.model_h5 import read_model, write_model
+from cutkit.mesh.generate import box_mesh
+from cutkit.model.tetmodel import BoundaryConditions, Materials, Prestress, TetModel
+
+#: Slab 32 x 12 x 16 mm (x, y, z); the blade enters its y = 0 face.
+SHAPE, H = (16, 6, 8), 2.0
+
+
+def slab(prestrain=0.15):
+    points, tets = box_mesh(SHAPE, spacing=(H, H, H))
+    ends = np.flatnonzero((points[:, 2] == 0) | (points[:, 2] == SHAPE[2] * H))
+    row = dict(label=1, name="muscle", **DEFAULT_MATERIALS["muscle"])
+    return TetModel.from_arrays(
+        points, tets, materials=Materials.from_rows([row]),
+        boundary=BoundaryConditions(fixed_nodes=ends),
+        prestress=Prestress(label=np.array([1], np.int32), fibre_direction=np.array([[0.0, 0.0, 1.0]]),
+                            prestrain=np.array([prestrain])))
+
+
+def _simulate(d, prestrain):
+    write_model(d / "slab.h5", slab(prestrain))
+    traj = straight_incision([6.0, 0.0, 8.3], [26.0, 0.0, 8.3], inward=[0, 1, 0], depth=5.0, approach=3.0,
+                             press_time=0.3, cut_time=0.6, rate=100)
+    write_trajectory(d / "cut.csv", traj)
+    code = main(["simulate", str(d / "slab.h5"), "--trajectory", str(d / "cut.csv"), "-o", str(d / "out"),
+                 "--fps", "10", "--hold", "0.3"])
+    assert code == 0
+    return d / "out"
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory):
+    """One simulated incision across the fibres (x at z = 8 mm), 5 mm deep."""
+    return _simulate(tmp_path_factory.mktemp("sim"), 0.15)
+
+
+@pytest.fixture(scope="module")
+def run_without_prestress(tmp_path_factory):
+    return _simulate(tmp_path_factory.mktemp("sim0"), 0.0)
+
+
+def test_outputs_are_written(run):
+    frames = sorted((run / "frames").glob("*.vtu"))
+    surfaces = sorted((run / "surface").glob("*.vtp"))
+    assert len(frames) == len(surfaces) >= 12  # 1.2 s at 10 fps, plus the first frame
+    pvd = (run / "cut.pvd").read_text()
+    assert pvd.count("<DataSet") == len(frames)
+    assert (run / "cut_surface.pvd").read_text().count("<DataSet") == len(surfaces)
+    import meshio
+
+    last = meshio.read(frames[-1])
+    for key in ("displacement", "velocity", "fixed", "node_list"):
+        assert key in last.point_data
+    assert set(last.cell_data) >= {"label", "new_tet"}
+    assert last.cell_data["new_tet"][0].sum() > 0
+
+
+def test_forces_zero_before_contact_then_static_then_cutting(run):
+    with open(run / "forces.csv") as f:
+        rows = list(csv.DictReader(f))
+    states = [r["state"] for r in rows]
+    first_contact = states.index("static")
+    assert first_contact > 0
+    # before contact: no force at all
+    for r in rows[:first_contact]:
+        assert r["state"] == "free"
+        assert float(r["F_ext_x"]) == float(r["F_ext_y"]) == float(r["F_ext_z"]) == 0.0
+    # the blade meets static friction first, cuts later
+    assert "cutting" in states[first_contact:]
+    assert states.index("cutting") > first_contact
+    # static friction holds until |F_par| reaches F_enter (muscle: 0.8 N)
+    k = states.index("cutting")
+    f_before = np.linalg.norm([float(rows[k - 1][c]) for c in ("F_ext_x", "F_ext_y", "F_ext_z")])
+    assert f_before == pytest.approx(DEFAULT_MATERIALS["muscle"]["F_enter"], rel=0.15)
+
+
+def test_summary_and_cut(run):
+    s = json.loads((run / "summary.json").read_text())
+    assert s["cut_tets"] > 20
+    assert 2.0 < s["new_tets_per_cut_tet"] <= 12.0
+    assert s["tets_final"] > s["tets_initial"]
+    assert s["nodes_final"] > s["nodes_initial"]
+    assert s["states"][:3] == ["free", "static", "cutting"]
+    assert s["warnings"] == []
+    assert s["simulated_s"] == pytest.approx(1.2, abs=0.02)
+    for task in ("haptics", "collision_and_cut", "relaxation", "output"):
+        assert s["time_per_task_s"][task] >= 0.0
+
+
+def test_cut_opens_under_prestress(run, run_without_prestress):
+    # the two copies of a cut node start at one place and drift apart as the
+    # prestressed fibres retract; without prestress only the blade's push separates them
+    opening = json.loads((run / "summary.json").read_text())["cut_opening_mm"]
+    plain = json.loads((run_without_prestress / "summary.json").read_text())["cut_opening_mm"]
+    assert opening["final_mean"] > 0.3
+    assert opening["final_mean"] > 3.0 * plain["final_mean"]
+
+
+def test_final_model_passes_check(run, capsys):
+    m = read_model(run / "model.h5")
+    assert m.tets.shape[0] > 0 and "displacement" in m.point_data
+    assert main(["check", str(run / "model.h5")]) == 0
+
+
+def test_mass_is_kept_by_the_cut(run):
+    from cutkit.relax import build_spring_model
+
+    before = build_spring_model(slab()).masses.sum()
+    m = read_model(run / "model.h5")
+    # the cut model's rest geometry gives the same total mass (subdivision keeps the rest volume)
+    p = m.points[m.tets]  # the model file holds the rest configuration
+    vol = np.einsum("ij,ij->i", np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), p[:, 3] - p[:, 0]).sum() / 6.0
+    assert vol * DEFAULT_MATERIALS["muscle"]["density"] * 1e-12 == pytest.approx(before, rel=1e-9)
+
+
+def test_trajectory_that_never_touches_warns(tmp_path, capsys):
+    write_model(tmp_path / "slab.h5", slab())
+    traj = straight_incision([6.0, -20.0, 8.0], [26.0, -20.0, 8.0], inward=[0, 1, 0], depth=2.0, approach=3.0,
+                             press_time=0.1, cut_time=0.2, rate=100)
+    write_trajectory(tmp_path / "miss.csv", traj)
+    code = main(["simulate", str(tmp_path / "slab.h5"), "--trajectory", str(tmp_path / "miss.csv"),
+                 "-o", str(tmp_path / "out"), "--fps", "10", "--hold", "0"])
+    assert code == 0
+    out = capsys.readouterr().out
+    assert "never touches the tissue" in out
+    s = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert s["cut_tets"] == 0 and s["states"] == ["free"]
+
+
+@pytest.mark.parametrize("what, content, message", [
+    ("trajectory", "t,x,y,z,ax,ay,az,nx,ny,nz\n0,0,0,0,0,1,0,1,0,0\n0,0,0,1,0,1,0,1,0,0\n", "cut.csv:3: t = 0 does not increase"),
+    ("model", b"not an hdf5 file", "model"),
+])
+def test_bad_input_is_one_line_error(tmp_path, capsys, what, content, message):
+    write_model(tmp_path / "slab.h5", slab())
+    write_trajectory(tmp_path / "cut.csv", straight_incision([6.0, 0.0, 8.0], [26.0, 0.0, 8.0], inward=[0, 1, 0]))
+    if what == "trajectory":
+        (tmp_path / "cut.csv").write_text(content)
+    else:
+        (tmp_path / "slab.h5").write_bytes(content)
+    code = main(["simulate", str(tmp_path / "slab.h5"), "--trajectory", str(tmp_path / "cut.csv"),
+                 "-o", str(tmp_path / "out")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2
+    assert len(err) == 1 and err[0].startswith("cutkit: error:") and message in err[0]
+    assert not (tmp_path / "out" / "summary.json").exists()
+
+
+def test_haptics_address_is_checked(tmp_path, capsys):
+    write_model(tmp_path / "slab.h5", slab())
+    write_trajectory(tmp_path / "cut.csv", straight_incision([6.0, 0.0, 8.0], [26.0, 0.0, 8.0], inward=[0, 1, 0]))
+    code = main(["simulate", str(tmp_path / "slab.h5"), "--trajectory", str(tmp_path / "cut.csv"),
+                 "-o", str(tmp_path / "out"), "--haptics", "localhost"])
+    assert code == 2
+    assert "HOST:PORT" in capsys.readouterr().err
+
+
+def test_lookup_springs_matches_twin():
+    from _twins_simulate import lookup_springs_twin
+
+    from cutkit.relax import build_spring_model
+    from cutkit.simulate._kernels import lookup_springs
+
+    sm = build_spring_model(slab())
+    rng = np.random.default_rng(0)
+    n = sm.n_nodes
+    a = np.concatenate([sm.springs[:50, 0], sm.springs[50:100, 1], rng.integers(0, n + 5, 200)])
+    b = np.concatenate([sm.springs[:50, 1], sm.springs[50:100, 0], rng.integers(0, n + 5, 200)])
+    got = lookup_springs(sm.adj_offsets, sm.adj_nodes, sm.adj_springs, a, b)
+    np.testing.assert_array_equal(got, lookup_springs_twin(sm.springs, n, a, b))
+    assert np.all(got[:100] >= 0)
+
+
+def test_spring_bookkeeping_matches_a_fresh_build_after_cuts():
+    """After a few cut steps, springs, stiffness, rest lengths and masses equal a rebuild from the cut mesh."""
+    from cutkit.cutting import cut_step
+    from cutkit.relax import build_spring_model
+    from cutkit.simulate.tissue import Tissue
+
+    tis = Tissue(slab(), blade_length=20.0, dt0=1e-3, n_lists=3, tolerance_fraction=1e-3)
+    for x in np.linspace(5.0, 20.0, 16):
+        res = cut_step(tis.cm, [x, 4.0, 8.3], [0.0, 1.0, 0.0])
+        tis.apply_cut(res)
+    cm, sm = tis.cm, tis.springs
+    ref = build_spring_model(TetModel.from_arrays(cm.rest_points.copy(), cm.tets, cm.labels[cm.tet_origin],
+                                                  materials=tis.model.materials, prestress=tis.model.prestress))
+    key = lambda s: s[:, 0] * 10**6 + s[:, 1]  # noqa: E731
+    order, ref_order = np.argsort(key(np.sort(sm.springs, axis=1))), np.argsort(key(ref.springs))
+    np.testing.assert_array_equal(np.sort(sm.springs, axis=1)[order], ref.springs[ref_order])
+    np.testing.assert_allclose(sm.stiffness[order], ref.stiffness[ref_order], rtol=1e-9)
+    np.testing.assert_allclose(sm.rest_length[order], ref.rest_length[ref_order], rtol=1e-9)
+    used = tis.node_tet_count > 0
+    np.testing.assert_allclose(sm.masses[used], ref.masses[used], rtol=1e-9, atol=1e-30)
+    assert np.all(sm.masses[~used] == 0) and np.all(sm.fixed[~used])
+    assert sm.masses.sum() == pytest.approx(build_spring_model(slab()).masses.sum(), rel=1e-12)
+
+
+def test_interrupted_run_leaves_complete_frames(tmp_path):
+    """Ctrl-C mid-run: the frames written so far, a .pvd naming exactly them, and the logs."""
+    import meshio
+
+    from cutkit.simulate import SimulateOptions, simulate
+
+    traj = straight_incision([6.0, 0.0, 8.3], [26.0, 0.0, 8.3], inward=[0, 1, 0], depth=5.0, approach=3.0,
+                             press_time=0.3, cut_time=0.6, rate=100)
+    calls = []
+
+    def interrupt(t, total):
+        calls.append(t)
+        if t > 0.5:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        simulate(slab(), traj, tmp_path, SimulateOptions(fps=20, hold_s=0.0), progress=interrupt)
+    frames = sorted((tmp_path / "frames").glob("*.vtu"))
+    assert 5 <= len(frames) < 19
+    pvd = (tmp_path / "cut.pvd").read_text()
+    assert pvd.count("<DataSet") == len(frames) and pvd.rstrip().endswith("</VTKFile>")
+    meshio.read(frames[-1])  # complete
+    assert not list(tmp_path.rglob(".*.vtu"))  # no temporary file left
+    s = json.loads((tmp_path / "summary.json").read_text())
+    assert s["interrupted"] is True
+    assert (tmp_path / "forces.csv").read_text().count("\n") > 500
+
+
+def test_simulate_through_the_haptics_service(tmp_path):
+    """--haptics: the force model runs in `cutkit haptics serve`; the cut still happens."""
+    from cutkit.haptics.client import spawned_server
+
+    write_model(tmp_path / "slab.h5", slab())
+    traj = straight_incision([6.0, 0.0, 8.3], [26.0, 0.0, 8.3], inward=[0, 1, 0], depth=5.0, approach=3.0,
+                             press_time=0.3, cut_time=0.6, rate=100)
+    write_trajectory(tmp_path / "cut.csv", traj)
+    with spawned_server() as (host, port, _):
+        code = main(["simulate", str(tmp_path / "slab.h5"), "--trajectory", str(tmp_path / "cut.csv"),
+                     "-o", str(tmp_path / "out"), "--fps", "5", "--hold", "0.1", "--haptics", f"{host}:{port}"])
+    assert code == 0
+    s = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert s["states"][:2] == ["free", "static"] and "cutting" in s["states"]
+    assert s["cut_tets"] > 5
+    # The service paces ticks to the wall clock, so the simulation can never see more than 1 kHz; how many
+    # fewer it sees depends on how busy the machine is, which a test must not assert.
+    assert 0 < s["rates_hz"]["haptics"] < 1050
+
+
+def test_png_pictures_show_the_tissue(tmp_path):
+    from PIL import Image
+
+    write_model(tmp_path / "slab.h5", slab())
+    traj = straight_incision([6.0, 0.0, 8.3], [26.0, 0.0, 8.3], inward=[0, 1, 0], depth=5.0, approach=3.0,
+                             press_time=0.2, cut_time=0.3, rate=100)
+    write_trajectory(tmp_path / "cut.csv", traj)
+    code = main(["simulate", str(tmp_path / "slab.h5"), "--trajectory", str(tmp_path / "cut.csv"),
+                 "-o", str(tmp_path / "out"), "--fps", "10", "--hold", "0.1", "--png"])
+    assert code == 0
+    s = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert len(s["pictures"]) == 3
+    img = np.asarray(Image.open(tmp_path / "out" / s["pictures"][-1]).convert("RGB"))
+    assert img.shape[0] > 100 and img.shape[1] > 100
+    # the camera looks into the wound: the tissue colour, and the dark gap of the opened cut
+    dark = img.astype(int).sum(axis=2) < 300
+    tissue = img[..., 0].astype(int) > img[..., 2].astype(int) + 30
+    assert 0.01 < dark.mean() < 0.5
+    assert tissue.mean() > 0.3
