@@ -6,7 +6,9 @@ from rich.console import Console
 from rich.progress import BarColumn, Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
-console = Console(highlight=False)
+# soft_wrap: plain lines are never broken by rich, so a long file path stays
+# one piece to copy (the terminal wraps it for display); tables still fit the width.
+console = Console(highlight=False, soft_wrap=True)
 
 
 def progress() -> Progress:
