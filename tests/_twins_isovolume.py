@@ -15,6 +15,24 @@ from itertools import permutations
 import numpy as np
 
 N_DIRS = 7
+#: The centre of a coned tet is moved when its cone has a smaller dihedral angle (degrees).
+CENTRE_MIN_DIHEDRAL_DEG = 15.0
+
+
+def min_dihedral_twin(p):
+    """Smallest dihedral angle (degrees) of a tet given as four (3,) points, from face normals."""
+    p = [np.asarray(x, float) for x in p]
+    angles = []
+    for i in range(4):
+        for j in range(i + 1, 4):
+            # faces i and j are opposite vertices i and j; they share edge (k, l)
+            k, l = [x for x in range(4) if x not in (i, j)]
+            e = p[l] - p[k]
+            # components perpendicular to the shared edge of the vectors to the opposite vertices
+            a = p[j] - p[k] - np.dot(p[j] - p[k], e) / np.dot(e, e) * e
+            b = p[i] - p[k] - np.dot(p[i] - p[k], e) / np.dot(e, e) * e
+            angles.append(np.degrees(np.arccos(np.clip(np.dot(a, b) / np.linalg.norm(a) / np.linalg.norm(b), -1, 1))))
+    return min(angles)
 
 
 def _kuhn_tets():
@@ -86,16 +104,7 @@ class _Grid:
         if node[0] == "v":
             return np.array(node[1], float)
         if node[0] == "c":
-            # mean of the tet's crossings with the background (or of all, if none)
-            corners = node[3]
-            has_bg = any(self.lab[c] == 0 for c in corners)
-            pts = []
-            for a in range(4):
-                for b in range(a + 1, 4):
-                    la, lb = self.lab[corners[a]], self.lab[corners[b]]
-                    if la != lb and (not has_bg or la == 0 or lb == 0):
-                        pts.append(self.pos(_crossing(corners[a], corners[b])))
-            return np.mean(pts, axis=0)
+            return self.centre(node)
         lo, hi = np.array(node[1], float), np.array(node[2], float)
         if self.scalar:
             flo, fhi = self.f[node[1]], self.f[node[2]]
@@ -103,6 +112,37 @@ class _Grid:
         else:
             s = self.label_crossing(node[1], node[2])
         return lo + s * (hi - lo)
+
+    def centre(self, node):
+        """Centre of a coned tet: the crossing mean, moved off a sliver (docs/isovolume.md section 4)."""
+        cube, t, corners = node[1], node[2], node[3]
+        has_bg = any(self.lab[c] == 0 for c in corners)
+
+        def crossing_mean(background_only):
+            pts = []
+            for a in range(4):
+                for b in range(a + 1, 4):
+                    la, lb = self.lab[corners[a]], self.lab[corners[b]]
+                    if la != lb and (not background_only or la == 0 or lb == 0):
+                        pts.append(self.pos(_crossing(corners[a], corners[b])))
+            return np.mean(pts, axis=0)
+
+        cone = [tet for tet, _ in _cone_twin(self, cube, t, corners)]
+
+        def smallest_angle(c):
+            return min(min_dihedral_twin([c if n == node else self.pos(n) for n in tet]) for tet in cone)
+
+        c0 = crossing_mean(has_bg)
+        if has_bg or smallest_angle(c0) >= CENTRE_MIN_DIHEDRAL_DEG:
+            return c0
+        best, best_angle = c0, smallest_angle(c0)
+        centroid = np.mean(np.array(corners, float), axis=0)
+        for f in (0.25, 0.5, 0.75, 1.0):
+            c = c0 + f * (centroid - c0)
+            a = smallest_angle(c)
+            if a > best_angle + 1e-6:
+                best, best_angle = c, a
+        return best
 
     def label_crossing(self, lo, hi):
         """Zero of the multilinear interpolant of h = [label a] - [label b] on the diagonal lo -> hi."""

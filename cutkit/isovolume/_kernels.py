@@ -49,6 +49,7 @@ from cutkit.isovolume._clip import (  # noqa: F401  (tables re-exported for call
     _emit,
     label_crossing,
 )
+from cutkit.isovolume._centre import place_centre
 
 
 # --------------------------------------------------------- vertex passes ---
@@ -357,6 +358,9 @@ def fill_pieces(lab, on, f, mask, vmap, eoff, tet_off, centre_off, nx, ny, nz, l
         out = np.empty((6 * MAX_PIECES, 4), np.int64)
         out_lab = np.empty(6 * MAX_PIECES, np.int32)
         centre_id = np.empty(6, np.int64)
+        cworld = np.empty((REF_CENTRE, 3))
+        cknown = np.zeros(REF_CENTRE, np.bool_)
+        cwork = np.empty((8, 3))
         corner_id = np.empty(8, np.int64)
         nt = tet_off[i]
         nc = centre_off[i]
@@ -400,40 +404,9 @@ def fill_pieces(lab, on, f, mask, vmap, eoff, tet_off, centre_off, nx, ny, nz, l
                             t = x - REF_CENTRE
                             if centre_id[t] < 0:
                                 centre_id[t] = nc
-                                # centre of Kuhn tet t: the mean of its crossings with the
-                                # background if it has background corners (so the outer
-                                # surface, coned from it, stays close to flat), else of
-                                # all its crossings.  Either set has a crossing on an edge
-                                # of every corner, so the mean is strictly inside, and
-                                # any inside point keeps every cone tet valid.
-                                has_bg = False
-                                for w in range(4):
-                                    cc = KUHN_PATHS[t, w]
-                                    if lab[g0 + (((cc >> 2) & 1) * ny + ((cc >> 1) & 1)) * nz + (cc & 1)] == 0:
-                                        has_bg = True
-                                cx = 0.0
-                                cy = 0.0
-                                cz = 0.0
-                                nw = 0
-                                for e in range(6):
-                                    ca = KUHN_PATHS[t, EDGE_A[e]]
-                                    cb = KUHN_PATHS[t, EDGE_B[e]]
-                                    ga = g0 + (((ca >> 2) & 1) * ny + ((ca >> 1) & 1)) * nz + (ca & 1)
-                                    gb = g0 + (((cb >> 2) & 1) * ny + ((cb >> 1) & 1)) * nz + (cb & 1)
-                                    if lab[ga] == lab[gb]:
-                                        continue
-                                    if has_bg and lab[ga] != 0 and lab[gb] != 0:
-                                        continue
-                                    sc = label_crossing(lab, ga, ca ^ cb, ny, nz)
-                                    cx += i + ((ca >> 2) & 1) + sc * (((cb >> 2) & 1) - ((ca >> 2) & 1))
-                                    cy += j + ((ca >> 1) & 1) + sc * (((cb >> 1) & 1) - ((ca >> 1) & 1))
-                                    cz += k + (ca & 1) + sc * ((cb & 1) - (ca & 1))
-                                    nw += 1
-                                cx /= nw
-                                cy /= nw
-                                cz /= nw
-                                for q in range(3):
-                                    points[nc, q] = affine[q, 0] * cx + affine[q, 1] * cy + affine[q, 2] * cz + affine[q, 3]
+                                # default: the mean of its crossings (with the background
+                                # if it has some), moved where that cone makes a sliver
+                                place_centre(out, m, t, lab, g0, i, j, k, ny, nz, affine, cworld, cknown, cwork, points[nc])
                                 nc += 1
                             node = centre_id[t]
                         tets[nt, v] = node
