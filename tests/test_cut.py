@@ -223,6 +223,23 @@ def test_cut_surface_area_matches_swept_area(centre):
     assert area / 2 == pytest.approx(18.0, rel=0.1)
 
 
+def test_cut_surface_from_sub_tets_equals_the_whole_mesh_boundary():
+    """The cut surface is looked for among the sub-tets only; the whole mesh's boundary gives the same faces."""
+    from cutkit.cutting import cut_surface_faces
+    from cutkit.mesh.topology import boundary_faces
+
+    p, t = bar()
+    cm = CutMesh(p, t, blade_length=10.0)
+    for x in np.linspace(-0.5, 6.5, 20):
+        cut_step(cm, [x, 1.37, 0.8 + 0.1 * x], [0, 0, -1.0])
+    whole, _ = boundary_faces(cm.tets)
+    expected = whole[(whole >= cm.n_orig_points).all(axis=1)]
+    got = cut_surface_faces(cm)
+    assert got.shape[0] > 20
+    canon = lambda f: sorted(tuple(np.roll(r, -int(np.argmin(r)))) for r in f)  # noqa: E731 (keeps orientation)
+    assert canon(got) == canon(expected)
+
+
 def test_step_deltas_describe_the_topology_change():
     p, t = bar()
     cm = CutMesh(p, t, blade_length=10.0)

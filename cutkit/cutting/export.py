@@ -11,15 +11,19 @@ def cut_surface_faces(cm: CutMesh) -> np.ndarray:
     """(k, 3) int64 boundary triangles of the cut surface (both sides of each cut).
 
     Every triangle of the Fig. 2 face patterns contains an original
-    vertex, and every cut-surface triangle is made of cut nodes only.
+    vertex, and every cut-surface triangle is made of cut nodes only.  Only
+    sub-tets of cut tets hold cut nodes, so the faces are looked for among
+    them alone: the work follows the size of the cut, not of the mesh.
     """
     from cutkit.mesh.topology import boundary_faces
-    tets = cm.tets
-    if tets.shape[0] == 0:
+
+    m0, total = cm.orig_tets.shape[0], cm.n_tets_total
+    sub_tets = cm._tets[m0:total][cm._alive[m0:total]]
+    if sub_tets.shape[0] == 0:
         return np.zeros((0, 3), np.int64)
-    faces, _ = boundary_faces(tets)
-    # every triangle of an original face contains an original vertex, so
-    # a boundary face made only of new nodes is on the cut surface
+    faces, _ = boundary_faces(sub_tets)
+    # A face made only of cut nodes belongs to sub-tets only, so appearing
+    # once among them it appears once in the whole mesh: it is on the boundary.
     return faces[(faces >= cm.n_orig_points).all(axis=1)]
 
 

@@ -20,7 +20,8 @@ import numpy as np
 from numba import njit
 
 from cutkit.decimate._geometry import tet_max_cos
-from cutkit.isovolume._clip import EDGE_A, EDGE_B, KUHN_PATHS, REF_CENTRE, label_crossing
+from cutkit.isovolume._clip import EDGE_A, EDGE_B, KUHN_PATHS, REF_CENTRE
+from cutkit.isovolume._crossings import crossing_node
 
 #: A centre whose cone has a smaller dihedral angle (degrees) is moved.  Above
 #: the decimator's default floor (10 degrees), so that floor is met with margin.
@@ -39,7 +40,7 @@ def _grid_id(g0, c, ny, nz):
 
 
 @njit(cache=True, nogil=True)
-def _index_position(x, lab, g0, i, j, k, ny, nz, out):
+def _index_position(x, g0, i, j, k, ny, nz, mask, eoff, n_v, cross_s, out):
     """Index-space position of cube ref ``x`` (a corner, < 8, or a crossing, < REF_CENTRE)."""
     if x < 8:
         c = x
@@ -48,7 +49,7 @@ def _index_position(x, lab, g0, i, j, k, ny, nz, out):
     else:
         c = (x - 8) // 7
         code = (x - 8) - 7 * c + 1
-        s = label_crossing(lab, _grid_id(g0, c, ny, nz), code, ny, nz)
+        s = cross_s[crossing_node(_grid_id(g0, c, ny, nz), code - 1, mask, eoff) - n_v]
     out[0] = i + ((c >> 2) & 1) + s * ((code >> 2) & 1)
     out[1] = j + ((c >> 1) & 1) + s * ((code >> 1) & 1)
     out[2] = k + (c & 1) + s * (code & 1)
@@ -61,7 +62,7 @@ def _to_world(affine, p, out):
 
 
 @njit(cache=True, nogil=True)
-def _crossing_mean(lab, g0, t, i, j, k, ny, nz, background_only, out):
+def _crossing_mean(lab, g0, t, i, j, k, ny, nz, mask, eoff, n_v, cross_s, background_only, out):
     """Index-space mean of Kuhn tet ``t``'s crossings (with the background only, if asked).
 
     Either set has a crossing on an edge of every corner, so the mean is
@@ -79,7 +80,7 @@ def _crossing_mean(lab, g0, t, i, j, k, ny, nz, background_only, out):
             continue
         if background_only and la != 0 and lb != 0:
             continue
-        sc = label_crossing(lab, _grid_id(g0, ca, ny, nz), ca ^ cb, ny, nz)
+        sc = cross_s[crossing_node(_grid_id(g0, ca, ny, nz), (ca ^ cb) - 1, mask, eoff) - n_v]
         p[0] = i + ((ca >> 2) & 1) + sc * (((cb >> 2) & 1) - ((ca >> 2) & 1))
         p[1] = j + ((ca >> 1) & 1) + sc * (((cb >> 1) & 1) - ((ca >> 1) & 1))
         p[2] = k + (ca & 1) + sc * ((cb & 1) - (ca & 1))
@@ -113,7 +114,7 @@ def _cone_min_angle(rows, m, centre_ref, centre, world, p):
 
 
 @njit(cache=True, nogil=True)
-def place_centre(rows, m, t, lab, g0, i, j, k, ny, nz, affine, world, known, work, out):
+def place_centre(rows, m, t, lab, g0, i, j, k, ny, nz, mask, eoff, n_v, cross_s, affine, world, known, work, out):
     """World position of the centre node of Kuhn tet ``t`` of cube (i, j, k).
 
     Parameters
@@ -121,6 +122,9 @@ def place_centre(rows, m, t, lab, g0, i, j, k, ny, nz, affine, world, known, wor
     rows : (>= m, 4) int64
         The cube's pieces as cube refs; those holding ``REF_CENTRE + t`` are
         the cone of this centre.
+    mask, eoff, n_v, cross_s
+        The crossing table (:mod:`cutkit.isovolume._crossings`): ``cross_s``
+        (n_e,) float64 is the parameter of crossing node ``n_v + e``.
     affine : (3, 4) float64
         Index space to world (mm).
     world : (REF_CENTRE, 3) float64, known : (REF_CENTRE,) bool
@@ -139,7 +143,7 @@ def place_centre(rows, m, t, lab, g0, i, j, k, ny, nz, affine, world, known, wor
         # A centre on the outer surface stays at the mean of the background
         # crossings: moving it would move the boundary away from the
         # segmentation (docs/isovolume.md, the half-voxel bound).
-        _crossing_mean(lab, g0, t, i, j, k, ny, nz, True, c0)
+        _crossing_mean(lab, g0, t, i, j, k, ny, nz, mask, eoff, n_v, cross_s, True, c0)
         _to_world(affine, c0, out)
         return
     centre_ref = REF_CENTRE + t
@@ -157,7 +161,7 @@ def place_centre(rows, m, t, lab, g0, i, j, k, ny, nz, affine, world, known, wor
             x = rows[r, v]
             if x < REF_CENTRE and not known[x]:
                 known[x] = True
-                _index_position(x, lab, g0, i, j, k, ny, nz, work[1])
+                _index_position(x, g0, i, j, k, ny, nz, mask, eoff, n_v, cross_s, work[1])
                 _to_world(affine, work[1], world[x])
     # The crossing mean and the centroid, in world space (the map is affine).
     centroid = work[1]

@@ -17,7 +17,9 @@ Work is split into passes that never need a lock (parallel over x-slabs):
 3. :func:`count_pieces` - per slab, the number of output tets and tet-centre
    nodes; marks the grid vertices that a tet uses.
 4. prefix sums (NumPy) give every used vertex, crossing and centre its node id;
-5. :func:`fill_points` and :func:`fill_pieces` write nodes and tets.
+5. label maps: :func:`cutkit.isovolume._crossings.label_crossing_params`
+   places every crossing on its edge once, in a table the next pass reads;
+6. :func:`fill_points` and :func:`fill_pieces` write nodes and tets.
 
 Inside a cube, a node is named by a *ref*: ``0..7`` a cube corner (its code),
 ``8 + 7 * corner + dir`` a crossing on the forward edge ``dir`` of a corner,
@@ -47,7 +49,6 @@ from cutkit.isovolume._clip import (  # noqa: F401  (tables re-exported for call
     _clip_side,
     _cone,
     _emit,
-    label_crossing,
 )
 from cutkit.isovolume._centre import place_centre
 
@@ -298,12 +299,14 @@ def count_pieces(lab, on, f, nx, ny, nz, level, mode, sgn, n_tets, n_centres, us
 
 
 @njit(cache=True, parallel=True)
-def fill_points(lab, on, f, mask, used, vmap, eoff, nx, ny, nz, level, mode, affine, points):
+def fill_points(lab, on, f, mask, used, vmap, eoff, n_v, cross_s, nx, ny, nz, level, mode, affine, points):
     """World positions of the used grid vertices and of the crossing points.
 
     vmap : (n,) int64 node id of each used vertex; eoff : (n,) int64 node id
-    of the first crossing of each vertex's forward edges; affine : (3, 4)
-    float64 index -> world; points : (n_nodes, 3) float64 out.
+    of the first crossing of each vertex's forward edges; cross_s : (n_e,)
+    float64 parameter of crossing node ``n_v + e`` (label maps; see
+    :mod:`._crossings`); affine : (3, 4) float64 index -> world;
+    points : (n_nodes, 3) float64 out.
     """
     for i in prange(nx):
         for j in range(ny):
@@ -327,7 +330,7 @@ def fill_points(lab, on, f, mask, used, vmap, eoff, nx, ny, nz, level, mode, aff
                             fa = f[g]
                             s = (level - fa) / (f[g + (dx * ny + dy) * nz + dz] - fa)
                         else:
-                            s = label_crossing(lab, g, code, ny, nz)
+                            s = cross_s[eoff[g] + r - n_v]
                         x = i + s * dx
                         y = j + s * dy
                         z = k + s * dz
@@ -338,7 +341,7 @@ def fill_points(lab, on, f, mask, used, vmap, eoff, nx, ny, nz, level, mode, aff
 
 
 @njit(cache=True, parallel=True)
-def fill_pieces(lab, on, f, mask, vmap, eoff, tet_off, centre_off, nx, ny, nz, level, mode, sgn,
+def fill_pieces(lab, on, f, mask, vmap, eoff, n_v, cross_s, tet_off, centre_off, nx, ny, nz, level, mode, sgn,
                 affine, tets, tet_labels, points):
     """Write the tets of every slab at ``tet_off[i]`` and its centre nodes at ``centre_off[i]``.
 
@@ -406,7 +409,8 @@ def fill_pieces(lab, on, f, mask, vmap, eoff, tet_off, centre_off, nx, ny, nz, l
                                 centre_id[t] = nc
                                 # default: the mean of its crossings (with the background
                                 # if it has some), moved where that cone makes a sliver
-                                place_centre(out, m, t, lab, g0, i, j, k, ny, nz, affine, cworld, cknown, cwork, points[nc])
+                                place_centre(out, m, t, lab, g0, i, j, k, ny, nz, mask, eoff, n_v, cross_s, affine,
+                                             cworld, cknown, cwork, points[nc])
                                 nc += 1
                             node = centre_id[t]
                         tets[nt, v] = node

@@ -18,6 +18,7 @@ import numpy as np
 
 from cutkit.errors import EmptySegmentationError, InputError
 from cutkit.isovolume import _kernels as K
+from cutkit.isovolume._crossings import label_crossing_params
 from cutkit.model.tetmodel import TetModel
 from cutkit.volumes.volume import Volume
 
@@ -177,8 +178,11 @@ def isovolume(volume: Volume, level: float = 0.5, labels=None, snap: float = SNA
     points = np.empty((n_v + n_e + n_c, 3), np.float64)
     tets = np.empty((n_tets, 4), np.int64)
     tet_labels = np.empty(n_tets, np.int32)
-    K.fill_points(lab, on, f, mask, used, vmap, eoff, nx, ny, nz, level, mode, affine, points)
-    K.fill_pieces(lab, on, f, mask, vmap, eoff, tet_off, centre_off, nx, ny, nz, level, mode, sgn,
+    cross_s = np.full(n_e if mode == K.MODE_LABELS else 0, 0.5)
+    if mode == K.MODE_LABELS:
+        label_crossing_params(lab, mask, eoff, n_v, nx, ny, nz, cross_s)
+    K.fill_points(lab, on, f, mask, used, vmap, eoff, n_v, cross_s, nx, ny, nz, level, mode, affine, points)
+    K.fill_pieces(lab, on, f, mask, vmap, eoff, n_v, cross_s, tet_off, centre_off, nx, ny, nz, level, mode, sgn,
                   affine, tets, tet_labels, points)
 
     stats = IsovolumeStats(

@@ -110,8 +110,12 @@ def render_picture(path, points: np.ndarray, tets: np.ndarray, rgb: np.ndarray |
         Camera distance from ``focal``, mm.
     """
     import pyvista as pv
+    import vtk
 
     pv.OFF_SCREEN = True
+    # Without a display VTK tries X first and logs a warning before it falls
+    # back to off-screen rendering; the picture is fine, so keep stderr quiet.
+    vtk.vtkLogger.SetStderrVerbosity(vtk.vtkLogger.VERBOSITY_ERROR)
     grid = pv.UnstructuredGrid({pv.CellType.TETRA: np.ascontiguousarray(tets, np.int64)},
                                np.ascontiguousarray(points, np.float64))
     if rgb is not None:
