@@ -1,6 +1,6 @@
 """Benchmark: the knee phantom at full resolution, isovolume then decimation to a tenth.
 
-The native 1 mm label map (``sample_volumes/knee_labels.nrrd``, no
+The native 1.5 mm label map (``sample_volumes/knee_labels.nrrd``, no
 resampling) goes through the six-tetrahedra isovolume and the progressive
 decimation; the script reports the tet counts, the decimation time, the
 smallest dihedral angle before and after, the boundary Hausdorff distance
