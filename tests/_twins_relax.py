@@ -128,3 +128,8 @@ def spring_csr_twin(springs, n):
     offsets = np.zeros(n + 1, np.int64)
     np.cumsum(np.bincount(src, minlength=n), out=offsets[1:])
     return offsets, dst[order], sid[order]
+
+
+def gather_spring_arrays_twin(springs, adj_springs, rest_length, stiffness, n):
+    """CSR-ordered rest lengths and stiffnesses, and per-node stiffness sums, by NumPy indexing."""
+    return rest_length[adj_springs], stiffness[adj_springs], np.bincount(springs.ravel(), np.repeat(stiffness, 2), minlength=n)

@@ -191,6 +191,22 @@ def test_spring_coefficients_and_halo_match_twins():
     assert c[0] == 0.0 and np.all(np.isfinite(c))
 
 
+def test_gather_spring_arrays_matches_twin():
+    from _twins_relax import gather_spring_arrays_twin
+
+    rng = np.random.default_rng(11)
+    springs = rng.integers(0, 40, (300, 2))
+    springs = springs[springs[:, 0] != springs[:, 1]]
+    rest, stiff = rng.uniform(0.5, 2.0, len(springs)), rng.uniform(1.0, 9.0, len(springs))
+    off, _, sid = K.spring_csr(springs[:, 0].copy(), springs[:, 1].copy(), 45)  # nodes 40..44 have no spring
+    ar, ak, nk = np.empty(sid.size), np.empty(sid.size), np.full(45, np.nan)
+    K.gather_spring_arrays(off, sid, rest, stiff, ar, ak, nk)
+    tr, tk, tn = gather_spring_arrays_twin(springs, sid, rest, stiff, 45)
+    assert np.array_equal(ar, tr) and np.array_equal(ak, tk)
+    np.testing.assert_allclose(nk, tn, rtol=1e-13, atol=0.0)  # summation order differs
+    assert np.all(nk[40:] == 0.0)
+
+
 def test_spring_csr_matches_twin_with_duplicates_and_isolated_nodes():
     rng = np.random.default_rng(3)
     springs = rng.integers(0, 40, size=(300, 2))

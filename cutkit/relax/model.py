@@ -125,9 +125,14 @@ class SpringModel:
 
     def refresh_spring_arrays(self) -> None:
         """Copy ``rest_length``/``stiffness`` into CSR order after editing them."""
-        self.adj_rest = np.ascontiguousarray(self.rest_length[self.adj_springs])
-        self.adj_stiffness = np.ascontiguousarray(self.stiffness[self.adj_springs])
-        self.node_stiffness = np.bincount(self.springs.ravel(), np.repeat(self.stiffness, 2), minlength=self.n_nodes)
+        from cutkit.relax._kernels import gather_spring_arrays
+
+        self.adj_rest = np.empty(self.adj_springs.shape[0])
+        self.adj_stiffness = np.empty(self.adj_springs.shape[0])
+        self.node_stiffness = np.empty(self.n_nodes)
+        gather_spring_arrays(self.adj_offsets, self.adj_springs, np.ascontiguousarray(self.rest_length, np.float64),
+                             np.ascontiguousarray(self.stiffness, np.float64), self.adj_rest, self.adj_stiffness,
+                             self.node_stiffness)
 
 
 @dataclass
