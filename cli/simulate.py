@@ -17,7 +17,12 @@ import click
 @click.option("--geometry-rate", "geometry_rate_hz", default=50.0, show_default=True, type=float,
               help="Cut and relaxation updates per simulated second.")
 @click.option("--blade-length", default=None, type=float, help="Blade length, mm (default: the trajectory's).")
-def command(model, trajectory, out_dir, fps, png, realtime, haptics, hold_s, geometry_rate_hz, blade_length):
+@click.option("--volume-stiffness", default=0.0, show_default=True, type=float,
+              help="Volume term: each tet resists a change of volume with bulk = this x E (0: springs only, "
+                   "as in the paper; 0.3 keeps almost every tet from inverting, at about four times the "
+                   "relaxation time).")
+def command(model, trajectory, out_dir, fps, png, realtime, haptics, hold_s, geometry_rate_hz, blade_length,
+            volume_stiffness):
     """Cut MODEL along TRAJECTORY with the scalpel force model and relax it; write frames and logs."""
     from cutkit.cli._ui import console
     from cutkit.cutting.trajectory import read_trajectory
@@ -25,7 +30,8 @@ def command(model, trajectory, out_dir, fps, png, realtime, haptics, hold_s, geo
     from cutkit.simulate import SimulateOptions
 
     opt = SimulateOptions(fps=fps, png=png, realtime=realtime, haptics=haptics, hold_s=hold_s,
-                          geometry_rate_hz=geometry_rate_hz, blade_length=blade_length)
+                          geometry_rate_hz=geometry_rate_hz, blade_length=blade_length,
+                          volume_stiffness=volume_stiffness)
     opt.check()
     tet_model = read_model(model)
     traj = read_trajectory(trajectory)

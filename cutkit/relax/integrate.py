@@ -22,6 +22,7 @@ import numpy as np
 
 from cutkit.errors import InputError
 from cutkit.relax import _kernels as K
+from cutkit.relax._volume_kernels import add_volume_forces
 from cutkit.relax.model import Control, SpringModel, SpringState
 
 METHODS = {
@@ -99,13 +100,25 @@ def advance_nodes(
     x, v, ts = state.positions, state.velocities, state.time_stamps
     p = np.empty((n, 3))
     K.predict_positions(halo, target_time, x, v, ts, mode == K.MODE_EXPLICIT, p)
+    vt = model.volume
+    f_node, k_node = f_ext, model.node_stiffness
+    if vt is not None:
+        # the advanced nodes' rows of these get the volume terms added (scratch kept by the term)
+        f_node, k_node = vt.scratch(n)
     args = (state.accel_window, state.n_updates, model.adj_offsets, model.adj_nodes, model.adj_springs,
-            model.adj_rest, model.adj_stiffness, model.node_stiffness, model.masses, model.damping, f_ext,
+            model.adj_rest, model.adj_stiffness, k_node, model.masses, model.damping, f_node,
             gravity, mode)
     if classes is not None:
         for cls in classes:
+            if vt is not None:
+                # Gauss-Seidel: this class sees the new positions of the classes before it
+                add_volume_forces(cls, p, vt.tets, vt.tet_offsets, vt.node_tets, vt.node_corner, vt.rest_volume,
+                                  vt.bulk, f_ext, model.node_stiffness, f_node, k_node)
             K.relax_nodes(cls, target_time, x, v, ts, p, x, v, ts, True, _NO_COEFFICIENTS, *args)
         return
+    if vt is not None:
+        add_volume_forces(nodes, p, vt.tets, vt.tet_offsets, vt.node_tets, vt.node_corner, vt.rest_volume,
+                          vt.bulk, f_ext, model.node_stiffness, f_node, k_node)
     if 4 * len(nodes) >= n:
         # a large share of the nodes: one square root per spring, not per spring end
         c = np.empty(model.n_springs)

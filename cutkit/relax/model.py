@@ -72,7 +72,11 @@ class SpringModel:
     spring_a, spring_b : (s,) int32
         ``springs[:, 0]`` and ``springs[:, 1]``, contiguous for the kernels.
     node_stiffness : (n,) float64
-        Sum of the stiffness of each node's springs, N/mm.
+        Sum of the stiffness of each node's springs, N/mm (the integrator adds
+        the volume term's at the current shape).
+    volume : VolumeTerm or None
+        Per-tet volume springs (:mod:`cutkit.relax.volume`); None: springs only,
+        as in the paper.
     """
 
     rest_positions: np.ndarray
@@ -92,6 +96,7 @@ class SpringModel:
     spring_a: np.ndarray = field(default=None)
     spring_b: np.ndarray = field(default=None)
     node_stiffness: np.ndarray = field(default=None)
+    volume: "VolumeTerm | None" = None
 
     def __post_init__(self):
         if self.adj_offsets is None:
@@ -219,6 +224,7 @@ def build_spring_model(
     *,
     calibration: float = STIFFNESS_CALIBRATION,
     prestress: bool = True,
+    volume_stiffness: float = 0.0,
 ) -> SpringModel:
     """Mass-spring model of a :class:`~cutkit.model.tetmodel.TetModel`.
 
@@ -237,6 +243,10 @@ def build_spring_model(
         The constant c above.
     prestress : bool
         Apply the model's prestress to the rest lengths.
+    volume_stiffness : float
+        > 0 adds the volume term (:mod:`cutkit.relax.volume`) with
+        ``bulk_t = volume_stiffness * E_t``; 0 (default) keeps the paper's
+        springs only.
 
     Returns
     -------
@@ -253,6 +263,8 @@ def build_spring_model(
         raise MeshError(f"tets index nodes outside 0..{n - 1}")
     if not calibration > 0:
         raise InputError(f"stiffness calibration must be > 0, got {calibration}")
+    if not (np.isfinite(volume_stiffness) and volume_stiffness >= 0):
+        raise InputError(f"volume_stiffness must be a finite number >= 0, got {volume_stiffness}")
     vol = _tet_volumes(points, tets)
     if np.any(vol <= 0):
         bad = int(np.flatnonzero(vol <= 0)[0])
@@ -311,6 +323,11 @@ def build_spring_model(
     fixed[fn] = True
     fixed[pn] = True
     presc[pn] = np.asarray(bc.prescribed_displacement, np.float64).reshape(-1, 3)
+    volume = None
+    if volume_stiffness > 0:
+        from cutkit.relax.volume import VolumeTerm
+
+        volume = VolumeTerm.build(points, tets, vol, volume_stiffness * E)
     return SpringModel(
         rest_positions=points.copy(),
         masses=masses,
@@ -320,6 +337,7 @@ def build_spring_model(
         damping=damping,
         fixed=fixed,
         prescribed_displacement=presc,
+        volume=volume,
     )
 
 

@@ -38,6 +38,9 @@ HAPTIC_DT = 1e-3
 #: The blade has left the tissue once the hand's tip is this far outside the
 #: entry face's plane, mm (a small margin so surface noise does not flicker).
 LEAVE_MARGIN_MM = 0.5
+#: Default volume stiffness (bulk modulus of the volume term over E): see
+#: docs/simulate.md for what it does to the demo's inverted tets and opening.
+VOLUME_STIFFNESS = 0.0
 
 
 @dataclass
@@ -70,6 +73,10 @@ class SimulateOptions:
         mm; default: the trajectory's.
     centre_nodes : bool
         Fig. 2c centre nodes in split faces.
+    volume_stiffness : float
+        Volume term (:mod:`cutkit.relax.volume`): each tet resists a change of
+        its volume with ``bulk = volume_stiffness * E``; 0 is the paper's
+        springs only.
     png : bool
         Pictures of selected frames under ``pictures/``.
     realtime : bool
@@ -92,6 +99,7 @@ class SimulateOptions:
     tolerance_fraction: float = 1e-3
     blade_length: float | None = None
     centre_nodes: bool = False
+    volume_stiffness: float = VOLUME_STIFFNESS
     png: bool = False
     realtime: bool = False
     haptics: str | None = None
@@ -113,6 +121,8 @@ class SimulateOptions:
             raise InputError(f"geometry-rate-hz must be at most the haptic rate {1.0 / HAPTIC_DT:.0f} Hz")
         if self.blade_length is not None and not (np.isfinite(self.blade_length) and self.blade_length > 0):
             raise InputError(f"blade-length must be a positive number, got {self.blade_length}")
+        if not (np.isfinite(self.volume_stiffness) and self.volume_stiffness >= 0):
+            raise InputError(f"volume-stiffness must be a number >= 0, got {self.volume_stiffness}")
         if not 1 <= int(self.n_lists) <= 12:
             raise InputError(f"n-lists must lie in 1..12, got {self.n_lists}")
         if self.haptics is not None:
@@ -181,7 +191,8 @@ def simulate(model, trajectory, out_dir, options: SimulateOptions | None = None,
     task_s = {"setup": 0.0, "settle": 0.0, "haptics": 0.0, "collision_and_cut": 0.0, "relaxation": 0.0,
               "output": 0.0}
     tis = Tissue(model, blade_length=blade_length, dt0=opt.dt0, n_lists=opt.n_lists,
-                 tolerance_fraction=opt.tolerance_fraction, centre_nodes=opt.centre_nodes)
+                 tolerance_fraction=opt.tolerance_fraction, centre_nodes=opt.centre_nodes,
+                 volume_stiffness=opt.volume_stiffness)
     cm, sm, st = tis.cm, tis.springs, tis.state
     n0, m0 = cm.n_orig_points, tis.n_orig_tets
     faces, face_tet = boundary_faces(cm.orig_tets)

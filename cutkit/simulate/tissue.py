@@ -41,6 +41,22 @@ def _rest_volumes(X: np.ndarray, tets: np.ndarray) -> np.ndarray:
     return np.einsum("ij,ij->i", np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), p[:, 3] - p[:, 0]) / 6.0
 
 
+#: Tets whose normalised volume 6 sqrt(2) V / l_rms^3 (1 for a regular tet)
+#: is below this get no volume term (see Tissue._rebuild_volume_term).
+VOLUME_TERM_MIN_QUALITY = 0.1
+
+
+def _shape_quality(X: np.ndarray, tets: np.ndarray, V: np.ndarray) -> np.ndarray:
+    """6 sqrt(2) V / l_rms^3 of each tet (1 for a regular tet, 0 for a flat one): (m,) float64."""
+    p = X[tets]
+    l2 = np.zeros(tets.shape[0])
+    for a, b in TET_EDGES:
+        d = p[:, b] - p[:, a]
+        l2 += np.einsum("ij,ij->i", d, d)
+    l_rms = np.sqrt(l2 / 6.0)
+    return 6.0 * np.sqrt(2.0) * V / np.maximum(l_rms, 1e-300) ** 3
+
+
 class Tissue:
     """Cut mesh + mass-spring model + node lists of one tissue model.
 
@@ -70,11 +86,12 @@ class Tissue:
     """
 
     def __init__(self, model, *, blade_length: float, dt0: float, n_lists: int, tolerance_fraction: float,
-                 centre_nodes: bool = False, calibration: float = STIFFNESS_CALIBRATION):
+                 centre_nodes: bool = False, calibration: float = STIFFNESS_CALIBRATION, volume_stiffness: float = 0.0):
         self.model = model
         self.calibration = float(calibration)
+        self.volume_stiffness = float(volume_stiffness)
         self.cm = cm = CutMesh.from_model(model, blade_length=blade_length, centre_nodes=centre_nodes)
-        self.springs = sm = build_spring_model(model, calibration=calibration)
+        self.springs = sm = build_spring_model(model, calibration=calibration, volume_stiffness=volume_stiffness)
         self.state = initial_state(sm)
         tolerance = tolerance_fraction * float(np.mean(sm.rest_length))
         self.lists = NodeLists(sm, self.state, dt0, n_lists, displacement_tolerance=tolerance)
@@ -295,6 +312,8 @@ class Tissue:
             sm.prescribed_displacement[changed] = np.where(
                 fixed[changed, None], st.positions[changed] - sm.rest_positions[changed], 0.0)
 
+        if sm.volume is not None:
+            self._rebuild_volume_term()
         sm.rebuild_adjacency(recolour=False)
         if sm.colour.shape[0] < sm.n_nodes:
             sm.colour = np.concatenate([sm.colour, np.full(sm.n_nodes - sm.colour.shape[0], -1, np.int32)])
@@ -302,6 +321,22 @@ class Tissue:
             _recolour(sm, np.unique(new_pairs))
         self.lists.topology_changed()
         return {"nodes_added": int(new.size), "springs_added": len(new_pairs), "springs_removed": n_dead}
+
+    def _rebuild_volume_term(self) -> None:
+        """The volume term over the live tets: rest volumes from the per-tet records (the cut is made at rest)."""
+        from cutkit.relax.volume import VolumeTerm
+
+        cm = self.cm
+        ids = np.flatnonzero(cm._alive[:cm.n_tets_total])
+        # Flat sub-tets of a cut are left out: their volume stiffness
+        # (bulk |dV/dx|^2 / V0) dwarfs their springs' and the semi-implicit
+        # step, which treats it per node, overshoots on them.
+        sub = ids[ids >= self.n_orig_tets]
+        flat = sub[(self.rec_V[sub] <= 0.0) | (_shape_quality(cm._X, cm._tets[sub], self.rec_V[sub]) < VOLUME_TERM_MIN_QUALITY)]
+        ids = np.setdiff1d(ids, flat, assume_unique=True)
+        V0 = self.rec_V[ids]
+        self.springs.volume = VolumeTerm.build(self.springs.rest_positions, cm._tets[ids], V0,
+                                               self.volume_stiffness * self.E[cm._tet_orig[ids]])
 
     def _append_nodes(self, new: np.ndarray) -> None:
         cm, sm, st = self.cm, self.springs, self.state
