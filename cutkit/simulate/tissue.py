@@ -44,6 +44,9 @@ def _rest_volumes(X: np.ndarray, tets: np.ndarray) -> np.ndarray:
 #: Tets whose normalised volume 6 sqrt(2) V / l_rms^3 (1 for a regular tet)
 #: is below this get no volume term (see Tissue._rebuild_volume_term).
 VOLUME_TERM_MIN_QUALITY = 0.1
+#: Sub-tets smaller than this fraction of their original tet get no volume
+#: term either: their nodes carry almost no mass.
+VOLUME_TERM_MIN_FRACTION = 0.05
 
 
 def _shape_quality(X: np.ndarray, tets: np.ndarray, V: np.ndarray) -> np.ndarray:
@@ -332,7 +335,9 @@ class Tissue:
         # (bulk |dV/dx|^2 / V0) dwarfs their springs' and the semi-implicit
         # step, which treats it per node, overshoots on them.
         sub = ids[ids >= self.n_orig_tets]
-        flat = sub[(self.rec_V[sub] <= 0.0) | (_shape_quality(cm._X, cm._tets[sub], self.rec_V[sub]) < VOLUME_TERM_MIN_QUALITY)]
+        small = self.rec_V[sub] < VOLUME_TERM_MIN_FRACTION * self.rec_V[cm._tet_orig[sub]]
+        flat = sub[small | (self.rec_V[sub] <= 0.0)
+                   | (_shape_quality(cm._X, cm._tets[sub], self.rec_V[sub]) < VOLUME_TERM_MIN_QUALITY)]
         ids = np.setdiff1d(ids, flat, assume_unique=True)
         V0 = self.rec_V[ids]
         self.springs.volume = VolumeTerm.build(self.springs.rest_positions, cm._tets[ids], V0,
