@@ -13,40 +13,34 @@ from numba import njit, prange
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _grad(p, a, b, c, d, corner):
-    """dV/dx of ``corner`` (0..3) of tet (a, b, c, d), V = det[b - a, c - a, d - a] / 6, as a 3-tuple."""
-    # The gradient of corner i is (1/6) times the cross product of two edges
-    # of the opposite face, ordered so that it points towards corner i for a
-    # positive tet.
+def _grad_volume(p, a, b, c, d, corner):
+    """dV/dx of ``corner`` (0..3) of tet (a, b, c, d) and V itself, as a 4-tuple.
+
+    V = det[b - a, c - a, d - a] / 6.  The gradient of corner i is (1/6)
+    times the cross product of two edges of the opposite face, ordered so
+    that it points towards corner i for a positive tet; V is linear in the
+    corner's position and vanishes on that face, so V = grad . (x_i - x_f)
+    for a face node f: one dot product instead of a determinant.
+    """
     if corner == 0:
-        i, j, k = b, d, c
+        x, i, j, k = a, b, d, c
     elif corner == 1:
-        i, j, k = a, c, d
+        x, i, j, k = b, a, c, d
     elif corner == 2:
-        i, j, k = a, d, b
+        x, i, j, k = c, a, d, b
     else:
-        i, j, k = a, b, c
+        x, i, j, k = d, a, b, c
     e0 = p[j, 0] - p[i, 0]
     e1 = p[j, 1] - p[i, 1]
     e2 = p[j, 2] - p[i, 2]
-    g0 = p[k, 0] - p[i, 0]
-    g1 = p[k, 1] - p[i, 1]
-    g2 = p[k, 2] - p[i, 2]
-    return (e1 * g2 - e2 * g1) / 6.0, (e2 * g0 - e0 * g2) / 6.0, (e0 * g1 - e1 * g0) / 6.0
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _volume(p, a, b, c, d):
-    x0 = p[b, 0] - p[a, 0]
-    x1 = p[b, 1] - p[a, 1]
-    x2 = p[b, 2] - p[a, 2]
-    y0 = p[c, 0] - p[a, 0]
-    y1 = p[c, 1] - p[a, 1]
-    y2 = p[c, 2] - p[a, 2]
-    z0 = p[d, 0] - p[a, 0]
-    z1 = p[d, 1] - p[a, 1]
-    z2 = p[d, 2] - p[a, 2]
-    return (x0 * (y1 * z2 - y2 * z1) - x1 * (y0 * z2 - y2 * z0) + x2 * (y0 * z1 - y1 * z0)) / 6.0
+    h0 = p[k, 0] - p[i, 0]
+    h1 = p[k, 1] - p[i, 1]
+    h2 = p[k, 2] - p[i, 2]
+    g0 = (e1 * h2 - e2 * h1) / 6.0
+    g1 = (e2 * h0 - e0 * h2) / 6.0
+    g2 = (e0 * h1 - e1 * h0) / 6.0
+    vol = g0 * (p[x, 0] - p[i, 0]) + g1 * (p[x, 1] - p[i, 1]) + g2 * (p[x, 2] - p[i, 2])
+    return g0, g1, g2, vol
 
 
 @njit(cache=True, parallel=True, nogil=True)
@@ -72,13 +66,9 @@ def add_volume_forces(nodes, p, tets, tet_offsets, node_tets, node_corner, rest_
         kk = 0.0
         for r in range(tet_offsets[k], tet_offsets[k + 1]):
             t = node_tets[r]
-            a = tets[t, 0]
-            b = tets[t, 1]
-            c = tets[t, 2]
-            d = tets[t, 3]
             v0 = rest_volume[t]
-            s = -bulk[t] * (_volume(p, a, b, c, d) - v0) / v0
-            g0, g1, g2 = _grad(p, a, b, c, d, node_corner[r])
+            g0, g1, g2, vol = _grad_volume(p, tets[t, 0], tets[t, 1], tets[t, 2], tets[t, 3], node_corner[r])
+            s = -bulk[t] * (vol - v0) / v0
             f0 += s * g0
             f1 += s * g1
             f2 += s * g2
