@@ -22,15 +22,11 @@ import numpy as np
 from cutkit.decimate import decimate, quality_summary
 from cutkit.isovolume import isovolume
 from cutkit.mesh.check import check_mesh
+from cutkit.mesh.quality import signed_volumes
 from cutkit.model.tetmodel import TetModel
 from cutkit.volumes import read_volume
 
 KNEE = Path(__file__).resolve().parent.parent / "sample_volumes" / "knee_labels.nrrd"
-
-
-def _volumes(points, tets):
-    p = points[tets]
-    return np.einsum("ij,ij->i", np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), p[:, 3] - p[:, 0]) / 6.0
 
 
 def _surface(points, tets):
@@ -76,7 +72,7 @@ def main() -> None:
 
     q_in = quality_summary(fine.points, fine.tets)
     q_out = quality_summary(coarse.points, coarse.tets)
-    v_in, v_out = _volumes(fine.points, fine.tets), _volumes(coarse.points, coarse.tets)
+    v_in, v_out = signed_volumes(fine.points, fine.tets), signed_volumes(coarse.points, coarse.tets)
     volume_change = {}
     for lab in np.unique(fine.labels):
         a, b = v_in[fine.labels == lab].sum(), v_out[coarse.labels == lab].sum()

@@ -31,7 +31,7 @@ def test_kernel_matches_twin():
     f_in, k_in = rng.normal(size=x.shape), rng.uniform(size=len(x))
     f, k = np.full_like(x, np.nan), np.full(len(x), np.nan)
     nodes = np.arange(len(x))[::2]  # only these rows are written
-    add_volume_forces(nodes, x, vt.tets, vt.tet_offsets, vt.node_tets, vt.node_corner, V0, bulk, f_in, k_in, f, k)
+    add_volume_forces(nodes, x, vt.tets, vt.tet_offsets, vt.node_tets, V0, bulk, f_in, k_in, f, k)
     tf, tk = volume_forces_twin(x, tets, V0, bulk)
     np.testing.assert_allclose(f[nodes], f_in[nodes] + tf[nodes], rtol=1e-12, atol=1e-14)
     np.testing.assert_allclose(k[nodes], k_in[nodes] + tk[nodes], rtol=1e-12)
@@ -48,7 +48,7 @@ def test_forces_are_minus_the_energy_gradient():
         return float(np.sum(bulk * (_volumes(y, tets) - V0) ** 2 / (2 * V0)))
 
     f = np.zeros_like(x)
-    add_volume_forces(np.arange(len(x)), x, vt.tets, vt.tet_offsets, vt.node_tets, vt.node_corner, V0, bulk,
+    add_volume_forces(np.arange(len(x)), x, vt.tets, vt.tet_offsets, vt.node_tets, V0, bulk,
                       np.zeros_like(x), np.zeros(len(x)), f, np.zeros(len(x)))
     h = 1e-6
     for node in (0, 7, 20):

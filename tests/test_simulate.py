@@ -141,16 +141,20 @@ def test_trajectory_that_never_touches_warns(tmp_path, capsys):
 @pytest.mark.parametrize("what, content, message", [
     ("trajectory", "t,x,y,z,ax,ay,az,nx,ny,nz\n0,0,0,0,0,1,0,1,0,0\n0,0,0,1,0,1,0,1,0,0\n", "cut.csv:3: t = 0 does not increase"),
     ("model", b"not an hdf5 file", "model"),
+    ("option", ["--volume-stiffness", "-1"], "volume-stiffness must be a number >= 0, got -1.0"),
 ])
 def test_bad_input_is_one_line_error(tmp_path, capsys, what, content, message):
     write_model(tmp_path / "slab.h5", slab())
     write_trajectory(tmp_path / "cut.csv", straight_incision([6.0, 0.0, 8.0], [26.0, 0.0, 8.0], inward=[0, 1, 0]))
+    extra = []
     if what == "trajectory":
         (tmp_path / "cut.csv").write_text(content)
-    else:
+    elif what == "model":
         (tmp_path / "slab.h5").write_bytes(content)
+    else:
+        extra = content
     code = main(["simulate", str(tmp_path / "slab.h5"), "--trajectory", str(tmp_path / "cut.csv"),
-                 "-o", str(tmp_path / "out")])
+                 "-o", str(tmp_path / "out"), *extra])
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2
     assert len(err) == 1 and err[0].startswith("cutkit: error:") and message in err[0]

@@ -62,11 +62,10 @@ def _to_world(affine, p, out):
 
 
 @njit(cache=True, nogil=True)
-def _crossing_mean(lab, g0, t, i, j, k, ny, nz, mask, eoff, n_v, cross_s, background_only, out):
-    """Index-space mean of Kuhn tet ``t``'s crossings (with the background only, if asked).
+def _background_crossing_mean(lab, g0, t, i, j, k, ny, nz, mask, eoff, n_v, cross_s, out):
+    """Index-space mean of Kuhn tet ``t``'s crossings with the background.
 
-    Either set has a crossing on an edge of every corner, so the mean is
-    strictly inside the tet.
+    There is one on an edge of every corner, so the mean is strictly inside the tet.
     """
     p = np.empty(3)
     out[:] = 0.0
@@ -78,7 +77,7 @@ def _crossing_mean(lab, g0, t, i, j, k, ny, nz, mask, eoff, n_v, cross_s, backgr
         lb = lab[_grid_id(g0, cb, ny, nz)]
         if la == lb:
             continue
-        if background_only and la != 0 and lb != 0:
+        if la != 0 and lb != 0:
             continue
         sc = cross_s[crossing_node(_grid_id(g0, ca, ny, nz), (ca ^ cb) - 1, mask, eoff) - n_v]
         p[0] = i + ((ca >> 2) & 1) + sc * (((cb >> 2) & 1) - ((ca >> 2) & 1))
@@ -143,7 +142,7 @@ def place_centre(rows, m, t, lab, g0, i, j, k, ny, nz, mask, eoff, n_v, cross_s,
         # A centre on the outer surface stays at the mean of the background
         # crossings: moving it would move the boundary away from the
         # segmentation (docs/isovolume.md, the half-voxel bound).
-        _crossing_mean(lab, g0, t, i, j, k, ny, nz, mask, eoff, n_v, cross_s, True, c0)
+        _background_crossing_mean(lab, g0, t, i, j, k, ny, nz, mask, eoff, n_v, cross_s, c0)
         _to_world(affine, c0, out)
         return
     centre_ref = REF_CENTRE + t

@@ -44,7 +44,7 @@ def _grad_volume(p, a, b, c, d, corner):
 
 
 @njit(cache=True, parallel=True, nogil=True)
-def add_volume_forces(nodes, p, tets, tet_offsets, node_tets, node_corner, rest_volume, bulk, f_in, k_in, f_out, k_out):
+def add_volume_forces(nodes, p, tets, tet_offsets, node_tets, rest_volume, bulk, f_in, k_in, f_out, k_out):
     """Volume forces and stiffnesses of each node of ``nodes`` at positions ``p``, added to given ones.
 
     ``f_out[k] = f_in[k] + sum over k's tets of -bulk (V - V0) / V0 dV/dx_k``
@@ -54,8 +54,8 @@ def add_volume_forces(nodes, p, tets, tet_offsets, node_tets, node_corner, rest_
     semi-implicit step of eq. (6) adds to the node's spring stiffness sum.
 
     p : (n, 3) float64 positions (the eq. (7) predictions); tets : (m, 4)
-    int64; tet_offsets : (n + 1,) int64, node_tets, node_corner : (4 m,)
-    int64 (tet and corner of each incidence); rest_volume : (m,) mm^3;
+    int64; tet_offsets : (n + 1,) int64, node_tets : (4 m,) int64 (the
+    node -> tet CSR of :func:`cutkit.mesh.topology.node_to_tets`); rest_volume : (m,) mm^3;
     bulk : (m,) N/mm^2; f_in, f_out : (n, 3) float64; k_in, k_out : (n,) float64.
     """
     for ii in prange(nodes.shape[0]):
@@ -67,7 +67,10 @@ def add_volume_forces(nodes, p, tets, tet_offsets, node_tets, node_corner, rest_
         for r in range(tet_offsets[k], tet_offsets[k + 1]):
             t = node_tets[r]
             v0 = rest_volume[t]
-            g0, g1, g2, vol = _grad_volume(p, tets[t, 0], tets[t, 1], tets[t, 2], tets[t, 3], node_corner[r])
+            corner = 0
+            while tets[t, corner] != k:
+                corner += 1
+            g0, g1, g2, vol = _grad_volume(p, tets[t, 0], tets[t, 1], tets[t, 2], tets[t, 3], corner)
             s = -bulk[t] * (vol - v0) / v0
             f0 += s * g0
             f1 += s * g1
@@ -77,29 +80,3 @@ def add_volume_forces(nodes, p, tets, tet_offsets, node_tets, node_corner, rest_
         f_out[k, 1] = f_in[k, 1] + f1
         f_out[k, 2] = f_in[k, 2] + f2
         k_out[k] = k_in[k] + kk
-
-
-@njit(cache=True, nogil=True)
-def tet_incidence(tets, n_nodes):
-    """Node -> tet CSR by counting sort: ``(offsets (n + 1,), node_tets (4 m,), node_corner (4 m,))``, int64.
-
-    The tets of node k, ascending, are ``node_tets[offsets[k]:offsets[k + 1]]``
-    and ``node_corner`` says which corner of each tet k is.
-    """
-    m = tets.shape[0]
-    offsets = np.zeros(n_nodes + 1, np.int64)
-    for t in range(m):
-        for c in range(4):
-            offsets[tets[t, c] + 1] += 1
-    for k in range(n_nodes):
-        offsets[k + 1] += offsets[k]
-    fill = offsets[:-1].copy()
-    node_tets = np.empty(4 * m, np.int64)
-    node_corner = np.empty(4 * m, np.int64)
-    for t in range(m):
-        for c in range(4):
-            k = tets[t, c]
-            node_tets[fill[k]] = t
-            node_corner[fill[k]] = c
-            fill[k] += 1
-    return offsets, node_tets, node_corner

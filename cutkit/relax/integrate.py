@@ -112,12 +112,12 @@ def advance_nodes(
         for cls in classes:
             if vt is not None:
                 # Gauss-Seidel: this class sees the new positions of the classes before it
-                add_volume_forces(cls, p, vt.tets, vt.tet_offsets, vt.node_tets, vt.node_corner, vt.rest_volume,
+                add_volume_forces(cls, p, vt.tets, vt.tet_offsets, vt.node_tets, vt.rest_volume,
                                   vt.bulk, f_ext, model.node_stiffness, f_node, k_node)
             K.relax_nodes(cls, target_time, x, v, ts, p, x, v, ts, True, _NO_COEFFICIENTS, *args)
         return
     if vt is not None:
-        add_volume_forces(nodes, p, vt.tets, vt.tet_offsets, vt.node_tets, vt.node_corner, vt.rest_volume,
+        add_volume_forces(nodes, p, vt.tets, vt.tet_offsets, vt.node_tets, vt.rest_volume,
                           vt.bulk, f_ext, model.node_stiffness, f_node, k_node)
     if 4 * len(nodes) >= n:
         # a large share of the nodes: one square root per spring, not per spring end

@@ -36,8 +36,8 @@ class VolumeTerm:
         V0, mm^3 (positive).
     bulk : (m,) float64
         Volume stiffness, N/mm^2 (MPa).
-    tet_offsets, node_tets, node_corner
-        Node -> tet CSR: ``(n + 1,)``, ``(4 m,)``, ``(4 m,)`` int64.
+    tet_offsets, node_tets
+        Node -> tet CSR (:func:`cutkit.mesh.topology.node_to_tets`): ``(n + 1,)``, ``(4 m,)`` int64.
     """
 
     tets: np.ndarray
@@ -45,7 +45,6 @@ class VolumeTerm:
     bulk: np.ndarray
     tet_offsets: np.ndarray
     node_tets: np.ndarray
-    node_corner: np.ndarray
     _f_scratch: np.ndarray | None = None
     _k_scratch: np.ndarray | None = None
 
@@ -67,7 +66,7 @@ class VolumeTerm:
         rest_volume : (m,) float64, > 0
         bulk : (m,) float64, >= 0
         """
-        from cutkit.relax._volume_kernels import tet_incidence
+        from cutkit.mesh.topology import node_to_tets
 
         x = np.ascontiguousarray(rest_positions, np.float64)
         tets = np.ascontiguousarray(tets, np.int64)
@@ -81,5 +80,5 @@ class VolumeTerm:
             raise InputError(f"volume term: tets index nodes outside 0..{x.shape[0] - 1}")
         if np.any(rest_volume <= 0) or np.any(bulk < 0) or not np.all(np.isfinite(bulk)):
             raise InputError("volume term: rest volumes must be > 0 and bulk moduli finite and >= 0")
-        offsets, node_tets, corner = tet_incidence(tets, x.shape[0])
-        return cls(tets, rest_volume, bulk, offsets, node_tets, corner)
+        offsets, node_tets = node_to_tets(tets, x.shape[0])
+        return cls(tets, rest_volume, bulk, offsets, node_tets)
