@@ -20,11 +20,14 @@ def command(volume, output, recipe_path, threshold, channel, labels_path, voxel_
     """Build a cuttable model from VOLUME (or the recipe's volume)."""
     import numpy as np
 
+    from cutkit.io.atomic import check_writable
     from cutkit.build import STAGES, run_build
     from cutkit.cli._ui import console, parse_vec3, progress, stage_reporter, table
     from cutkit.errors import InputError
     from cutkit.io.model_h5 import write_model
     from cutkit.recipe import load_recipe, validate_recipe
+
+    check_writable(output)
 
     recipe = load_recipe(recipe_path) if recipe_path else {"_path": None, "_sha256": None}
     seg = dict(recipe.get("segment", {}))

@@ -16,6 +16,7 @@ def command(model, trajectory, out_dir, blade_length, centre_nodes):
 
     import numpy as np
 
+    from cutkit.io.atomic import check_writable
     from cutkit.cli._ui import console, progress
     from cutkit.cutting import CutMesh, cut_step, to_model
     from cutkit.cutting.trajectory import read_trajectory
@@ -26,6 +27,7 @@ def command(model, trajectory, out_dir, blade_length, centre_nodes):
 
     if blade_length is not None and not (np.isfinite(blade_length) and blade_length > 0):
         raise InputError(f"--blade-length must be a positive number, got {blade_length}")
+    check_writable(out_dir, folder=True)
     tet_model = read_model(model)
     kw = {} if blade_length is None else {"blade_length": blade_length}
     traj = read_trajectory(trajectory, **kw)

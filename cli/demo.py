@@ -12,11 +12,13 @@ def command(out_dir, fps, no_png):
     """Build pipelines/knee.toml (reused when unchanged), cut sample_volumes/incision.csv, take pictures."""
     import time
 
+    from cutkit.io.atomic import check_writable
     from cutkit.simulate.demo import demo_inputs
     from cutkit.simulate.warmup import start_background
 
     t0 = time.perf_counter()
     _, trajectory = demo_inputs()
+    check_writable(out_dir, folder=True)
     # a second process compiles the decimation and simulation kernels while this one builds
     warm = start_background()
     try:

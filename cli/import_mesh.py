@@ -11,10 +11,12 @@ import click
 def command(mesh: str, output: str) -> None:
     import numpy as np
 
+    from cutkit.io.atomic import check_writable
     from cutkit.cli._ui import console
     from cutkit.io.meshes import import_mesh
     from cutkit.io.model_h5 import write_model
 
+    check_writable(output)
     model = import_mesh(mesh)
     write_model(output, model)
     info = model.provenance.get("import", {})

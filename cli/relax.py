@@ -19,6 +19,7 @@ def command(model, seconds, out_dir, fps, gravity, dt0, n_lists):
     """Relax MODEL for SECONDS of simulated time and write a .vtu series."""
     import numpy as np
 
+    from cutkit.io.atomic import check_writable
     from cutkit.cli._ui import console, parse_vec3, progress
     from cutkit.errors import InputError
     from cutkit.io.model_h5 import read_model
@@ -29,6 +30,7 @@ def command(model, seconds, out_dir, fps, gravity, dt0, n_lists):
             raise InputError(f"{flag} must be a positive number, got {value}")
     if not 1 <= n_lists <= 30:
         raise InputError(f"--lists must lie in 1..30, got {n_lists}")
+    check_writable(out_dir, folder=True)
     g = np.asarray(parse_vec3(gravity, "--gravity"), np.float64) * 1000.0  # m/s^2 -> mm/s^2
     tet_model = read_model(model)
     with progress() as bar:

@@ -55,10 +55,12 @@ def command(volume_path, output, threshold, channel, otsu, labels_path, smooth, 
     import numpy as np
 
     from cutkit.cli._ui import console, parse_vec3, table
+    from cutkit.io.atomic import check_writable
     from cutkit.segment import segment
     from cutkit.volumes import read_volume, write_volume
 
     rng = _parse_threshold(threshold)
+    check_writable(output)
     volume = read_volume(volume_path, spacing=parse_vec3(spacing, "--spacing"))
     labels = read_volume(labels_path) if labels_path else None
     if rng is None and not otsu and labels is None and channel is None and _looks_like_labels(volume):

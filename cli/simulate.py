@@ -24,6 +24,7 @@ import click
 def command(model, trajectory, out_dir, fps, png, realtime, haptics, hold_s, geometry_rate_hz, blade_length,
             volume_stiffness):
     """Cut MODEL along TRAJECTORY with the scalpel force model and relax it; write frames and logs."""
+    from cutkit.io.atomic import check_writable
     from cutkit.cli._ui import console
     from cutkit.cutting.trajectory import read_trajectory
     from cutkit.io.model_h5 import read_model
@@ -33,6 +34,7 @@ def command(model, trajectory, out_dir, fps, png, realtime, haptics, hold_s, geo
                           geometry_rate_hz=geometry_rate_hz, blade_length=blade_length,
                           volume_stiffness=volume_stiffness)
     opt.check()
+    check_writable(out_dir, folder=True)
     tet_model = read_model(model)
     traj = read_trajectory(trajectory)
     summary = run_with_progress(tet_model, traj, out_dir, opt, model_path=str(model))

@@ -12,11 +12,13 @@ import click
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="Output model file.")
 def command(model, volume_path, seg_path, method, max_voxels, output):
     """Give every node of MODEL coordinates into a 3D texture (paper section 7.2)."""
+    from cutkit.io.atomic import check_writable
     from cutkit.cli._ui import console
     from cutkit.io.model_h5 import read_model, write_model
     from cutkit.texture import register_texture
     from cutkit.volumes import read_volume
 
+    check_writable(output)
     if seg_path is None and method != "none":
         method_note = f"--register {method} needs --segmentation; registering with 'none'"
         console.print(f"[yellow]warning:[/] {method_note}")
