@@ -16,7 +16,6 @@ def command(model, trajectory, out_dir, blade_length, centre_nodes):
 
     import numpy as np
 
-    from cutkit.io.atomic import check_writable
     from cutkit.cli._ui import console, progress
     from cutkit.cutting import CutMesh, cut_step, to_model
     from cutkit.cutting.trajectory import read_trajectory
@@ -27,7 +26,6 @@ def command(model, trajectory, out_dir, blade_length, centre_nodes):
 
     if blade_length is not None and not (np.isfinite(blade_length) and blade_length > 0):
         raise InputError(f"--blade-length must be a positive number, got {blade_length}")
-    check_writable(out_dir, folder=True)
     tet_model = read_model(model)
     kw = {} if blade_length is None else {"blade_length": blade_length}
     traj = read_trajectory(trajectory, **kw)
@@ -35,27 +33,26 @@ def command(model, trajectory, out_dir, blade_length, centre_nodes):
     os.makedirs(out_dir, exist_ok=True)
 
     def frame_data():
-        m = to_model(cm, tet_model)
         tnode = np.zeros(cm.n_points, np.uint8)
         tnode[cm.tet_T[cm.tet_T >= 0]] = 1
-        pd = {"new_node": m.point_data["new_node"], "cut_surface_node": tnode}
+        m = to_model(cm, tet_model, point_data={"cut_surface_node": tnode})  # no orphan node
+        pd = {"new_node": m.point_data["new_node"], "cut_surface_node": m.point_data["cut_surface_node"]}
         if tet_model.texture is not None and m.texcoords is not None:
             pd["texture_rgb"] = np.asarray(tet_model.texture.sample_rgb(m.texcoords))
         return m, pd, {"new_tet": m.cell_data["new_tet"]}
 
-    worst = 180.0
     with SeriesWriter(out_dir, "cut") as series, progress() as bar:
         task = bar.add_task("cutting", total=len(traj.t))
         for i in range(len(traj.t)):
-            res = cut_step(cm, traj.tip[i], traj.a[i])
-            if len(res.added_tets):
-                new = cm._tets[res.added_tets]
-                worst = min(worst, float(min_dihedral_angles(cm.points, new).min()))
+            cut_step(cm, traj.tip[i], traj.a[i])
             m, pd, cd = frame_data()
             series.write(float(traj.t[i]), m.points, m.tets, point_data=pd, cell_data=cd)
             bar.update(task, advance=1)
     m, _, _ = frame_data()
     write_model(os.path.join(out_dir, "model.h5"), m)
+    # the worst angle of the written mesh: cut nodes move after their tets are made
+    new = m.tets[m.cell_data["new_tet"] == 1]
+    worst = float(min_dihedral_angles(m.points, new).min()) if len(new) else 180.0
     console.print(f"{len(traj.t)} poses, {len(cm.subtets)} tets cut into "
                   f"{sum(len(v) for v in cm.subtets.values())}, worst new dihedral {worst:.1f} deg "
                   f"-> {out_dir}/cut.pvd, {out_dir}/model.h5")

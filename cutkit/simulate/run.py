@@ -169,7 +169,7 @@ def simulate(model, trajectory, out_dir, options: SimulateOptions | None = None,
         What ``summary.json`` holds.
     """
     from cutkit.collision import SurfaceBVH
-    from cutkit.cutting import cut_step, cut_surface_faces
+    from cutkit.cutting import compact_nodes, cut_step, cut_surface_faces
     from cutkit.io.model_h5 import write_model
     from cutkit.io.series import SeriesWriter
     from cutkit.mesh.topology import boundary_faces
@@ -258,7 +258,9 @@ def simulate(model, trajectory, out_dir, options: SimulateOptions | None = None,
         if rgb is not None:
             pd["texture_rgb"] = rgb
         cd = {"label": cm.labels[cm._tet_orig[ids]].astype(np.int32), "new_tet": (ids >= m0).astype(np.uint8)}
-        series.write(t, st.positions, tets, point_data=pd, cell_data=cd)
+        kept, new_index = compact_nodes(tets, n)  # no orphan node in a frame
+        series.write(t, st.positions[kept], new_index[tets], point_data={k: v[kept] for k, v in pd.items()},
+                     cell_data=cd)
         surf_faces = cut_surface_faces(cm)
         spd = {"displacement": pd["displacement"]}
         if rgb is not None:
@@ -431,31 +433,22 @@ def cut_model(tis, model, summary: dict | None = None):
     follow from it), so ``points`` are the rest positions of the cut mesh,
     where every tetrahedron is positively oriented; ``point_data
     ["displacement"]`` (mm) holds the relaxed deformation (ParaView: Warp By
-    Vector).  Cut nodes no tetrahedron uses any more are dropped.
+    Vector).  Nodes no tetrahedron uses are dropped (``to_model`` compacts
+    the numbering and carries the boundary conditions over to it).
     """
     import dataclasses
 
     from cutkit.cutting import to_model
 
     cm, st, sm = tis.cm, tis.state, tis.springs
-    m = to_model(cm, model)
-    n = cm.n_points
-    keep = np.zeros(n, bool)
-    keep[m.tets.ravel()] = True
-    keep[:cm.n_orig_points] = True  # original nodes keep their numbers (boundary conditions name them)
-    new_index = np.cumsum(keep) - 1
-    pd = {k: np.asarray(v)[keep] for k, v in m.point_data.items()}
-    pd["displacement"] = (st.positions - sm.rest_positions)[keep]
+    m = to_model(cm, model, points=cm.points, point_data={"displacement": st.positions - sm.rest_positions})
     provenance = dict(m.provenance)
     stages = dict(provenance.get("stages", {}))
     if summary is not None:
         stages["simulate"] = {"options": summary.get("options"), "cut_tets": summary.get("cut_tets"),
                               "simulated_s": summary.get("simulated_s")}
     provenance["stages"] = stages
-    return dataclasses.replace(
-        m, points=cm.points[keep].copy(), tets=new_index[m.tets],
-        texcoords=None if m.texcoords is None else np.asarray(m.texcoords)[keep],
-        point_data=pd, provenance=provenance)
+    return dataclasses.replace(m, provenance=provenance)
 
 
 def _summary(locals_: dict) -> dict:
