@@ -29,7 +29,7 @@ class _TableGroup(click.Group):
         if entry is None or not _module_exists(entry[0]):
             return None
         module = importlib.import_module(entry[0])
-        return module.command
+        return _with_threads_option(module.command)
 
     def format_commands(self, ctx, formatter):
         # Help text comes from the table so that --help imports no command module.
@@ -48,6 +48,26 @@ class _TableGroup(click.Group):
         except KeyboardInterrupt:
             click.echo("cutkit: interrupted", err=True)
             ctx.exit(130)
+
+
+def _set_threads(ctx, param, value):
+    """Configure numba's threads before the command runs (``--threads`` or ``CUTKIT_THREADS``)."""
+    if not ctx.resilient_parsing:
+        from cutkit.threads import configure_threads
+
+        configure_threads(value)
+    return value
+
+
+def _with_threads_option(command):
+    """Give ``command`` (and a group's subcommands) the shared ``--threads N`` option."""
+    commands = [command] + (list(command.commands.values()) if isinstance(command, click.Group) else [])
+    for cmd in commands:
+        if not any(p.name == "threads" for p in cmd.params):
+            cmd.params.append(click.Option(
+                ["--threads"], metavar="N", default=None, expose_value=False, callback=_set_threads,
+                help="numba threads (default: $CUTKIT_THREADS, else the free cores, never more than the cores)."))
+    return command
 
 
 def _module_exists(module: str) -> bool:

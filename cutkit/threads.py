@@ -1,0 +1,101 @@
+"""How many numba threads cutkit runs.
+
+numba starts one thread per core by default.  On a machine whose cores
+are already busy (other users, other runs, the workers of a sweep) the
+extra threads only wait on each other: on a loaded 2-core machine a
+relaxation ran ten times slower with two threads than with one, with the
+same result.  :func:`configure_threads` therefore picks at most the cores
+that are free, and never more than the cores this process may run on.
+
+The command line calls it for every command, with ``--threads N`` or the
+environment variable ``CUTKIT_THREADS``.
+"""
+
+from __future__ import annotations
+
+import os
+
+from cutkit.errors import InputError
+
+#: Environment variable read when no thread count is given.
+ENV_VAR = "CUTKIT_THREADS"
+
+
+def available_cores() -> int:
+    """Cores this process may run on (its CPU affinity where the system has one)."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except (AttributeError, OSError):  # pragma: no cover - macOS, Windows
+        return max(1, os.cpu_count() or 1)
+
+
+def free_cores(cores: int | None = None) -> int:
+    """Cores not busy with other work: ``cores`` minus the 1-minute load average, at least 1.
+
+    Parameters
+    ----------
+    cores : int, optional
+        Cores to start from; default :func:`available_cores`.
+    """
+    cores = available_cores() if cores is None else int(cores)
+    try:
+        load = os.getloadavg()[0]
+    except (AttributeError, OSError):  # pragma: no cover - Windows
+        return cores
+    return int(min(cores, max(1, cores - int(round(load)))))
+
+
+def default_threads() -> int:
+    """The thread count used when none is asked for: the free cores, never more than the cores."""
+    return free_cores(available_cores())
+
+
+def parse_threads(value) -> int | None:
+    """A thread count from the command line or the environment; None for "choose".
+
+    Raises
+    ------
+    InputError
+        When ``value`` is not a whole number >= 1.
+    """
+    if value is None or (isinstance(value, str) and value.strip() == ""):
+        return None
+    try:
+        n = int(str(value).strip())
+    except ValueError:
+        raise InputError(f"threads must be a whole number >= 1, got {value!r}") from None
+    if n < 1:
+        raise InputError(f"threads must be a whole number >= 1, got {value!r}")
+    return n
+
+
+def configure_threads(n: int | None = None) -> int:
+    """Set the number of numba threads for this process and return it.
+
+    Parameters
+    ----------
+    n : int, optional
+        Threads to use.  Without it, ``CUTKIT_THREADS`` when set, else
+        :func:`default_threads`.  Never more than numba's thread pool
+        (``NUMBA_NUM_THREADS``, by default the machine's cores).
+
+    Returns
+    -------
+    threads : int
+        The threads numba now uses.
+
+    Raises
+    ------
+    InputError
+        When ``n`` or ``CUTKIT_THREADS`` is not a whole number >= 1.
+    """
+    asked = parse_threads(n)
+    if asked is None:
+        asked = parse_threads(os.environ.get(ENV_VAR))
+    if asked is None:
+        asked = default_threads()
+    import numba
+
+    threads = max(1, min(int(asked), int(numba.config.NUMBA_NUM_THREADS)))
+    numba.set_num_threads(threads)
+    return threads

@@ -1,0 +1,84 @@
+"""numba threads: --threads, CUTKIT_THREADS, the default, and identical results with 1 and 2 threads."""
+
+import numba
+import numpy as np
+import pytest
+
+from cutkit.cli.main import main
+from cutkit.threads import available_cores, configure_threads, default_threads, free_cores
+
+
+@pytest.fixture(autouse=True)
+def _restore_threads():
+    before = numba.get_num_threads()
+    yield
+    numba.set_num_threads(before)
+
+
+def test_default_is_free_cores_never_more_than_cores(monkeypatch):
+    cores = available_cores()
+    monkeypatch.setattr("os.getloadavg", lambda: (cores + 3.0, 0.0, 0.0))
+    assert free_cores(cores) == 1
+    monkeypatch.setattr("os.getloadavg", lambda: (0.0, 0.0, 0.0))
+    assert free_cores(cores) == cores
+    assert 1 <= default_threads() <= cores
+
+
+def test_explicit_and_environment(monkeypatch):
+    pool = numba.config.NUMBA_NUM_THREADS
+    assert configure_threads(1) == 1 and numba.get_num_threads() == 1
+    monkeypatch.setenv("CUTKIT_THREADS", str(pool + 5))
+    assert configure_threads() == pool  # never more than numba's pool
+    assert configure_threads(1) == 1  # the argument wins over the environment
+
+
+@pytest.mark.parametrize("bad", ["0", "-2", "two"])
+def test_bad_thread_count_is_one_line(tmp_path, capsys, bad):
+    code = main(["info", str(tmp_path / "missing.h5"), "--threads", bad])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2
+    assert err == [f"cutkit: error: threads must be a whole number >= 1, got {bad!r}"]
+
+
+def test_every_command_takes_threads():
+    import click
+
+    from cutkit.cli.commands import COMMANDS
+    from cutkit.cli.main import cli
+
+    ctx = click.Context(cli)
+    for name in COMMANDS:
+        cmd = cli.get_command(ctx, name)
+        if cmd is None:
+            continue
+        assert any(p.name == "threads" for p in cmd.params), name
+
+
+def test_cli_threads_sets_numba(tmp_path, monkeypatch):
+    from test_relax import block
+
+    from cutkit.io.model_h5 import write_model
+
+    write_model(tmp_path / "m.h5", block(2, 2, 2))
+    monkeypatch.setenv("CUTKIT_THREADS", "1")
+    assert main(["info", str(tmp_path / "m.h5")]) == 0
+    assert numba.get_num_threads() == 1
+
+
+@pytest.mark.skipif(numba.config.NUMBA_NUM_THREADS < 2, reason="numba's pool has one thread")
+def test_simulate_is_identical_with_one_and_two_threads(tmp_path):
+    from test_simulate import slab
+
+    from cutkit.cutting.trajectory import straight_incision
+    from cutkit.simulate import SimulateOptions, simulate
+
+    traj = straight_incision([6.0, 0.0, 8.3], [26.0, 0.0, 8.3], inward=[0, 1, 0], depth=5.0, approach=3.0,
+                             press_time=0.2, cut_time=0.4, rate=100)
+    out = {}
+    for n in (1, 2):
+        configure_threads(n)
+        s = simulate(slab(), traj, tmp_path / str(n), SimulateOptions(frames=False, write_model=False, hold_s=0.1))
+        forces = np.loadtxt(tmp_path / str(n) / "forces.csv", delimiter=",", skiprows=1, usecols=(0, 2, 3, 4))
+        out[n] = (s["cut_tets"], s["new_tets"], s["cut_opening_mm"], s["inverted_tets_deformed"], forces)
+    assert out[1][:4] == out[2][:4]
+    np.testing.assert_array_equal(out[1][4], out[2][4])
