@@ -38,11 +38,14 @@ def stage_reporter(bar: Progress, task):
 
 def table(title: str, columns: list[str], rows: list[list]) -> Table:
     """A rich table of ``rows`` under ``columns``."""
-    t = Table(title=title, title_justify="left")
+    from rich.markup import escape
+
+    # cells are plain text: "[deg]" is a unit, not rich markup
+    t = Table(title=escape(title), title_justify="left")
     for c in columns:
-        t.add_column(c)
+        t.add_column(escape(c))
     for r in rows:
-        t.add_row(*[str(v) for v in r])
+        t.add_row(*[escape(str(v)) for v in r])
     return t
 
 
@@ -59,3 +62,34 @@ def parse_vec3(text: str | None, what: str):
     if len(values) != 3:
         raise InputError(f"{what} must be three comma-separated numbers, e.g. 1,1,2.5 (got {text!r})")
     return values
+
+
+#: Endings of a model file (HDF5); anything else is another tool's format, written by ``cutkit export``.
+MODEL_SUFFIXES = (".h5", ".hdf5")
+
+
+def check_model_output(path) -> None:
+    """Raise InputError unless ``path`` ends like a model file (.h5)."""
+    from pathlib import Path
+
+    from cutkit.errors import InputError
+
+    suffix = Path(path).suffix.lower()
+    if suffix not in MODEL_SUFFIXES:
+        raise InputError(f"{path}: a model file ends in .h5; to get {suffix or 'another format'}, "
+                         f"write MODEL.h5 and run `cutkit export MODEL.h5 {path}`")
+
+
+def warn_missing_geometry(path, spacing) -> None:
+    """Say so when a volume format without voxel size (.npy, TIFF) is read without --spacing."""
+    if spacing is not None:
+        return
+    from cutkit.volumes.registry import format_for
+
+    try:
+        fmt = format_for(path)
+    except Exception:  # the reader reports unknown formats itself
+        return
+    if fmt.name in ("numpy", "tiff", "tiff-folder"):
+        console.print(f"[yellow]warning:[/] {path} stores no voxel size: taking 1 x 1 x 1 mm voxels "
+                      "(give --spacing SX,SY,SZ in mm)")

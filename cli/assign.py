@@ -9,12 +9,14 @@ import click
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="Output model file.")
 def command(model, recipe_path, output):
     """Assign the recipe's materials, boundary conditions and prestress to MODEL."""
+    from cutkit.cli._ui import check_model_output
     from cutkit.io.atomic import check_writable
     from cutkit.assign import assign
     from cutkit.cli._ui import console, table
     from cutkit.io.model_h5 import read_model, write_model
     from cutkit.recipe import load_recipe
 
+    check_model_output(output)
     check_writable(output)
     recipe = load_recipe(recipe_path)
     out = assign(read_model(model), recipe)

@@ -9,25 +9,45 @@ import click
 @click.option("--recipe", "recipe_path", type=click.Path(dir_okay=False), help="TOML recipe (pipelines/*.toml).")
 @click.option("--threshold", help="LOW[:HIGH] intensity threshold (overrides the recipe).")
 @click.option("--channel", help="Colour channel of an RGB volume to threshold (red, green, blue).")
-@click.option("--labels", "labels_path", type=click.Path(), help="Use this label map as the segmentation, as-is.")
+@click.option("--otsu", is_flag=True, help="Threshold at Otsu's value (blue channel: keep the dark side).")
+@click.option("--labels", "labels_path", type=click.Path(),
+              help="Use this label map as the segmentation (smoothed and resampled only when asked). "
+                   "A VOLUME that is itself a label map (integers, at most 32 values in 0..255) needs no flag.")
 @click.option("--voxel-size", type=float, help="Resample to this isotropic voxel size, mm.")
 @click.option("--smooth", type=float, help="Gaussian smoothing sigma, mm.")
 @click.option("--spacing", help="SX,SY,SZ voxel spacing in mm for formats without one (.npy).")
 @click.option("--ratio", type=float, help="Decimation ratio of tets kept (overrides the recipe).")
 @click.option("--no-decimate", is_flag=True, help="Skip the decimation stage.")
+@click.option("--clean", "clean", flag_value=True, default=None,
+              help="Morphological opening and closing of a thresholded mask (off by default: it erases "
+                   "structures thinner than three voxels).")
+@click.option("--no-clean", "clean", flag_value=False,
+              help="Skip all clean-up: opening/closing, largest component and hole filling.")
 @click.option("--texture", "texture_path", type=click.Path(), help="Texture volume (defaults to the recipe's, if any).")
-def command(volume, output, recipe_path, threshold, channel, labels_path, voxel_size, smooth, spacing, ratio, no_decimate, texture_path):
+def command(volume, output, recipe_path, threshold, channel, otsu, labels_path, voxel_size, smooth, spacing, ratio,
+            no_decimate, clean, texture_path):
     """Build a cuttable model from VOLUME (or the recipe's volume)."""
     import numpy as np
 
     from cutkit.io.atomic import check_writable
     from cutkit.build import STAGES, run_build
-    from cutkit.cli._ui import console, parse_vec3, progress, stage_reporter, table
+    from cutkit.cli._ui import (check_model_output, console, parse_vec3, progress, stage_reporter, table,
+                                warn_missing_geometry)
     from cutkit.errors import InputError
     from cutkit.io.model_h5 import write_model
     from cutkit.recipe import load_recipe, validate_recipe
+    from cutkit.segment import check_sizes, cleanup_warning
 
+    check_sizes(smooth, voxel_size, names=("--smooth", "--voxel-size"))
+    rules = [flag for flag, given in (("--threshold", threshold is not None), ("--otsu", otsu),
+                                      ("--channel", channel is not None)) if given]
+    if labels_path is not None and rules:
+        raise InputError(f"--labels uses the label map as the segmentation; it cannot be combined with {rules[0]}")
+    if threshold is not None and otsu:
+        raise InputError("--threshold and --otsu are two thresholds; give one")
+    check_model_output(output)
     check_writable(output)
+    spacing = parse_vec3(spacing, "--spacing")
 
     recipe = load_recipe(recipe_path) if recipe_path else {"_path": None, "_sha256": None}
     seg = dict(recipe.get("segment", {}))
@@ -35,6 +55,17 @@ def command(volume, output, recipe_path, threshold, channel, labels_path, voxel_
         seg["threshold"] = _parse_threshold(threshold)
         seg.pop("labels", None)
         seg.pop("otsu", None)
+    if otsu:
+        seg["otsu"] = True
+        seg.pop("labels", None)
+        seg.pop("threshold", None)
+    if labels_path is not None:
+        for key in ("threshold", "otsu", "channel", "labels"):
+            seg.pop(key, None)
+    if clean is not None:
+        seg["clean"] = clean
+        if not clean:
+            seg["largest_component"] = seg["fill_holes"] = False
     if channel is not None:
         seg["channel"] = channel
     if voxel_size is not None:
@@ -54,12 +85,17 @@ def command(volume, output, recipe_path, threshold, channel, labels_path, voxel_
     volume = volume or recipe.get("recipe", {}).get("volume")
     if volume is None:
         raise InputError("no input volume: give VOLUME or a recipe with [recipe] volume")
-    if not (seg.get("labels") or labels_path or "threshold" in seg or seg.get("otsu") or seg.get("channel")):
-        raise InputError("no segmentation: give --threshold, --channel, --labels or a recipe [segment] table")
+    from pathlib import Path
+
+    if not Path(volume).exists():
+        raise InputError(f"{volume}: no such volume file or folder")
+    if labels_path is not None and not Path(labels_path).exists():
+        raise InputError(f"{labels_path}: no such label map file or folder")
+    warn_missing_geometry(volume, spacing)
 
     with progress() as bar:
         task = bar.add_task("build-model", total=len(STAGES))
-        ctx = run_build(volume, recipe, on_stage=stage_reporter(bar, task), spacing=parse_vec3(spacing, "--spacing"), labels_path=labels_path)
+        ctx = run_build(volume, recipe, on_stage=stage_reporter(bar, task), spacing=spacing, labels_path=labels_path)
         bar.update(task, description="build-model: write")
         write_model(output, ctx.model)
 
@@ -75,19 +111,28 @@ def command(volume, output, recipe_path, threshold, channel, labels_path, voxel_
         seg_vols = {int(a): float(c) * float(np.prod(sv.spacing)) for a, c in zip(lab, cnt)}
     mesh_total = float(vols.sum())
     seg_total = float(sum(seg_vols.values()))
+    seg_report = ctx.report.get("segment", {})
     rows = [
         ["tets", m.n_tets],
         ["nodes", m.n_points],
         ["min dihedral [deg]", f"{mind.min():.2f}"],
         ["1st percentile dihedral [deg]", f"{np.percentile(mind, 1):.2f}"],
-        ["volume error", f"{100 * (mesh_total - seg_total) / seg_total:+.2f} % ({mesh_total:.0f} vs {seg_total:.0f} mm^3)"],
     ]
+    if "cleanup_change_percent" in seg_report:
+        before = seg_report["voxels_selected"] * seg_report["voxel_mm3"]
+        rows.append(["clean-up change", f"{seg_report['cleanup_change_percent']:+.2f} % "
+                                        f"({seg_total:.0f} vs {before:.0f} mm^3 segmented)"])
+    rows.append(["mesh vs segmentation", f"{100 * (mesh_total - seg_total) / seg_total:+.2f} % "
+                                         f"({mesh_total:.0f} vs {seg_total:.0f} mm^3)"])
     tex = ctx.report.get("texture", {})
     if "residual_after_mm" in tex:
         rows.append(["registration residual [mm]", f"{tex['residual_before_mm']:.3f} -> {tex['residual_after_mm']:.3f}"])
     for name, figures in ctx.report.items():
         rows.append([f"time: {name} [s]", f"{figures['seconds']:.2f}"])
     console.print(table(f"build-model -> {output}", ["", "value"], rows))
+    warning = cleanup_warning(seg_report)
+    if warning:
+        console.print(f"[yellow]warning:[/] {warning}")
 
 
 def _parse_threshold(text: str):

@@ -16,6 +16,7 @@ def command(model, trajectory, out_dir, blade_length, centre_nodes):
 
     import numpy as np
 
+    from cutkit.io.atomic import check_writable
     from cutkit.cli._ui import console, progress
     from cutkit.cutting import CutMesh, cut_step, to_model
     from cutkit.cutting.trajectory import read_trajectory
@@ -26,6 +27,7 @@ def command(model, trajectory, out_dir, blade_length, centre_nodes):
 
     if blade_length is not None and not (np.isfinite(blade_length) and blade_length > 0):
         raise InputError(f"--blade-length must be a positive number, got {blade_length}")
+    check_writable(out_dir, folder=True)
     tet_model = read_model(model)
     kw = {} if blade_length is None else {"blade_length": blade_length}
     traj = read_trajectory(trajectory, **kw)
@@ -53,6 +55,13 @@ def command(model, trajectory, out_dir, blade_length, centre_nodes):
     # the worst angle of the written mesh: cut nodes move after their tets are made
     new = m.tets[m.cell_data["new_tet"] == 1]
     worst = float(min_dihedral_angles(m.points, new).min()) if len(new) else 180.0
+    if not cm.subtets:
+        lo, hi = tet_model.points.min(axis=0), tet_model.points.max(axis=0)
+        console.print(f"[yellow]warning:[/] the blade never cut the tissue: no tet was cut (the model spans "
+                      f"{', '.join(f'{a:g}..{b:g}' for a, b in zip(lo, hi))} mm in x, y, z; the trajectory "
+                      f"{', '.join(f'{a:g}..{b:g}' for a, b in zip(traj.tip.min(axis=0), traj.tip.max(axis=0)))})")
+        console.print(f"{len(traj.t)} poses, nothing cut -> {out_dir}/cut.pvd, {out_dir}/model.h5")
+        return
     console.print(f"{len(traj.t)} poses, {len(cm.subtets)} tets cut into "
                   f"{sum(len(v) for v in cm.subtets.values())}, worst new dihedral {worst:.1f} deg "
                   f"-> {out_dir}/cut.pvd, {out_dir}/model.h5")

@@ -25,6 +25,7 @@ def command(model, output, target_tets, ratio, tolerance, min_dihedral, level, o
     """
     import time
 
+    from cutkit.cli._ui import check_model_output
     from cutkit.io.atomic import check_writable
     from cutkit.cli._ui import console, progress, table
     from cutkit.decimate import decimate, extract_level, n_levels, quality_summary
@@ -35,6 +36,7 @@ def command(model, output, target_tets, ratio, tolerance, min_dihedral, level, o
         raise InputError("--level extracts a recorded level; it cannot be combined with --target-tets or --ratio")
     if level is None and (target_tets is None) == (ratio is None):
         raise InputError("give exactly one of --target-tets or --ratio (or --level K)")
+    check_model_output(output)
     check_writable(output)
     src = read_model(model)
     before = quality_summary(src.points, src.tets, min_dihedral)

@@ -11,11 +11,13 @@ import click
 def command(mesh: str, output: str) -> None:
     import numpy as np
 
+    from cutkit.cli._ui import check_model_output
     from cutkit.io.atomic import check_writable
     from cutkit.cli._ui import console
     from cutkit.io.meshes import import_mesh
     from cutkit.io.model_h5 import write_model
 
+    check_model_output(output)
     check_writable(output)
     model = import_mesh(mesh)
     write_model(output, model)

@@ -13,7 +13,7 @@ MAX_VOLUME_LABELS = 64
 @click.command("info", help="Describe a volume or a model file.")
 @click.argument("path", type=click.Path(path_type=str))
 def command(path: str) -> None:
-    from cutkit.errors import InputError, ModelFormatError
+    from cutkit.errors import InputError
 
     p = Path(path)
     if not p.exists():
@@ -21,13 +21,9 @@ def command(path: str) -> None:
     if p.is_file() and p.suffix.lower() in (".h5", ".hdf5"):
         from cutkit.io.model_h5 import read_schema_version
 
-        try:
-            version = read_schema_version(p)
-        except ModelFormatError:
-            version = None
-        if version is not None:
-            _model_info(path, version)
-            return
+        # an .h5 file is only ever a model: a damaged one is reported as such
+        _model_info(path, read_schema_version(p))
+        return
     _volume_info(path)
 
 

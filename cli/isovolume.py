@@ -16,12 +16,14 @@ def command(volume_path, output, level, snap, labels):
     """Split every voxel cube of LABELS_VOLUME into six tetrahedra and clip them (paper section 7.1)."""
     import numpy as np
 
+    from cutkit.cli._ui import check_model_output
     from cutkit.io.atomic import check_writable
     from cutkit.cli._ui import console, table
     from cutkit.io.model_h5 import write_model
     from cutkit.isovolume import SNAP_FRACTION, dihedral_summary, isovolume
     from cutkit.volumes import read_volume
 
+    check_model_output(output)
     check_writable(output)
     volume = read_volume(volume_path)
     with console.status("marching isovolume ..."):

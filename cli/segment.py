@@ -21,20 +21,6 @@ def _parse_threshold(text):
     return lo, hi
 
 
-#: An integer volume with at most this many values (all in 0..255) and no rule given is a label map.
-MAX_AUTO_LABELS = 32
-
-
-def _looks_like_labels(volume) -> bool:
-    import numpy as np
-
-    data = np.asarray(volume.data)
-    if data.ndim != 3 or not np.issubdtype(data.dtype, np.integer):
-        return False
-    values = np.unique(data)
-    return len(values) <= MAX_AUTO_LABELS and values[0] >= 0 and values[-1] <= 255
-
-
 @click.command(name="segment")
 @click.argument("volume_path", metavar="VOLUME", type=click.Path())
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False),
@@ -45,26 +31,41 @@ def _looks_like_labels(volume) -> bool:
 @click.option("--labels", "labels_path", default=None, type=click.Path(), help="Use this label map as is.")
 @click.option("--smooth", type=float, default=None, metavar="SIGMA_MM", help="Gaussian smoothing sigma in mm.")
 @click.option("--voxel-size", type=float, default=None, metavar="MM", help="Resample to cubic voxels of this size.")
-@click.option("--no-clean", is_flag=True, help="Skip opening/closing, largest component and hole filling.")
+@click.option("--clean", "clean", flag_value=True, default=None,
+              help="Morphological opening and closing (off by default: it erases structures thinner than "
+                   "three voxels).")
+@click.option("--no-clean", "clean", flag_value=False,
+              help="Skip all clean-up: opening/closing, largest component and hole filling.")
 @click.option("--spacing", default=None, metavar="SX,SY,SZ", help="Voxel size in mm (for .npy and TIFF input).")
-def command(volume_path, output, threshold, channel, otsu, labels_path, smooth, voxel_size, no_clean, spacing):
+def command(volume_path, output, threshold, channel, otsu, labels_path, smooth, voxel_size, clean, spacing):
     """Segment VOLUME by threshold, Otsu, a colour channel or a given label map (paper section 7.1).
 
     An integer VOLUME with at most 32 values in 0..255 and no rule given is taken as a label map.
     """
     import numpy as np
 
-    from cutkit.cli._ui import console, parse_vec3, table
+    from cutkit.cli._ui import console, parse_vec3, table, warn_missing_geometry
+    from cutkit.errors import InputError
     from cutkit.io.atomic import check_writable
-    from cutkit.segment import segment
+    from cutkit.segment import check_sizes, cleanup_warning, looks_like_labels, segment
     from cutkit.volumes import read_volume, write_volume
 
     rng = _parse_threshold(threshold)
+    check_sizes(smooth, voxel_size, names=("--smooth", "--voxel-size"))
+    rules = [flag for flag, given in (("--threshold", rng is not None), ("--otsu", otsu),
+                                      ("--channel", channel is not None)) if given]
+    if labels_path is not None and rules:
+        raise InputError(f"--labels uses the label map as the segmentation; it cannot be combined with {rules[0]}")
+    if rng is not None and otsu:
+        raise InputError("--threshold and --otsu are two thresholds; give one")
     check_writable(output)
-    volume = read_volume(volume_path, spacing=parse_vec3(spacing, "--spacing"))
+    spacing = parse_vec3(spacing, "--spacing")
+    volume = read_volume(volume_path, spacing=spacing)
+    warn_missing_geometry(volume_path, spacing)
     labels = read_volume(labels_path) if labels_path else None
-    if rng is None and not otsu and labels is None and channel is None and _looks_like_labels(volume):
+    if rng is None and not otsu and labels is None and channel is None and looks_like_labels(volume):
         labels = volume
+    cleanup: dict = {}
     with console.status("segmenting ..."):
         seg = segment(
             volume,
@@ -74,9 +75,10 @@ def command(volume_path, output, threshold, channel, otsu, labels_path, smooth, 
             labels=labels,
             smooth_sigma_mm=smooth,
             voxel_size_mm=voxel_size,
-            clean=not no_clean,
-            largest_component=not no_clean,
-            fill_holes=not no_clean,
+            clean=bool(clean),
+            largest_component=clean is not False,
+            fill_holes=clean is not False,
+            report=cleanup,
         )
         write_volume(output, seg)
     voxel_mm3 = float(np.prod(seg.spacing))
@@ -85,3 +87,9 @@ def command(volume_path, output, threshold, channel, otsu, labels_path, smooth, 
     console.print(table("segmentation", ["label", "voxels", "volume [mm^3]"], rows))
     sp = ", ".join(f"{s:g}" for s in seg.spacing)
     console.print(f"{seg.shape[0]} x {seg.shape[1]} x {seg.shape[2]} voxels of {sp} mm -> {output}")
+    if cleanup.get("voxels_selected"):
+        console.print(f"clean-up: {cleanup['voxels_selected']} voxels segmented, {cleanup['voxels_kept']} kept "
+                      f"({cleanup['cleanup_change_percent']:+.2f} %)")
+    warning = cleanup_warning(cleanup)
+    if warning:
+        console.print(f"[yellow]warning:[/] {warning}")

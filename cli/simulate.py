@@ -16,7 +16,7 @@ import click
               help="Simulated seconds after the trajectory's end (the cut opens).")
 @click.option("--geometry-rate", "geometry_rate_hz", default=50.0, show_default=True, type=float,
               help="Cut and relaxation updates per simulated second.")
-@click.option("--blade-length", default=None, type=float, help="Blade length, mm (default: the trajectory's).")
+@click.option("--blade-length", default=None, type=float, help="Blade length, mm [default: 20, the trajectory reader's; a trajectory file stores no blade size].")
 @click.option("--volume-stiffness", default=0.0, show_default=True, type=float,
               help="Volume term: each tet resists a change of volume with bulk = this x E (0: springs only, "
                    "as in the paper; 0.3 leaves a tenth of the inverted tets on the demo knee, at about four "
@@ -30,6 +30,8 @@ def command(model, trajectory, out_dir, fps, png, realtime, haptics, hold_s, geo
     from cutkit.io.model_h5 import read_model
     from cutkit.simulate import SimulateOptions
 
+    _check_flags(fps=fps, hold=hold_s, geometry_rate=geometry_rate_hz, blade_length=blade_length,
+                 volume_stiffness=volume_stiffness)
     opt = SimulateOptions(fps=fps, png=png, realtime=realtime, haptics=haptics, hold_s=hold_s,
                           geometry_rate_hz=geometry_rate_hz, blade_length=blade_length,
                           volume_stiffness=volume_stiffness)
@@ -40,6 +42,34 @@ def command(model, trajectory, out_dir, fps, png, realtime, haptics, hold_s, geo
     summary = run_with_progress(tet_model, traj, out_dir, opt, model_path=str(model))
     report(console, summary, out_dir)
     return 0
+
+
+def _check_flags(**values) -> None:
+    """Check the numbers of the command line first, so that errors name the flags."""
+    import numpy as np
+
+    from cutkit.errors import InputError
+    from cutkit.scalpel import HAPTIC_DT
+
+    for name, v in values.items():
+        flag = "--" + name.replace("_", "-")
+        if v is None:
+            continue
+        if name in ("hold", "volume_stiffness"):
+            if not (np.isfinite(v) and v >= 0):
+                raise InputError(f"{flag} must be a number >= 0, got {v:g}")
+        elif not (np.isfinite(v) and v > 0):
+            raise InputError(f"{flag} must be a positive number, got {v:g}")
+    if values["geometry_rate"] > 1.0 / HAPTIC_DT:
+        raise InputError(f"--geometry-rate must be at most the haptic rate {1.0 / HAPTIC_DT:.0f} Hz, "
+                         f"got {values['geometry_rate']:g}")
+
+
+def states_line(states: list[str]) -> str:
+    """The scalpel states a run went through, short: each state once, in order, and the number of changes."""
+    seen = list(dict.fromkeys(states))
+    changes = max(len(states) - 1, 0)
+    return f"states {', '.join(seen)} ({changes} change{'s' if changes != 1 else ''}; every tick in forces.csv)"
 
 
 def run_with_progress(tet_model, traj, out_dir, opt, model_path=None):
@@ -64,7 +94,7 @@ def report(console, summary, out_dir) -> None:
     t = summary["time_per_task_s"]
     console.print(
         f"{summary['cut_tets']} tets cut into {summary['new_tets']} "
-        f"({summary['new_tets_per_cut_tet']:.1f} per cut tet); states {' -> '.join(summary['states'])}; "
+        f"({summary['new_tets_per_cut_tet']:.1f} per cut tet); {states_line(summary['states'])}; "
         f"cut opening {summary['cut_opening_mm']['final_mean']:.2f} mm mean")
     console.print(
         f"{summary['simulated_s']:.2f} s simulated in {summary['wall_s']:.1f} s "

@@ -12,12 +12,14 @@ import click
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="Output model file.")
 def command(model, volume_path, seg_path, method, max_voxels, output):
     """Give every node of MODEL coordinates into a 3D texture (paper section 7.2)."""
+    from cutkit.cli._ui import check_model_output
     from cutkit.io.atomic import check_writable
     from cutkit.cli._ui import console
     from cutkit.io.model_h5 import read_model, write_model
     from cutkit.texture import register_texture
     from cutkit.volumes import read_volume
 
+    check_model_output(output)
     check_writable(output)
     if seg_path is None and method != "none":
         method_note = f"--register {method} needs --segmentation; registering with 'none'"
@@ -27,7 +29,9 @@ def command(model, volume_path, seg_path, method, max_voxels, output):
     seg = read_volume(seg_path) if seg_path else None
     out, rep = register_texture(read_model(model), read_volume(volume_path), segmentation=seg, method=method, **kwargs)
     write_model(output, out)
-    console.print(
-        f"texture {rep.texture_shape} (downsampled x{rep.downsample_factor}); registration {rep.method}: "
-        f"residual {rep.residual_before_mm:.3f} mm -> {rep.residual_after_mm:.3f} mm in {rep.iterations} iterations -> {output}"
-    )
+    if rep.method == "none":
+        how = "not registered (texture used in place)"
+    else:
+        how = (f"registration {rep.method}: residual {rep.residual_before_mm:.3f} mm -> "
+               f"{rep.residual_after_mm:.3f} mm in {rep.iterations} iterations")
+    console.print(f"texture {rep.texture_shape} (downsampled x{rep.downsample_factor}); {how} -> {output}")

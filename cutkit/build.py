@@ -31,6 +31,8 @@ class BuildContext:
     volume: Volume | None = None
     volume_path: str | None = None
     segmentation: Volume | None = None
+    #: a label map given with the volume (``--labels``), segmented as it is
+    labels: Volume | None = None
     model: TetModel | None = None
     #: stage name -> {"seconds": float, ...figures the stage reports}
     report: dict = field(default_factory=dict)
@@ -39,11 +41,23 @@ class BuildContext:
 def _stage_segment(ctx: BuildContext) -> dict:
     from cutkit.segment import segment
 
+    from cutkit.segment import looks_like_labels
+
     opts = ctx.recipe.get("segment", {})
     vol = ctx.volume
-    if opts.get("labels", False):
-        seg = segment(vol, labels=vol, smooth_sigma_mm=opts.get("smooth_mm") or None,
-                      voxel_size_mm=opts.get("voxel_size_mm"))
+    cleanup: dict = {}
+    rule = opts.get("labels") or "threshold" in opts or opts.get("otsu") or opts.get("channel")
+    if ctx.labels is None and not rule:
+        if not looks_like_labels(vol):
+            raise InputError(f"{ctx.volume_path}: no segmentation rule and the volume is not a label map: "
+                             "give --threshold, --otsu, --channel, --labels or a recipe [segment] table")
+        opts = {**opts, "labels": True}  # an integer volume of a few values in 0..255 is a label map
+    if ctx.labels is not None or opts.get("labels", False):
+        # a given label map is used as it is: only smoothing and resampling apply
+        lv = ctx.labels if ctx.labels is not None else vol
+        seg = segment(vol, labels=lv, smooth_sigma_mm=opts.get("smooth_mm"),
+                      voxel_size_mm=opts.get("voxel_size_mm"),
+                      largest_component=opts.get("largest_component", ctx.labels is None), report=cleanup)
     else:
         threshold = opts.get("threshold")
         if threshold is not None:
@@ -55,14 +69,16 @@ def _stage_segment(ctx: BuildContext) -> dict:
             otsu=bool(opts.get("otsu", False)),
             smooth_sigma_mm=opts.get("smooth_mm") or None,
             voxel_size_mm=opts.get("voxel_size_mm"),
-            clean=opts.get("clean", True),
+            clean=opts.get("clean", False),
             largest_component=opts.get("largest_component", True),
             fill_holes=opts.get("fill_holes", True),
+            report=cleanup,
         )
     ctx.segmentation = seg
     voxel_mm3 = float(np.prod(seg.spacing))
     labels, counts = np.unique(seg.data[seg.data > 0], return_counts=True)
-    return {"labels": {int(l): float(c) * voxel_mm3 for l, c in zip(labels, counts)}, "shape": list(seg.shape)}
+    return {"labels": {int(l): float(c) * voxel_mm3 for l, c in zip(labels, counts)}, "shape": list(seg.shape),
+            **cleanup}
 
 
 def _stage_isovolume(ctx: BuildContext) -> dict:
@@ -181,8 +197,9 @@ def run_build(
     spacing : (3,) float, optional
         Voxel spacing for formats that carry none (.npy).
     labels_path : path-like, optional
-        A label map used as the segmentation as-is; the segment stage is
-        skipped and the volume serves only as the default texture.
+        A label map used as the segmentation as it is (the recipe's smoothing
+        and resampling still apply); the volume serves only as the default
+        texture.
 
     Returns
     -------
@@ -200,14 +217,12 @@ def run_build(
     ctx.volume = read_volume(volume_path, spacing=spacing) if spacing is not None else read_volume(volume_path)
     ctx.report["read"] = {"seconds": time.perf_counter() - t0, "shape": list(ctx.volume.shape)}
     if labels_path is not None:
-        ctx.segmentation = read_volume(labels_path)
-        if not np.any(np.asarray(ctx.segmentation.data) > 0):
+        ctx.labels = read_volume(labels_path)
+        if not np.any(np.asarray(ctx.labels.data) > 0):
             from cutkit.errors import EmptySegmentationError
 
             raise EmptySegmentationError(f"{labels_path}: the label map has no voxel with a label > 0")
     for name, fn in STAGES:
-        if name == "segment" and labels_path is not None:
-            continue
         if on_stage:
             on_stage(name, "start")
         t0 = time.perf_counter()

@@ -2,9 +2,13 @@
 
 from cutkit.segment.segment import (
     CLEAN_BALL_RADIUS_VOXELS,
+    CLEANUP_WARN_PERCENT,
+    check_sizes,
     clean_mask,
+    cleanup_warning,
     fill_mask_holes,
     largest_connected_component,
+    looks_like_labels,
     otsu_threshold,
     resample_isotropic,
     scalar_channel,
@@ -24,4 +28,8 @@ __all__ = [
     "largest_connected_component",
     "fill_mask_holes",
     "CLEAN_BALL_RADIUS_VOXELS",
+    "CLEANUP_WARN_PERCENT",
+    "check_sizes",
+    "cleanup_warning",
+    "looks_like_labels",
 ]

@@ -148,6 +148,34 @@ def fill_mask_holes(mask: np.ndarray) -> np.ndarray:
     return ndimage.binary_fill_holes(mask)
 
 
+#: An integer volume with at most this many values (all in 0..255) and no rule given is a label map.
+MAX_AUTO_LABELS = 32
+
+
+def looks_like_labels(volume: Volume) -> bool:
+    """True for a 3D integer volume with at most :data:`MAX_AUTO_LABELS` values, all in 0..255.
+
+    Such a volume given without a segmentation rule is taken as a label map
+    (``cutkit segment`` and ``cutkit build-model``).
+    """
+    data = np.asarray(volume.data)
+    if data.ndim != 3 or not np.issubdtype(data.dtype, np.integer):
+        return False
+    values = np.unique(data)
+    return len(values) <= MAX_AUTO_LABELS and values[0] >= 0 and values[-1] <= 255
+
+
+def check_sizes(smooth_sigma_mm=None, voxel_size_mm=None, names=("smoothing sigma", "voxel size")) -> None:
+    """Raise :class:`InputError` for a negative or non-finite sigma or a voxel size that is not positive.
+
+    ``names`` are the words the message uses for the two (the command line passes its flags).
+    """
+    if smooth_sigma_mm is not None and not (np.isfinite(smooth_sigma_mm) and smooth_sigma_mm >= 0):
+        raise InputError(f"{names[0]} must be a number of mm >= 0 (0: no smoothing), got {smooth_sigma_mm:g}")
+    if voxel_size_mm is not None and not (np.isfinite(voxel_size_mm) and voxel_size_mm > 0):
+        raise InputError(f"{names[1]} must be a positive number of mm, got {voxel_size_mm:g}")
+
+
 def _labels_volume(volume: Volume, labels) -> Volume:
     if labels is True:
         labels = volume
@@ -188,9 +216,10 @@ def segment(
     labels=None,
     smooth_sigma_mm: float | None = None,
     voxel_size_mm: float | None = None,
-    clean: bool = True,
+    clean: bool = False,
     largest_component: bool = True,
     fill_holes: bool = True,
+    report: dict | None = None,
 ) -> Volume:
     """Segment ``volume`` into a uint8 label map.
 
@@ -212,9 +241,15 @@ def segment(
     voxel_size_mm : float, optional
         Resample to cubic voxels of this size (order 1 for images, 0 for labels).
     clean, largest_component, fill_holes : bool
-        Opening+closing with a ball of ``CLEAN_BALL_RADIUS_VOXELS``; keep the
-        largest connected component; fill enclosed cavities.  For label
-        maps only ``largest_component`` applies (to the non-zero voxels).
+        Opening+closing with a ball of ``CLEAN_BALL_RADIUS_VOXELS`` (off by
+        default: the opening erases structures thinner than three voxels,
+        e.g. white matter at 2 mm); keep the largest connected component;
+        fill enclosed cavities.  For label maps only ``largest_component``
+        applies (to the non-zero voxels).
+    report : dict, optional
+        Filled with what the clean-up changed: ``voxels_selected`` (before
+        it), ``voxels_kept`` (after it), ``cleanup_change_percent``
+        (kept / selected - 1, in per cent) and ``voxel_mm3``.
 
     Returns
     -------
@@ -226,16 +261,21 @@ def segment(
     ------
     EmptySegmentationError
         No voxel selected.
+    InputError
+        A negative smoothing sigma or a voxel size that is not positive.
     """
+    check_sizes(smooth_sigma_mm, voxel_size_mm)
     if labels is not None and labels is not False:
         lv = _labels_volume(volume, labels)
         if smooth_sigma_mm:
             lv = Volume(_smooth_labels(lv, smooth_sigma_mm), lv.spacing, lv.origin, lv.direction)
-        if voxel_size_mm:
+        if voxel_size_mm is not None:
             lv = resample_isotropic(lv, voxel_size_mm, order=0)
         data = lv.data
+        selected = int(np.count_nonzero(data))
         if largest_component and np.any(data):
             data = np.where(largest_connected_component(data > 0), data, 0).astype(np.uint8)
+        _cleanup_report(report, selected, int(np.count_nonzero(data)), lv.spacing)
         if not np.any(data):
             raise EmptySegmentationError("label map selects no voxel (all labels are 0)")
         return Volume(np.ascontiguousarray(data, np.uint8), lv.spacing, lv.origin, lv.direction)
@@ -244,7 +284,7 @@ def segment(
         raise InputError("the volume is RGB: choose a channel (e.g. --channel blue, the paper's blue-background rule)")
     image = smooth_mm(scalar_channel(volume, channel), volume.spacing, smooth_sigma_mm)
     grid = Volume(image, volume.spacing, volume.origin, volume.direction)
-    if voxel_size_mm:
+    if voxel_size_mm is not None:
         grid = resample_isotropic(grid, voxel_size_mm, order=1)
     image = grid.data
     dark_side = channel is not None and _channel_index(channel) == 2
@@ -261,12 +301,36 @@ def segment(
         raise EmptySegmentationError(
             f"segmentation selects no voxel ({rule}; values range {finite.min():.4g}..{finite.max():.4g})"
         )
+    selected = int(np.count_nonzero(mask))
     if clean:
         mask = clean_mask(mask)
     if largest_component:
         mask = largest_connected_component(mask)
     if fill_holes:
         mask = fill_mask_holes(mask)
+    _cleanup_report(report, selected, int(np.count_nonzero(mask)), grid.spacing)
     if not mask.any():
         raise EmptySegmentationError(f"segmentation is empty after clean-up ({rule}); try --no-clean")
     return Volume(mask.astype(np.uint8), grid.spacing, grid.origin, grid.direction)
+
+
+#: A clean-up that changes the segmented volume by more than this many per cent is worth a warning.
+CLEANUP_WARN_PERCENT = 3.0
+
+
+def _cleanup_report(report, selected: int, kept: int, spacing) -> None:
+    if report is None:
+        return
+    report.update(voxels_selected=selected, voxels_kept=kept, voxel_mm3=float(np.prod(spacing)),
+                  cleanup_change_percent=100.0 * (kept - selected) / selected if selected else 0.0)
+
+
+def cleanup_warning(report: dict) -> str | None:
+    """A one-line warning when the clean-up of :func:`segment` changed the volume by more than
+    :data:`CLEANUP_WARN_PERCENT`, else None."""
+    change = report.get("cleanup_change_percent")
+    if change is None or abs(change) <= CLEANUP_WARN_PERCENT:
+        return None
+    mm3 = report["voxel_mm3"] * (report["voxels_kept"] - report["voxels_selected"])
+    return (f"the clean-up changed the segmented volume by {change:+.1f} % ({mm3:+.0f} mm^3); "
+            "thin structures or islands were lost: try --no-clean (or a smaller voxel size)")

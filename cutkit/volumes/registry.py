@@ -129,7 +129,7 @@ def read_volume(path: str | os.PathLike, spacing=None, origin=None) -> Volume:
 def _positive_vec3(v, path, what) -> np.ndarray:
     a = np.asarray(v, np.float64).reshape(-1)
     if a.shape != (3,) or not np.all(np.isfinite(a)) or np.any(a <= 0):
-        raise InputError(f"{path}: {what} must be three positive numbers (got {list(a)})")
+        raise InputError(f"{path}: {what} must be three positive numbers (got {', '.join(f'{v:g}' for v in a)})")
     return a
 
 
@@ -155,7 +155,7 @@ def validate_volume(vol: Volume, path) -> Volume:
     vol.data = np.ascontiguousarray(data)
     vol.spacing = _positive_vec3(vol.spacing, path, "spacing")
     if not np.all(np.isfinite(vol.origin)):
-        raise InputError(f"{path}: origin is not finite ({list(vol.origin)})")
+        raise InputError(f"{path}: origin is not finite ({', '.join(f'{v:g}' for v in vol.origin)})")
     d = vol.direction
     if not np.all(np.isfinite(d)) or np.max(np.abs(np.linalg.norm(d, axis=0) - 1.0)) > DIRECTION_TOLERANCE:
         raise InputError(f"{path}: direction columns must be unit vectors")
