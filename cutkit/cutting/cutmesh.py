@@ -27,18 +27,24 @@ from cutkit.errors import InputError
 from cutkit.mesh.topology import TET_EDGES, TET_FACES, unique_edges, unique_faces, tet_neighbors
 from cutkit.cutting import subdivision as S
 from cutkit.cutting import _kernels_step as K
+from cutkit.cutting.splits import COMPACT_VOL_MIN, SPLIT_ANGLE_GAIN, SPLIT_ANGLE_GOOD, compact_split, min_angle
 
 #: Edge intersection parameters are clamped into [EDGE_SNAP, 1 - EDGE_SNAP]
 #: (a crossing near a vertex, or through it, becomes a crossing near it).
-EDGE_SNAP = 0.1
-#: Face nodes keep every barycentric coordinate >= FACE_BARY_MIN.
-FACE_BARY_MIN = 0.1
-#: Tip/centre nodes T keep every barycentric coordinate >= TET_BARY_MIN.
-TET_BARY_MIN = 0.05
-#: Compact complete splits accept only sub-tets of at least this fraction
-#: of the original tet's volume (else the always-valid T-cone is used).
-COMPACT_VOL_MIN = 1e-3
+#: Measured on random blade paths (docs/cutting.md): 0.1 gives cut-made
+#: dihedral angles down to 0.5 degrees, 0.25 keeps them above about 3 degrees
+#: (median worst 7-8) for a cut surface at most a quarter edge off the blade.
+EDGE_SNAP = 0.25
+#: Face nodes keep every barycentric coordinate >= FACE_BARY_MIN (same reason).
+FACE_BARY_MIN = 0.2
+#: Tip/centre nodes T keep every barycentric coordinate >= TET_BARY_MIN (same reason).
+TET_BARY_MIN = 0.15
 
+
+#: Where T may go when no tip is inside (fractions of the way from the cut
+#: nodes' centroid to the tet's centroid): the best-shaped cone is taken.  0
+#: keeps the cut surface flattest; further in, fewer slivers near the cut.
+T_BLENDS = (0.0, 0.35, 0.7)
 
 _TET_EDGES_L = TET_EDGES.tolist()
 _TET_FACES_L = TET_FACES.tolist()
@@ -124,6 +130,8 @@ class CutMesh:
         self.edge_node = -np.ones((self.edges.shape[0], 2), np.int64)
         self.face_node = -np.ones((self.faces.shape[0], 2), np.int64)
         self.face_ncut = np.zeros(self.faces.shape[0], np.int64)  # cut edges per face (kept by try_cut_edge)
+        self.pending_edges = {}  # edge -> first parameter, deferred (see try_cut_edge)
+        self.retried_edges = []  # deferred edges cut later (drained by cut_step)
         self.face_bary = {}  # face -> (3,) bary of the latest blade crossing
         self.tip_bary = {}  # original tet -> (4,) tip bary while inside
         self.tet_T = -np.ones((m0, 2), np.int64)
@@ -216,17 +224,69 @@ class CutMesh:
                     out.add(int(self.tet_faces[t, lf]))
         return out
 
+    def _splits_a_sheet(self, e):
+        """Whether cutting edge e would leave some tet of its ring with two opposite cut edges only.
+
+        Such a tet (mask {01, 23}, {02, 13} or {03, 12}) has all four faces
+        notched and its single crack-front node T would join two crack
+        sheets at one point: a non-manifold boundary vertex.
+        """
+        for t in self.edge_ring(e).tolist():
+            k = self.tet_edges[t].tolist().index(e)
+            if self.tet_mask(t) | (1 << k) in S.OPPOSITE_MASKS:
+                return True
+        return False
+
     def try_cut_edge(self, e, s):
         """Cut global edge ``e`` at parameter ``s`` (from edges[e,0]); returns touched tets.
 
         Refused (returns an empty list) when already cut or when some face
-        around the edge would get three cut edges.
+        around the edge would get three cut edges.  Deferred (kept in
+        ``pending_edges`` and an empty list returned) when the cut would give a
+        tet two opposite cut edges only (see :meth:`_splits_a_sheet`); a
+        deferred edge is cut as soon as an edge cut linking the two sheets
+        is made in one of its tets.
         """
         if np.isfinite(self.edge_t[e]):
             return []
         faces = self.faces_of_edge(e)
         if any(self.face_ncut[f] >= 2 for f in faces):
             return []
+        if self._splits_a_sheet(e):
+            self.pending_edges.setdefault(int(e), float(s))
+            return []
+        self.pending_edges.pop(int(e), None)
+        touched = self._cut_edge(e, s, faces)
+        self._retry_pending(touched)
+        return touched
+
+    def _retry_pending(self, touched):
+        """Cut the deferred edges of the tets in ``touched`` (list, extended in place) that are now allowed."""
+        if not self.pending_edges:
+            return
+        todo = list(dict.fromkeys(touched))
+        seen = set(todo)
+        while todo:
+            t = todo.pop()
+            for e in self.tet_edges[t].tolist():
+                if e not in self.pending_edges or np.isfinite(self.edge_t[e]):
+                    continue
+                faces = self.faces_of_edge(e)
+                if any(self.face_ncut[f] >= 2 for f in faces):
+                    del self.pending_edges[e]  # can never be cut now
+                    continue
+                if self._splits_a_sheet(e):
+                    continue
+                more = self._cut_edge(e, self.pending_edges.pop(e), faces)
+                self.retried_edges.append(e)
+                for u in more:
+                    if u not in seen:
+                        seen.add(u)
+                        touched.append(u)
+                        todo.append(u)
+
+    def _cut_edge(self, e, s, faces):
+        """Make the cut of edge e at parameter s (checks done); returns the tets of its ring."""
         s = min(max(float(s), EDGE_SNAP), 1.0 - EDGE_SNAP)
         self.edge_t[e] = s
         for f in faces:
@@ -338,7 +398,8 @@ class CutMesh:
         v = self.orig_tets[o].tolist()
         # tip / centre node T
         tb = self.tip_bary.get(o)
-        if tb is None:
+        free_T = tb is None  # no tip inside: T may go where its cone is best shaped
+        if free_T:
             tb = self._tip_centre_bary(o, mask, v)
         tb = _clamp_bary(tb, TET_BARY_MIN)
         complete = case in ("corner", "quad")
@@ -364,7 +425,14 @@ class CutMesh:
             tris.extend((tri, ow, lf) for tri, ow in S.face_triangles(gv, cut, edge_copy, f_node, self.centre_nodes))
         new = None
         if complete and self.compact_splits:
-            new = self._compact_split(o, tris, vgroup)
+            new, angle = compact_split(self, o, tris, vgroup)
+            if new is not None and angle < SPLIT_ANGLE_GOOD:
+                # a poor compact cone: the T-cone may be better (more tets, but no sliver)
+                tb_c, cone = self._best_T(v, tb, tris, free_T)
+                if cone > angle + SPLIT_ANGLE_GAIN:
+                    new, tb = None, tb_c
+        elif free_T:
+            tb, _ = self._best_T(v, tb, tris, free_T)
         if new is None:
             for c in range(2 if complete else 1):
                 if self.tet_T[o, c] < 0:
@@ -381,97 +449,29 @@ class CutMesh:
         self.subtets[o] = ids
         self._delta["added_tets"].extend(ids)
 
-    def _compact_split(self, o, tris, vgroup):
-        """Fewer tets for a complete split: cone each side to one of its vertices.
+    def _vol0(self, o):
+        """Signed volume of original tet o at the current positions."""
+        return _vol(self._x, self.orig_tets[o])
 
-        The cut polygon (closed loop of face cut segments) is triangulated
-        once (fan from one loop node) and used by both sides with their own
-        node copies; each side is the cone of its face triangles (those not
-        containing the apex) and the cut triangles to an original vertex of
-        that side.  An apex is allowed only if every face triangle of its side
-        on a face through it contains it (the cone then reproduces the
-        face's Fig. 2 pattern, so neighbours still conform).  Every choice
-        of fan node and apex is checked (the role
-        of the Fig. 4 intersection tests): all cone tets must have volume
-        >= COMPACT_VOL_MIN * the original's, else None (the T-cone is used).
+    def _best_T(self, v, tb, tris, free):
+        """Barycentric weights of T (4,) and the smallest dihedral angle (degrees) of its cone.
+
+        With ``free`` (no tip inside), T is moved from the cut nodes' centroid
+        ``tb`` towards the tet's centroid by each of ``T_BLENDS`` and the
+        best-shaped cone is kept.  T is tried in the spare row ``n_points`` of
+        the node arrays (no node is made).
         """
-        v = [int(x) for x in self.orig_tets[o]]
-        x = self._x
-        vol0 = _vol(x, v)
-        # canonical key of each cut node copy, so both sides' loops can be matched
-        key = {}
-        for e in self.tet_edges[o].tolist():
-            if self.edge_t[e] == self.edge_t[e]:  # cut (not NaN)
-                n0, n1 = self.edge_node[e].tolist()
-                key[n0] = key[n1] = ("e", e)
-        for f in self.tet_faces[o].tolist():
-            for c in self.face_node[f].tolist():
-                if c >= 0:
-                    key[c] = ("f", f)
-        nxt = [dict(), dict()]
-        copy = [dict(), dict()]
-        for tri, owner, _ in tris:
-            side = vgroup[owner]
-            for k in range(3):
-                a, b = tri[k], tri[(k + 1) % 3]
-                if a in key and b in key:
-                    nxt[side][b] = a  # the cut polygon runs the other way
-                    copy[side][key[a]] = a
-                    copy[side][key[b]] = b
-        if not nxt[0] or len(nxt[0]) != len(nxt[1]):
-            return None
-        start = next(iter(nxt[0]))
-        loop = [start]
-        while True:
-            n = nxt[0].get(loop[-1])
-            if n is None:
-                return None
-            if n == start:
-                break
-            loop.append(n)
-            if len(loop) > len(nxt[0]):
-                return None
-        if len(loop) != len(nxt[0]):
-            return None
-        keys = [key[n] for n in loop]
-        if any(k not in copy[1] for k in keys):
-            return None
-        # allowed apexes of each side (in vertex order) and their face-triangle cone tets;
-        # they do not depend on the fan node
-        apexes = ([], [])
-        for ia, apex in enumerate(v):
-            side = vgroup[apex]
-            # the cone tiles each face through the apex by a fan from the apex:
-            # conforming (crack-free) only if the face pattern is that fan
-            if any(vgroup[ow] == side and lf != ia and apex not in t for t, ow, lf in tris):
-                continue
-            # face triangles on a face through the apex are flat cones: skip them
-            apexes[side].append((apex, [(t[0], t[2], t[1], apex) for t, ow, lf in tris
-                                        if vgroup[ow] == side and lf == ia]))
-        vol_min = COMPACT_VOL_MIN * vol0
-        for r in range(len(loop)):
-            kk = keys[r:] + keys[:r]
-            poly = [(kk[0], kk[i], kk[i + 1]) for i in range(1, len(kk) - 1)]
-            out = []
-            for side in (0, 1):
-                cs = copy[side]
-                # cone tets of the cut triangles (side 1 sees them flipped)
-                if side == 0:
-                    cut_tris = [(cs[t[0]], cs[t[2]], cs[t[1]]) for t in poly]
-                else:
-                    cut_tris = [(cs[t[0]], cs[t[1]], cs[t[2]]) for t in poly]
-                best = None
-                for apex, face_cone in apexes[side]:
-                    cand = face_cone + [t + (apex,) for t in cut_tris]
-                    if K.min_volume(x, np.array(cand, np.int64)) >= vol_min:
-                        best = cand
-                        break
-                if best is None:
-                    break
-                out.extend(best)
-            else:
-                return out
-        return None
+        self._grow_nodes()
+        i = self.n_points
+        cone = np.array([(tri[0], tri[2], tri[1], i) for tri, _, _ in tris], np.int64)
+        best, best_angle = tb, -1.0
+        for w in (T_BLENDS if free else (0.0,)):
+            b = _clamp_bary((1.0 - w) * np.asarray(tb) + 0.25 * w, TET_BARY_MIN)
+            self._x[i] = b @ self._x[v]
+            angle = min_angle(self._x, cone)
+            if angle > best_angle:
+                best, best_angle = b, angle
+        return best, best_angle
 
     def _add_tets(self, new, o):
         """Append the tets ``new`` (list of 4-tuples) as sub-tets of original ``o``; returns their ids."""

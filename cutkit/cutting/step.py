@@ -176,7 +176,9 @@ def cut_step(cm: CutMesh, tip, a) -> StepResult:
             ring = cm.try_cut_edge(i, val[0])
             if ring:
                 cut_edges.append(i)
+                cut_edges.extend(cm.retried_edges)  # deferred edges this cut let through
                 changed.update(ring)
+            cm.retried_edges.clear()
         else:
             # the blade crosses face i: moves its notch node F (crack front);
             # only positions change, the topology does not

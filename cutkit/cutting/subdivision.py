@@ -151,6 +151,11 @@ def face_triangles(gv, cut, edge_copy, face_node, centre_nodes):
     return tris
 
 
+#: Masks of two opposite cut edges only (01+23, 02+13, 03+12): the cut would be two
+#: crack sheets meeting at the tet's single crack-front node (non-manifold), so
+#: ``CutMesh`` defers the second edge until a third links them.
+OPPOSITE_MASKS = frozenset((1 << 0 | 1 << 5, 1 << 1 | 1 << 4, 1 << 2 | 1 << 3))
+
 #: reduce_mask of every 6-bit mask (a lookup for the per-step subdivision).
 REDUCE_TABLE = tuple(reduce_mask(_m) for _m in range(64))
 #: (case, group as a tuple of 4 ints) of classify for every 6-bit mask.
