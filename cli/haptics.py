@@ -1,11 +1,11 @@
-"""``cutkit haptics``: the 1 kHz haptic scalpel service and its benchmark client."""
+"""``cutkit haptics``: the 1 kHz haptic scalpel service, its benchmark client and a reference device."""
 
 import click
 
 
 @click.group(name="haptics")
 def command():
-    """The 1 kHz haptic scalpel service (serve) and its benchmark client (bench)."""
+    """The 1 kHz haptic scalpel service (serve), its benchmark client (bench) and a reference device (play)."""
 
 
 @command.command(name="serve")
@@ -71,3 +71,41 @@ def bench(host, port, seconds, spawn, priority, as_json):
 
     rows = [[k, f"{v:.4g}" if isinstance(v, float) else v] for k, v in result.items()]
     console.print(table("haptics bench", ["figure", "value"], rows))
+
+
+@command.command(name="play")
+@click.argument("trajectory", type=click.Path(dir_okay=False))
+@click.option("--host", default="127.0.0.1", show_default=True)
+@click.option("--port", default=4711, show_default=True, type=click.IntRange(1, 65535))
+@click.option("--rate", default=1000.0, show_default=True, type=click.FloatRange(1.0, 10000.0),
+              help="Poses per second.")
+@click.option("--loop", is_flag=True, help="Start again after the last row, until Ctrl-C.")
+@click.option("--priority", type=click.Choice(["normal", "high", "realtime"]), default="high", show_default=True,
+              help="Scheduling priority of the device loop; falls back if refused.")
+@click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
+def play(trajectory, host, port, rate, loop, priority, as_json):
+    """Stream a trajectory's poses to a running server as a device, at --rate Hz (1 kHz)."""
+    import json
+    import signal
+    import threading
+
+    from cutkit.cutting.trajectory import read_trajectory
+    from cutkit.haptics.play import play_trajectory
+    from cutkit.haptics.priority import raise_priority
+
+    traj = read_trajectory(trajectory)
+    stop = threading.Event()
+    old = signal.signal(signal.SIGINT, lambda *_: stop.set())
+    try:
+        got = raise_priority(priority)
+        result = play_trajectory(traj, host, port, rate_hz=rate, loop=loop, stop=stop)
+    finally:
+        signal.signal(signal.SIGINT, old)
+    result.update(trajectory=str(trajectory), host=host, port=port, priority=got)
+    if as_json:
+        click.echo(json.dumps(result))
+        return
+    from cutkit.cli._ui import console, table
+
+    rows = [[k, f"{v:.4g}" if isinstance(v, float) else v] for k, v in result.items()]
+    console.print(table("haptics play", ["figure", "value"], rows))

@@ -40,6 +40,31 @@ class ForceFrame(NamedTuple):
     arrival_ns: int  # perf_counter_ns() when this client parsed the frame
 
 
+class DevicePoseFrame(NamedTuple):
+    """A decoded DEVICE_POSE frame: a device's pose as it sent it (device convention).
+
+    ``a`` is the forward cutting direction and ``n`` the in-plane direction
+    along the blade, handle to tip (docs/haptics-protocol.md, POSE).
+    """
+
+    tip: tuple  # mm
+    a: tuple
+    n: tuple
+    buttons: int
+    device_id: int  # client id of the device that sent the pose
+    device_ns: int  # header timestamp of that POSE (the device's clock)
+    device_seq: int  # header sequence of that POSE
+    tick: int  # server tick that used it
+    server_ns: int  # server clock at that tick
+    arrival_ns: int  # perf_counter_ns() when this client parsed the frame
+
+
+def decode_device_pose(ts: int, payload, arrival_ns: int) -> DevicePoseFrame:
+    """Decode a DEVICE_POSE payload (``ts``: the frame header's timestamp)."""
+    v = P.DEVICE_POSE_PAYLOAD.unpack(payload)
+    return DevicePoseFrame(v[0:3], v[3:6], v[6:9], v[9], v[10], v[11], v[12], v[13], ts, arrival_ns)
+
+
 class HapticsClient:
     """Connect to a haptics server as a device or a simulation.
 
@@ -47,9 +72,15 @@ class HapticsClient:
     ----------
     host, port : address of the server
     role : "device" or "simulation"
+    timeout : float
+        Seconds to wait for the connection and the WELCOME.
+    forward_poses : bool
+        Simulation role only: ask the server for DEVICE_POSE frames
+        (:attr:`forwards_poses` says whether it agreed).
     """
 
-    def __init__(self, host: str, port: int, role: str = "device", timeout: float = CONNECT_TIMEOUT_S):
+    def __init__(self, host: str, port: int, role: str = "device", timeout: float = CONNECT_TIMEOUT_S,
+                 forward_poses: bool = False):
         roles = {"device": P.ROLE_DEVICE, "simulation": P.ROLE_SIMULATION}
         if role not in roles:
             raise InputError(f"unknown haptics role {role!r} (device or simulation)")
@@ -61,11 +92,17 @@ class HapticsClient:
         self.sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         self._buf = bytearray()
         self.seq = 0
-        self.sock.sendall(P.frame(P.HELLO, P.HELLO_PAYLOAD.pack(roles[role]), ts=time.perf_counter_ns()))
+        flags = P.HELLO_FORWARD_POSES if forward_poses else 0
+        self.sock.sendall(P.frame(P.HELLO, P.HELLO_PAYLOAD.pack(roles[role], flags), ts=time.perf_counter_ns()))
         ftype, _, _, payload = self.read_frame(timeout)
         if ftype != P.WELCOME:
             raise ProtocolError(f"expected WELCOME from the haptics server, got {P.TYPE_NAMES.get(ftype, ftype)}")
-        _, self.client_id, self.rate_hz = P.WELCOME_PAYLOAD.unpack(payload)
+        _, self.flags, self.client_id, self.rate_hz = P.WELCOME_PAYLOAD.unpack(payload)
+
+    @property
+    def forwards_poses(self) -> bool:
+        """Whether the server agreed to send this client DEVICE_POSE frames."""
+        return bool(self.flags & P.HELLO_FORWARD_POSES)
 
     # -- sending --------------------------------------------------------------
     def send_pose(self, tip, a, n, buttons: int = 0) -> tuple[int, int]:
@@ -123,6 +160,47 @@ class HapticsClient:
             if not chunk:
                 raise ProtocolError("the haptics server closed the connection")
             self._buf += chunk
+
+    def drain(self) -> list:
+        """Every whole frame that has arrived, without blocking.
+
+        Returns
+        -------
+        list of (type, seq, timestamp_ns, payload bytes)
+            In arrival order; a BYE is returned like any other frame.
+
+        Raises
+        ------
+        ProtocolError
+            The server sent ERROR or a malformed frame, or closed the connection.
+        """
+        closed = False
+        self.sock.settimeout(0.0)
+        while True:
+            try:
+                chunk = self.sock.recv(65536)
+            except (BlockingIOError, InterruptedError):
+                break
+            except OSError as err:
+                raise ProtocolError(f"haptics connection failed: {err.strerror or err}") from None
+            if not chunk:
+                closed = True
+                break
+            self._buf += chunk
+        frames = []
+        while len(self._buf) >= P.HEADER_SIZE:
+            ftype, length, seq, ts = P.check_header(self._buf)
+            if len(self._buf) < P.HEADER_SIZE + length:
+                break
+            payload = bytes(self._buf[P.HEADER_SIZE:P.HEADER_SIZE + length])
+            del self._buf[:P.HEADER_SIZE + length]
+            if ftype == P.ERROR:
+                (code,) = P.ERROR_HEAD.unpack_from(payload)
+                raise ProtocolError(f"haptics server error {code}: {payload[4:].decode('utf-8', 'replace')}")
+            frames.append((ftype, seq, ts, payload))
+        if closed and not any(f[0] == P.BYE for f in frames):
+            raise ProtocolError("the haptics server closed the connection")
+        return frames
 
     def read_force(self, timeout: float | None = CONNECT_TIMEOUT_S) -> ForceFrame:
         """The next FORCE or STATE frame (other frames are skipped)."""

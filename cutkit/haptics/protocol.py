@@ -3,6 +3,11 @@
 Every frame is a 24-byte little-endian header followed by ``length`` payload
 bytes.  Each frame type has one fixed payload size, so a receiver can reject
 a malformed frame from its header alone.
+
+Pose forwarding is an extension within version 1: a simulation sets
+``HELLO_FORWARD_POSES`` in the HELLO flags byte (a pad byte for servers
+without it), a server that forwards echoes the bit in WELCOME and sends that
+simulation a DEVICE_POSE frame every tick in which a device pose arrived.
 """
 
 from __future__ import annotations
@@ -29,9 +34,10 @@ SIM_UPDATE = 5  # simulation -> server
 STATE = 6  # server -> simulation, in reply to each SIM_UPDATE
 BYE = 7  # either way: closing
 ERROR = 8  # server -> client before it closes a connection
+DEVICE_POSE = 9  # server -> simulation that asked for it: the newest device pose
 
 TYPE_NAMES = {HELLO: "HELLO", WELCOME: "WELCOME", POSE: "POSE", FORCE: "FORCE", SIM_UPDATE: "SIM_UPDATE",
-              STATE: "STATE", BYE: "BYE", ERROR: "ERROR"}
+              STATE: "STATE", BYE: "BYE", ERROR: "ERROR", DEVICE_POSE: "DEVICE_POSE"}
 
 # roles
 ROLE_DEVICE = 1
@@ -39,8 +45,10 @@ ROLE_SIMULATION = 2
 ROLE_NAMES = {ROLE_DEVICE: "device", ROLE_SIMULATION: "simulation"}
 
 # payloads
-HELLO_PAYLOAD = struct.Struct("<B3x")  # role
-WELCOME_PAYLOAD = struct.Struct("<B3xII")  # role, client id, tick rate Hz
+HELLO_PAYLOAD = struct.Struct("<BB2x")  # role, flags (HELLO_* bits; 0 in a plain version 1 HELLO)
+WELCOME_PAYLOAD = struct.Struct("<BB2xII")  # role, flags granted, client id, tick rate Hz
+#: HELLO flag: a simulation asks for DEVICE_POSE frames (the server echoes it in WELCOME if it forwards).
+HELLO_FORWARD_POSES = 0x01
 #: tip (3), a (3), n (3) as float64; buttons uint32; 4 pad bytes
 POSE_PAYLOAD = struct.Struct("<9dI4x")
 #: force (3), proxy (3), a (3), n (3), force gain as float64; echo timestamp,
@@ -49,12 +57,16 @@ FORCE_PAYLOAD = struct.Struct("<13dQQIB3x")
 #: entry (3), plane normal (3), external force (3), material (9) as float64;
 #: contact uint8; 7 pad bytes
 SIM_PAYLOAD = struct.Struct("<18dB7x")
+#: tip (3), a (3), n (3) as float64 exactly as the device sent them; buttons
+#: uint32; device client id uint32; header timestamp of that POSE uint64;
+#: its header sequence uint32; 4 pad bytes; server tick uint64
+DEVICE_POSE_PAYLOAD = struct.Struct("<9dIIQI4xQ")
 ERROR_HEAD = struct.Struct("<I")  # error code, then a UTF-8 message to the end of the payload
 
 #: Payload size of each type; None = variable up to MAX_PAYLOAD.
 PAYLOAD_SIZE = {HELLO: HELLO_PAYLOAD.size, WELCOME: WELCOME_PAYLOAD.size, POSE: POSE_PAYLOAD.size,
                 FORCE: FORCE_PAYLOAD.size, SIM_UPDATE: SIM_PAYLOAD.size, STATE: FORCE_PAYLOAD.size,
-                BYE: 0, ERROR: None}
+                BYE: 0, ERROR: None, DEVICE_POSE: DEVICE_POSE_PAYLOAD.size}
 
 # error codes
 E_BAD_MAGIC = 1

@@ -13,6 +13,10 @@ late starts afresh from now instead of catching up in a burst.
 A watchdog ramps the rendered force to zero, at ``1 / WATCHDOG_RAMP_S`` per
 second, once no simulation update has arrived for ``WATCHDOG_TIMEOUT_S``;
 it ramps back up the same way when updates return.
+
+A simulation that asks for it in its HELLO (``HELLO_FORWARD_POSES``) gets
+the device's pose as the device sent it, in a DEVICE_POSE frame, every tick
+in which a new pose arrived: the hand's raw tip, not only the proxy.
 """
 
 from __future__ import annotations
@@ -61,7 +65,7 @@ class _Conn:
     """One client connection and its preallocated receive buffer."""
 
     __slots__ = ("sock", "peer", "cid", "role", "buf", "view", "r", "w", "last_seq", "last_ts",
-                 "pending", "dropped", "partial_since", "want_state", "out", "closed")
+                 "pending", "dropped", "partial_since", "want_state", "out", "closed", "flags")
 
     def __init__(self, sock, peer, cid):
         self.sock = sock
@@ -80,6 +84,7 @@ class _Conn:
         self.want_state = False
         self.out = bytearray(P.HEADER_SIZE + P.FORCE_PAYLOAD.size)
         self.closed = False
+        self.flags = 0  # HELLO flags granted
 
 
 def material_from_model(path, name: str = "muscle") -> dict:
@@ -138,6 +143,8 @@ class HapticsServer:
         self.f_sim = np.zeros(3)
         self.out = np.zeros(N_OUT)
         self._pose = None  # newest POSE payload of this tick
+        self._pose_meta = (0, 0, 0)  # device client id, sequence, timestamp of that POSE
+        self._forward = bytearray(P.HEADER_SIZE + P.DEVICE_POSE_PAYLOAD.size)  # DEVICE_POSE, packed per tick
         self._sim = None  # newest SIM_UPDATE payload of this tick
         self._last_sim_ns = None
         self.gain = 0.0
@@ -208,8 +215,9 @@ class HapticsServer:
                     log.exception("client %d (%s): internal error; closing the connection", key.data.cid,
                                   key.data.peer)
                     self._close(key.data)
-        if self._pose is not None:
-            v = self._pose
+        new_pose = self._pose
+        if new_pose is not None:
+            v = new_pose
             self.control.set(v[0:3], v[3:6], v[6:9])
             self._pose = None
         if self._sim is not None:
@@ -228,6 +236,8 @@ class HapticsServer:
             self.out[:] = 0.0
         self.tick += 1
         self._send_all(now)
+        if new_pose is not None:
+            self._forward_pose(new_pose, now)
         if self.tick % HOUSEKEEPING_TICKS == 0:
             self._housekeeping(now)
 
@@ -328,11 +338,13 @@ class HapticsServer:
         if conn.role == 0:
             if ftype != P.HELLO:
                 raise P.FrameError(f"expected HELLO first, got {P.TYPE_NAMES[ftype]}", P.E_UNEXPECTED)
-            (role,) = P.HELLO_PAYLOAD.unpack_from(buf, off)
+            role, flags = P.HELLO_PAYLOAD.unpack_from(buf, off)
             if role not in P.ROLE_NAMES:
                 raise P.FrameError(f"unknown role {role}", P.E_BAD_VALUE)
             conn.role = role
-            self._send(conn, P.frame(P.WELCOME, P.WELCOME_PAYLOAD.pack(role, conn.cid, self.rate_hz),
+            # unknown flag bits are ignored; only what this server grants is echoed
+            conn.flags = flags & P.HELLO_FORWARD_POSES if role == P.ROLE_SIMULATION else 0
+            self._send(conn, P.frame(P.WELCOME, P.WELCOME_PAYLOAD.pack(role, conn.flags, conn.cid, self.rate_hz),
                                      seq=seq, ts=now))
             log.info("client %d (%s) is a %s", conn.cid, conn.peer, P.ROLE_NAMES[role])
             return
@@ -341,6 +353,7 @@ class HapticsServer:
             if not all(map(math.isfinite, v[:9])):
                 raise P.FrameError("POSE with a non-finite number", P.E_BAD_VALUE)
             self._pose = v  # newest state wins
+            self._pose_meta = (conn.cid, seq, ts)
             conn.last_seq = seq
             conn.last_ts = ts
         elif ftype == P.SIM_UPDATE and conn.role == P.ROLE_SIMULATION:
@@ -409,6 +422,20 @@ class HapticsServer:
             out = conn.out
             P.pack_header(out, ftype, P.FORCE_PAYLOAD.size, self.tick, now)
             P.FORCE_PAYLOAD.pack_into(out, P.HEADER_SIZE, *values, conn.last_ts, self.tick, conn.last_seq, code)
+            self._send(conn, out)
+
+    def _forward_pose(self, v, now: int) -> None:
+        """Send this tick's device pose to every simulation that asked for it."""
+        out = None
+        for conn in tuple(self._conns):
+            if conn.role != P.ROLE_SIMULATION or not conn.flags & P.HELLO_FORWARD_POSES:
+                continue
+            if out is None:
+                out = self._forward
+                cid, seq, ts = self._pose_meta
+                P.pack_header(out, P.DEVICE_POSE, P.DEVICE_POSE_PAYLOAD.size, self.tick, now)
+                P.DEVICE_POSE_PAYLOAD.pack_into(out, P.HEADER_SIZE, *v[:9], v[9], cid, ts, seq & 0xFFFFFFFF,
+                                                self.tick)
             self._send(conn, out)
 
     def _send(self, conn: _Conn, data) -> None:
