@@ -18,6 +18,9 @@ import click
 @click.option("--spacing", help="SX,SY,SZ voxel spacing in mm for formats without one (.npy).")
 @click.option("--ratio", type=float, help="Decimation ratio of tets kept (overrides the recipe).")
 @click.option("--no-decimate", is_flag=True, help="Skip the decimation stage.")
+@click.option("--keep-record", is_flag=True,
+              help="Keep the decimation's progressive record (the finest mesh and its collapses, for "
+                   "`cutkit decimate --level`); about ten times the model's own size, so off by default.")
 @click.option("--clean", "clean", flag_value=True, default=None,
               help="Morphological opening and closing of a thresholded mask (off by default: it erases "
                    "structures thinner than three voxels).")
@@ -25,7 +28,7 @@ import click
               help="Skip all clean-up: opening/closing, largest component and hole filling.")
 @click.option("--texture", "texture_path", type=click.Path(), help="Texture volume (defaults to the recipe's, if any).")
 def command(volume, output, recipe_path, threshold, channel, otsu, labels_path, voxel_size, smooth, spacing, ratio,
-            no_decimate, clean, texture_path):
+            no_decimate, keep_record, clean, texture_path):
     """Build a cuttable model from VOLUME (or the recipe's volume)."""
     import numpy as np
 
@@ -95,7 +98,8 @@ def command(volume, output, recipe_path, threshold, channel, otsu, labels_path, 
 
     with progress() as bar:
         task = bar.add_task("build-model", total=len(STAGES))
-        ctx = run_build(volume, recipe, on_stage=stage_reporter(bar, task), spacing=spacing, labels_path=labels_path)
+        ctx = run_build(volume, recipe, on_stage=stage_reporter(bar, task), spacing=spacing, labels_path=labels_path,
+                        keep_record=keep_record)
         bar.update(task, description="build-model: write")
         write_model(output, ctx.model)
 

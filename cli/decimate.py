@@ -17,11 +17,14 @@ import click
 @click.option("--optimize", "optimizer", type=click.Choice(["netgen"]), default=None,
               help="Then try gmsh's Netgen optimiser; kept only if it raises the minimum dihedral angle "
                    "with the boundary, the interfaces and the node data unchanged (docs/decimation.md).")
-def command(model, output, target_tets, ratio, tolerance, min_dihedral, level, optimizer):
+@click.option("--no-record", is_flag=True,
+              help="Leave the progressive record out of the output (a model of about a tenth of the size; "
+                   "no --level later).")
+def command(model, output, target_tets, ratio, tolerance, min_dihedral, level, optimizer, no_record):
     """Decimate MODEL by half-edge collapses (paper section 7.1), interior edges first.
 
-    The collapses are recorded in the output (extra/progressive), so any
-    coarser or finer level can be extracted later with --level.
+    The collapses are recorded in the output (extra/progressive, compressed), so any
+    coarser or finer level can be extracted later with --level (--no-record leaves it out).
     """
     import time
 
@@ -62,6 +65,10 @@ def command(model, output, target_tets, ratio, tolerance, min_dihedral, level, o
 
         out, opt = optimize(out, optimizer)
     after = quality_summary(out.points, out.tets, min_dihedral)
+    if no_record:
+        from cutkit.decimate import RECORD
+
+        out.extra.pop(RECORD, None)
     write_model(output, out)
     rows = [
         ["tets", src.n_tets, out.n_tets],

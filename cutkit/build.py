@@ -183,6 +183,7 @@ def run_build(
     on_stage: Callable[[str, str], None] | None = None,
     spacing=None,
     labels_path: str | Path | None = None,
+    keep_record: bool = False,
 ) -> BuildContext:
     """Run every stage of :data:`STAGES` on a volume.
 
@@ -196,6 +197,12 @@ def run_build(
         Called with event ``"start"`` and ``"done"`` around each stage (for progress display).
     spacing : (3,) float, optional
         Voxel spacing for formats that carry none (.npy).
+    keep_record : bool
+        Keep the decimation's progressive record (``extra/progressive``: the
+        finest mesh and every collapse, so ``cutkit decimate --level`` can
+        extract other levels).  Off by default: it holds the isovolume's
+        millions of tets and would make the model ten times larger than its
+        own mesh (docs/model-format.md).
     labels_path : path-like, optional
         A label map used as the segmentation as it is (the recipe's smoothing
         and resampling still apply); the volume serves only as the default
@@ -232,6 +239,10 @@ def run_build(
         if on_stage:
             on_stage(name, "done")
 
+    if not keep_record:
+        from cutkit.decimate.progressive import RECORD
+
+        ctx.model.extra.pop(RECORD, None)
     prov = dict(ctx.model.provenance)
     prov["cutkit_version"] = __version__
     prov["recipe"] = {k: v for k, v in recipe.items() if not k.startswith("_")}

@@ -88,7 +88,8 @@ def n_levels(model: TetModel) -> int:
 def _record(model: TetModel) -> dict:
     rec = model.extra.get(RECORD)
     if rec is None:
-        raise InputError("the model has no progressive record (extra/progressive); decimate it first")
+        raise InputError("the model has no progressive record (extra/progressive): decimate it with "
+                         "`cutkit decimate`, or build it with `cutkit build-model --keep-record`")
     for name in ("points0", "tets0", "labels0", "collapse_u", "collapse_v", "tet_counts", "level", "node_ids", "tet_ids"):
         if name not in rec:
             raise ModelFormatError(f"progressive record is missing extra/progressive/{name}")
