@@ -381,6 +381,9 @@ def test_material_from_model(tmp_path):
     points, tets = box_mesh((2, 2, 2), spacing=(1.0, 1.0, 1.0), origin=(0.0, 0.0, 0.0))
     rows = [dict(label=1, name="fat", **{k: 1.0 for k in MATERIAL_FIELDS}),
             dict(label=2, name="muscle", **{k: 0.5 + i for i, k in enumerate(MATERIAL_FIELDS)})]
+    for row in rows:
+        if "poisson_ratio" in row:  # must lie in [0, 0.5)
+            row["poisson_ratio"] = 0.3
     path = tmp_path / "m.h5"
     write_model(path, TetModel.from_arrays(points, tets, np.full(len(tets), 2), materials=Materials.from_rows(rows)))
     row = material_from_model(path, "muscle")

@@ -93,11 +93,11 @@ class HapticsClient:
         self._buf = bytearray()
         self.seq = 0
         flags = P.HELLO_FORWARD_POSES if forward_poses else 0
-        self.sock.sendall(P.frame(P.HELLO, P.HELLO_PAYLOAD.pack(roles[role], flags), ts=time.perf_counter_ns()))
+        self.sock.sendall(P.frame(P.HELLO, P.HELLO_FLAGS_PAYLOAD.pack(roles[role], flags), ts=time.perf_counter_ns()))
         ftype, _, _, payload = self.read_frame(timeout)
         if ftype != P.WELCOME:
             raise ProtocolError(f"expected WELCOME from the haptics server, got {P.TYPE_NAMES.get(ftype, ftype)}")
-        _, self.flags, self.client_id, self.rate_hz = P.WELCOME_PAYLOAD.unpack(payload)
+        _, self.flags, self.client_id, self.rate_hz = P.WELCOME_FLAGS_PAYLOAD.unpack(payload)
 
     @property
     def forwards_poses(self) -> bool:

@@ -45,8 +45,11 @@ ROLE_SIMULATION = 2
 ROLE_NAMES = {ROLE_DEVICE: "device", ROLE_SIMULATION: "simulation"}
 
 # payloads
-HELLO_PAYLOAD = struct.Struct("<BB2x")  # role, flags (HELLO_* bits; 0 in a plain version 1 HELLO)
-WELCOME_PAYLOAD = struct.Struct("<BB2xII")  # role, flags granted, client id, tick rate Hz
+HELLO_PAYLOAD = struct.Struct("<B3x")  # role (a plain HELLO: flags byte zero)
+WELCOME_PAYLOAD = struct.Struct("<B3xII")  # role, client id, tick rate Hz (flags byte skipped)
+#: The same payloads with the flags byte (offset 1) that pose forwarding uses.
+HELLO_FLAGS_PAYLOAD = struct.Struct("<BB2x")  # role, flags (HELLO_* bits)
+WELCOME_FLAGS_PAYLOAD = struct.Struct("<BB2xII")  # role, flags granted, client id, tick rate Hz
 #: HELLO flag: a simulation asks for DEVICE_POSE frames (the server echoes it in WELCOME if it forwards).
 HELLO_FORWARD_POSES = 0x01
 #: tip (3), a (3), n (3) as float64; buttons uint32; 4 pad bytes

@@ -338,13 +338,13 @@ class HapticsServer:
         if conn.role == 0:
             if ftype != P.HELLO:
                 raise P.FrameError(f"expected HELLO first, got {P.TYPE_NAMES[ftype]}", P.E_UNEXPECTED)
-            role, flags = P.HELLO_PAYLOAD.unpack_from(buf, off)
+            role, flags = P.HELLO_FLAGS_PAYLOAD.unpack_from(buf, off)
             if role not in P.ROLE_NAMES:
                 raise P.FrameError(f"unknown role {role}", P.E_BAD_VALUE)
             conn.role = role
             # unknown flag bits are ignored; only what this server grants is echoed
             conn.flags = flags & P.HELLO_FORWARD_POSES if role == P.ROLE_SIMULATION else 0
-            self._send(conn, P.frame(P.WELCOME, P.WELCOME_PAYLOAD.pack(role, conn.flags, conn.cid, self.rate_hz),
+            self._send(conn, P.frame(P.WELCOME, P.WELCOME_FLAGS_PAYLOAD.pack(role, conn.flags, conn.cid, self.rate_hz),
                                      seq=seq, ts=now))
             log.info("client %d (%s) is a %s", conn.cid, conn.peer, P.ROLE_NAMES[role])
             return
