@@ -131,3 +131,53 @@ def brute_segment_hits(points, faces, alive, p0, p1):
         kind = G.HIT_VERTEX if on >= 2 else G.HIT_EDGE if on == 1 else G.HIT_FACE
         hits[int(f)] = (kind, min(max(t, 0.0), 1.0))
     return hits
+
+
+def triangle_faces_twin(points, faces, face_alive, tri):
+    """Every live face triangle ``tri`` meets, testing all faces: an edge of one crossing the other.
+
+    Plain NumPy: Moeller-Trumbore of each of the six edges (closed
+    barycentric and parameter ranges), plus the coplanar case by 2D
+    point-in-triangle of the vertices of each in the other.
+    """
+    out = []
+    tri = np.asarray(tri, float)
+    lo, hi = tri.min(axis=0), tri.max(axis=0)
+    for f in range(faces.shape[0]):
+        x = points[faces[f]]
+        if np.any(x.min(axis=0) > hi + 1e-9) or np.any(x.max(axis=0) < lo - 1e-9):
+            continue  # boxes apart: the triangles cannot meet
+        if face_alive[f] and _tri_tri(x, tri):
+            out.append(f)
+    return np.array(out, np.int64)
+
+
+def _seg_tri(p0, p1, a, b, c, eps=1e-10):
+    d = p1 - p0
+    e1, e2 = b - a, c - a
+    h = np.cross(d, e2)
+    det = e1 @ h
+    if abs(det) <= 1e-12 * np.linalg.norm(e1) * np.linalg.norm(e2) * np.linalg.norm(d):
+        return False
+    s = p0 - a
+    u = (s @ h) / det
+    q = np.cross(s, e1)
+    v = (d @ q) / det
+    t = (e2 @ q) / det
+    return u >= -eps and v >= -eps and u + v <= 1 + eps and -eps <= t <= 1 + eps
+
+
+def _tri_tri(T, U):
+    for X, Y in ((T, U), (U, T)):
+        for i in range(3):
+            if _seg_tri(X[i], X[(i + 1) % 3], *Y):
+                return True
+    n = np.cross(T[1] - T[0], T[2] - T[0])
+    if np.all(np.abs((U - T[0]) @ n) <= 1e-10 * np.linalg.norm(n) * (1 + np.abs(U - T[0]).max())):
+        # coplanar: a vertex of one inside the other
+        def inside(p, X):
+            m = np.stack([X[1] - X[0], X[2] - X[0]], axis=1)
+            uv = np.linalg.lstsq(m, p - X[0], rcond=None)[0]
+            return uv.min() >= -1e-10 and uv.sum() <= 1 + 1e-10
+        return any(inside(p, T) for p in U) or any(inside(p, U) for p in T)
+    return False

@@ -9,6 +9,7 @@ from cutkit.collision.bvh import (
     SegmentHits,
     SurfaceBVH,
 )
+from cutkit.collision.swept import Contact, blade_entry, query_triangle, swept_faces
 
 __all__ = [
     "DEFAULT_S_TOL",
@@ -18,4 +19,8 @@ __all__ = [
     "HIT_COPLANAR",
     "SegmentHits",
     "SurfaceBVH",
+    "Contact",
+    "blade_entry",
+    "query_triangle",
+    "swept_faces",
 ]

@@ -10,7 +10,8 @@ Per step:
    faces towards the new tip (the paper's findTrajectoryTetra, numba
    kernel ``_kernels_step.walk``).  With no tip tetrahedron (tip outside),
    the entry comes from the surface collision: boundary faces met by the
-   blade or the tip's path (``SurfaceBVH``, refitted to moved nodes).
+   whole blade, i.e. its swept quad or its new pose (``SurfaceBVH``,
+   refitted to moved nodes).
 2. ``markSwapFace``-style local traversal (numba kernel
    ``_kernels_step.sweep``): from the seeds (tip tetrahedra, entry
    tetrahedra, previous active tetrahedra), visit neighbours while the
@@ -35,6 +36,9 @@ from cutkit.cutting.cutmesh import CutMesh
 
 #: Maximum number of face crossings of the tip walk per step.
 MAX_WALK = 10000
+#: Entry tets from which the tip walk is tried per step (a blade entering
+#: edge-first may meet many faces; the tip, if inside, is near the first).
+MAX_ENTRY_WALKS = 8
 
 
 @dataclass
@@ -70,13 +74,19 @@ def find_trajectory_tetra(cm: CutMesh, start: int, target) -> int:
     return int(KS.walk(cm._x, cm.orig_tets, cm.neighbors, int(start), np.asarray(target, np.float64), MAX_WALK))
 
 
-def _surface_seeds(cm, segs):
-    """Original tets of the boundary faces met by the segments (surface collision, 4.1).
+def _surface_seeds(cm, P0, Q0, P1, Q1):
+    """Original tets of the boundary faces the blade met between two poses (surface collision, 4.1).
 
-    The surface BVH is built on first contact; afterwards it is refitted
-    (``SurfaceBVH.update``: only nodes that left their tolerance box cost
-    anything) so surface entry follows a deforming mesh.
+    The whole blade counts, not only its tip: the faces met by the swept
+    quad (P0, Q0, Q1, P1) or by the blade at its new pose
+    (:func:`cutkit.collision.swept_faces`), so a blade entering edge-first
+    (a cleaver, a through-cut with the tip outside, a one-step guillotine)
+    is found.  The surface BVH is built on first contact; afterwards it is
+    refitted (``SurfaceBVH.update``: only nodes that left their tolerance
+    box cost anything) so surface entry follows a deforming mesh.
     """
+    from cutkit.collision import swept_faces
+
     pts = cm._x[:cm.n_orig_points]
     bvh = getattr(cm, "_bvh", None)
     if bvh is None:
@@ -87,13 +97,8 @@ def _surface_seeds(cm, segs):
         cm._bvh_face_tet = face_tet
     else:
         bvh.update(pts)
-    out = []
-    for p0, p1 in segs:
-        if np.allclose(p0, p1):
-            continue
-        hits = bvh.query_segment(pts, p0, p1)
-        out.extend(cm._bvh_face_tet[hits.face].tolist())
-    return out
+    faces, _ = swept_faces(bvh, pts, P0, Q0, P1, Q1)
+    return cm._bvh_face_tet[faces].tolist()
 
 
 def _sweep(cm, stamp, seeds, swept, blade, P0):
@@ -155,9 +160,9 @@ def cut_step(cm: CutMesh, tip, a) -> StepResult:
     if cm.tip_tet >= 0:
         tip_tet = find_trajectory_tetra(cm, cm.tip_tet, P1)
     if tip_tet < 0:
-        ent = _surface_seeds(cm, [(Q1, P1), (P0, P1), (Q0, Q1)])
+        ent = _surface_seeds(cm, P0, Q0, P1, Q1)
         seeds.extend(ent)
-        for o in dict.fromkeys(ent):
+        for o in list(dict.fromkeys(ent))[:MAX_ENTRY_WALKS]:
             tip_tet = find_trajectory_tetra(cm, o, P1)
             if tip_tet >= 0:
                 break

@@ -1,0 +1,116 @@
+"""Contact of the whole blade with the tissue surface (paper section 4.1, extended).
+
+The paper finds the entry from the tip's path alone.  A blade also meets
+the tissue with its edge: a cleaver coming down, a through-cut whose tip
+stays outside, or a surface that relaxes past a resting blade.  Between two
+poses the blade (tip P, back Q) sweeps the quad (P0, Q0, Q1, P1), taken as
+the triangles (P0, Q0, Q1) and (P0, Q1, P1); every boundary face that quad
+or the blade at its new pose meets is a contact.  The queries descend the
+same :class:`~cutkit.collision.bvh.SurfaceBVH` as the segment queries, so
+they follow the deformed surface (after ``update``) and cost what the
+hierarchy's overlap with the quad costs, not the model's size.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from cutkit.collision import _swept_kernels as K
+from cutkit.collision.bvh import SurfaceBVH
+
+#: First guess of the number of faces one swept triangle meets.
+_HIT_ROOM = 64
+
+
+@dataclass
+class Contact:
+    """A blade contact: the boundary face, a point where the blade meets it, how it was found."""
+
+    face: int
+    point: np.ndarray
+    kind: str  # 'tip_path' | 'blade' | 'swept'
+
+
+def query_triangle(bvh: SurfaceBVH, points, tri):
+    """Live boundary faces met by triangle ``tri`` (3, 3): (faces (h,) int64, points (h, 3) float64)."""
+    points = np.ascontiguousarray(points, np.float64)
+    tri = np.ascontiguousarray(tri, np.float64).reshape(3, 3)
+    cap = _HIT_ROOM
+    while True:
+        face, pt = np.empty(cap, np.int64), np.empty((cap, 3))
+        n = K.query_triangle(points, bvh.faces, bvh.face_alive, bvh.box_min, bvh.box_max, bvh.child,
+                             bvh.leaf_face, bvh.root, tri, face, pt)
+        if n <= cap:
+            return face[:n], pt[:n]
+        cap = n
+
+
+def swept_faces(bvh: SurfaceBVH, points, p0, q0, p1, q1):
+    """Boundary faces met by the quad the blade swept from (p0, q0) to (p1, q1), or by the blade now.
+
+    Returns
+    -------
+    faces : (h,) int64  unique, ascending
+    points : (h, 3) float64  a point of each where the blade meets it
+    """
+    p0, q0, p1, q1 = (np.asarray(v, np.float64) for v in (p0, q0, p1, q1))
+    fs, ps = [], []
+    for tri in ((p0, q0, q1), (p0, q1, p1)):
+        if np.linalg.norm(np.cross(tri[1] - tri[0], tri[2] - tri[0])) > 0.0:
+            f, p = query_triangle(bvh, points, np.array(tri))
+            fs.append(f)
+            ps.append(p)
+    if np.any(p1 != q1):
+        hits = bvh.query_segment(points, q1, p1)
+        fs.append(hits.face)
+        ps.append(hits.point)
+    if not fs:
+        return np.zeros(0, np.int64), np.zeros((0, 3))
+    f, p = np.concatenate(fs), np.concatenate(ps)
+    u, first = np.unique(f, return_index=True)
+    return u, p[first]
+
+
+def blade_entry(bvh: SurfaceBVH, points, p0, q0, p1, q1) -> Contact | None:
+    """Where the blade moving from pose (p0, q0) to (p1, q1) enters the tissue, or None.
+
+    In order: the tip's path crossing a face inwards (the paper's entry);
+    the blade at its new pose crossing a face inwards from back to tip
+    (e.g. the surface moved past a resting tip); any face the swept quad
+    meets whose outward normal faces against the blade's motion (an edge-first
+    entry: cleaver, through-cut with the tip outside), the one nearest to
+    the previous blade first.
+    """
+    p0, q0, p1, q1 = (np.asarray(v, np.float64) for v in (p0, q0, p1, q1))
+    for kind, a, b in (("tip_path", p0, p1), ("blade", q1, p1)):
+        if np.any(a != b):
+            hits = bvh.query_segment(points, a, b)
+            for f, p in zip(hits.face.tolist(), hits.point):
+                if np.dot(_normal(bvh, points, f), b - a) < 0:
+                    return Contact(int(f), np.asarray(p, np.float64).copy(), kind)
+    faces, pts = swept_faces(bvh, points, p0, q0, p1, q1)
+    if faces.size == 0:
+        return None
+    motion = 0.5 * ((p1 - p0) + (q1 - q0))
+    best, best_d = None, np.inf
+    for f, p in zip(faces.tolist(), pts):
+        if np.dot(_normal(bvh, points, f), motion) >= 0:
+            continue
+        d = _segment_distance(p, q0, p0)
+        if d < best_d:
+            best, best_d = Contact(int(f), np.asarray(p, np.float64).copy(), "swept"), d
+    return best
+
+
+def _normal(bvh, points, f):
+    x = points[bvh.faces[f]]
+    return np.cross(x[1] - x[0], x[2] - x[0])
+
+
+def _segment_distance(p, a, b):
+    d = b - a
+    dd = float(d @ d)
+    s = 0.0 if dd == 0.0 else min(max(float((p - a) @ d) / dd, 0.0), 1.0)
+    return float(np.linalg.norm(p - (a + s * d)))
