@@ -25,4 +25,5 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "trajectory": ("cutkit.cli.trajectory", "Write the trajectory of a straight or arc incision (depth, blade angle, speed, tremor)."),
     "haptics": ("cutkit.cli.haptics", "The 1 kHz haptic scalpel service and its benchmark client."),
     "demo": ("cutkit.cli.demo", "Build the knee phantom and cut it along the shipped incision."),
+    "render": ("cutkit.cli.render", "Render an output folder again: pictures in other views, a movie of the cut."),
 }

@@ -8,7 +8,8 @@ import click
               type=click.Path(file_okay=False), help="Output folder (the model, the simulation, pictures).")
 @click.option("--fps", default=10.0, show_default=True, type=float, help="Frames per simulated second.")
 @click.option("--no-png", is_flag=True, help="Skip the pictures.")
-def command(out_dir, fps, no_png):
+@click.option("--movie", is_flag=True, help="Also a movie of the cut, OUT/cut.mp4.")
+def command(out_dir, fps, no_png, movie):
     """Build pipelines/knee.toml (reused when unchanged), cut sample_volumes/incision.csv, take pictures."""
     import time
 
@@ -22,19 +23,19 @@ def command(out_dir, fps, no_png):
     # a second process compiles the decimation and simulation kernels while this one builds
     warm = start_background()
     try:
-        _run(out_dir, fps, no_png, trajectory, warm, t0)
+        _run(out_dir, fps, no_png, movie, trajectory, warm, t0)
     finally:
         if warm is not None and warm.poll() is None:
             warm.terminate()
             warm.wait()
 
 
-def _run(out_dir, fps, no_png, trajectory, warm, t0):
+def _run(out_dir, fps, no_png, movie, trajectory, warm, t0):
     import time
 
     from cutkit.build import STAGES
     from cutkit.cli._ui import console, progress, stage_reporter
-    from cutkit.cli.simulate import report, run_with_progress
+    from cutkit.cli.simulate import render_with_progress, report, run_with_progress
     from cutkit.cutting.trajectory import read_trajectory
     from cutkit.io.model_h5 import read_model
     from cutkit.simulate import SimulateOptions
@@ -49,7 +50,8 @@ def _run(out_dir, fps, no_png, trajectory, warm, t0):
     model = read_model(model_path)
     console.print(f"model {model_path}: {model.tets.shape[0]} tets, {model.points.shape[0]} nodes"
                   + (" (inputs unchanged, build reused)" if reused else ""))
-    opt = SimulateOptions(fps=fps, png=not no_png)
+    opt = SimulateOptions(fps=fps, png=False)
     summary = run_with_progress(model, read_trajectory(trajectory), out_dir, opt, model_path=str(model_path))
+    render_with_progress(summary, out_dir, not no_png, movie)
     report(console, summary, out_dir)
     console.print(f"demo finished in {time.perf_counter() - t0:.0f} s")

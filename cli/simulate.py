@@ -9,7 +9,10 @@ import click
 @click.option("-o", "--output", "out_dir", required=True, type=click.Path(file_okay=False),
               help="Output folder (frames/, cut.pvd, cut_surface.pvd, forces.csv, summary.json, model.h5).")
 @click.option("--fps", default=30.0, show_default=True, type=float, help="Frames per simulated second.")
-@click.option("--png", is_flag=True, help="Off-screen pictures of selected frames (pictures/NNNN.png).")
+@click.option("--png", is_flag=True,
+              help="Pictures of the cut half-way, at the trajectory's end and at the end (pictures/NNNN_cut.png); "
+                   "`cutkit render OUT/` makes others.")
+@click.option("--movie", is_flag=True, help="A movie of every frame, OUT/cut.mp4 (imageio-ffmpeg).")
 @click.option("--realtime", is_flag=True, help="Pace to the wall clock and report the rate of each task.")
 @click.option("--haptics", metavar="HOST:PORT", help="Use a running `cutkit haptics serve` for the force model.")
 @click.option("--hold", "hold_s", default=0.5, show_default=True, type=float,
@@ -21,7 +24,7 @@ import click
               help="Volume term: each tet resists a change of volume with bulk = this x E (0: springs only, "
                    "as in the paper; 0.3 leaves a tenth of the inverted tets on the demo knee, at about four "
                    "times the relaxation time).")
-def command(model, trajectory, out_dir, fps, png, realtime, haptics, hold_s, geometry_rate_hz, blade_length,
+def command(model, trajectory, out_dir, fps, png, movie, realtime, haptics, hold_s, geometry_rate_hz, blade_length,
             volume_stiffness):
     """Cut MODEL along TRAJECTORY with the scalpel force model and relax it; write frames and logs."""
     from cutkit.io.atomic import check_writable
@@ -32,7 +35,7 @@ def command(model, trajectory, out_dir, fps, png, realtime, haptics, hold_s, geo
 
     _check_flags(fps=fps, hold=hold_s, geometry_rate=geometry_rate_hz, blade_length=blade_length,
                  volume_stiffness=volume_stiffness)
-    opt = SimulateOptions(fps=fps, png=png, realtime=realtime, haptics=haptics, hold_s=hold_s,
+    opt = SimulateOptions(fps=fps, png=False, realtime=realtime, haptics=haptics, hold_s=hold_s,
                           geometry_rate_hz=geometry_rate_hz, blade_length=blade_length,
                           volume_stiffness=volume_stiffness)
     opt.check()
@@ -40,8 +43,25 @@ def command(model, trajectory, out_dir, fps, png, realtime, haptics, hold_s, geo
     tet_model = read_model(model)
     traj = read_trajectory(trajectory)
     summary = run_with_progress(tet_model, traj, out_dir, opt, model_path=str(model))
+    render_with_progress(summary, out_dir, png, movie)
     report(console, summary, out_dir)
     return 0
+
+
+def render_with_progress(summary: dict, out_dir, png: bool, movie: bool) -> None:
+    """Pictures and movie of the folder just written (:func:`cutkit.render.render_output`)."""
+    if not (png or movie):
+        return
+    from cutkit.cli._ui import progress
+    from cutkit.render import render_output
+
+    with progress() as bar:
+        task = bar.add_task("rendering", total=None)
+        done = render_output(out_dir, pictures=png, movie="cut.mp4" if movie else None,
+                             progress=lambda k, n: bar.update(task, completed=k, total=n))
+    summary["pictures"] = done["pictures"]
+    if done["movie"]:
+        summary["movie"] = done["movie"]
 
 
 def _check_flags(**values) -> None:
@@ -108,3 +128,5 @@ def report(console, summary, out_dir) -> None:
                   f"forces in {out_dir}/forces.csv, summary in {out_dir}/summary.json")
     for p in summary["pictures"]:
         console.print(f"picture: {out_dir}/{p}")
+    if summary.get("movie"):
+        console.print(f"movie: {out_dir}/{summary['movie']}")
