@@ -50,17 +50,15 @@ def vertex_normals(points: np.ndarray, faces: np.ndarray) -> np.ndarray:
     (n, 3) float32
         Unit normals; zero for points in no face.
     """
-    n = points.shape[0]
-    out = np.zeros((n, 3), np.float64)
-    if faces.size:
-        p0 = points[faces[:, 0]]
-        fn = np.cross(points[faces[:, 1]] - p0, points[faces[:, 2]] - p0)
-        idx = faces.ravel()
-        for c in range(3):
-            out[:, c] = np.bincount(idx, weights=np.repeat(fn[:, c], 3), minlength=n)
-    length = np.linalg.norm(out, axis=1)
-    length[length == 0] = 1.0
-    return (out / length[:, None]).astype(np.float32)
+    from cutkit.live._kernels import vertex_normals as kernel
+
+    points = np.ascontiguousarray(points, np.float64)
+    faces = np.ascontiguousarray(faces, np.int64)
+    if faces.size and (faces.min() < 0 or faces.max() >= points.shape[0]):
+        raise IndexError("face index out of range")
+    out = np.empty((points.shape[0], 3), np.float32)
+    kernel(points, faces.reshape(-1, 3), out)
+    return out
 
 
 def cut_colour_fraction(image: np.ndarray, colour=CUT_RGB, min_saturation: float = 0.5,
@@ -235,9 +233,11 @@ class WindowView:
         old_b, old_c = self._faces
         if old_b is None or not np.array_equal(old_b, frame.boundary_faces):
             self._tissue.faces = _cells(frame.boundary_faces)
+            old_b = frame.boundary_faces.copy()
         if old_c is None or not np.array_equal(old_c, frame.cut_faces):
             self._cut.faces = _cells(frame.cut_faces)
-        self._faces = (frame.boundary_faces.copy(), frame.cut_faces.copy())
+            old_c = frame.cut_faces.copy()
+        self._faces = (old_b, old_c)
         rgb = frame.rgb if frame.rgb is not None else np.broadcast_to(self.tissue_rgb, (n, 3))
         self._tissue.point_data["rgb"] = np.ascontiguousarray(rgb, np.uint8)
         self._tissue.point_data.active_normals = vertex_normals(self._points, frame.boundary_faces)
