@@ -2,13 +2,21 @@
 
 from __future__ import annotations
 
+import os
+
 from rich.console import Console
 from rich.progress import BarColumn, Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
+#: Console width when the output is not a terminal (tables are never cut).
+PIPED_WIDTH = 400
+
 # soft_wrap: plain lines are never broken by rich, so a long file path stays
 # one piece to copy (the terminal wraps it for display); tables still fit the width.
 console = Console(highlight=False, soft_wrap=True)
+if not console.is_terminal and "COLUMNS" not in os.environ:
+    # piped or redirected: rich would cut tables to 80 columns; a file has no width
+    console = Console(highlight=False, soft_wrap=True, width=PIPED_WIDTH)
 
 
 def progress() -> Progress:

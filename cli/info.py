@@ -45,12 +45,15 @@ def _model_info(path: str, version: int) -> None:
     volumes = np.bincount(inv, weights=vol, minlength=labels.size)
     names = {int(l): n for l, n in zip(m.materials.label, m.materials.name)}
     rows = [[int(l), names.get(int(l), "-"), int(c), f"{v:.6g}"] for l, c, v in zip(labels, counts, volumes)]
-    console.print(table("labels", ["label", "material", "tets", "volume mm^3"], rows))
+    console.print(table("labels", ["label", "material", "tets", "volume [mm^3]"], rows))
     if m.materials.n_materials:
+        from cutkit.model.tetmodel import MATERIAL_FIELDS
+
         cols = list(m.materials.values)
         mrows = [[int(l), n] + [f"{m.materials.values[c][i]:.4g}" for c in cols]
                  for i, (l, n) in enumerate(zip(m.materials.label, m.materials.name))]
-        console.print(table("materials", ["label", "name"] + cols, mrows))
+        heads = [f"{c} [{MATERIAL_FIELDS[c]}]" if MATERIAL_FIELDS.get(c, "1") != "1" else c for c in cols]
+        console.print(table("materials (units in brackets; the others are ratios)", ["label", "name"] + heads, mrows))
     else:
         console.print("  no materials assigned")
     extras = []
@@ -82,19 +85,48 @@ def _volume_info(path: str) -> None:
         from cutkit.volumes import read_volume
     except ImportError:
         raise InputError(f"{path} is not a cutkit model file (volume reading is not available)") from None
+    from cutkit.cli._ui import table
+    from cutkit.volumes.describe import describe_volume
+
     v = read_volume(path)
     data = v.data
+    d = describe_volume(v)
     console.print(f"[bold]volume[/] {path}")
     console.print(f"  dims {tuple(int(s) for s in data.shape[:3])}"
                   + (f" x {data.shape[3]} channels" if data.ndim == 4 else "") + f", dtype {data.dtype}")
-    console.print(f"  spacing {tuple(float(s) for s in v.spacing)} mm, origin {tuple(float(s) for s in v.origin)} mm")
+    console.print(f"  spacing {', '.join(f'{s:g}' for s in v.spacing)} mm, origin "
+                  f"{', '.join(f'{s:g}' for s in v.origin)} mm, extent {' x '.join(f'{s:g}' for s in d['extent_mm'])} mm")
+    console.print(f"  orientation {orientation_code(v.direction)}: voxel axes i, j, k point to "
+                  f"{', '.join(AXIS_WORDS[c] for c in orientation_code(v.direction))}; world frame LPS "
+                  "(x left, y posterior, z superior, as DICOM and ITK; nibabel's RAS affine has x and y negated)")
     if not np.allclose(v.direction, np.eye(3)):
         console.print(f"  direction {np.asarray(v.direction).round(6).tolist()}")
+    if np.issubdtype(data.dtype, np.floating):
+        console.print(f"  NaN voxels: {d['n_nan']}")
     if data.size and np.issubdtype(data.dtype, np.integer):
         vals, counts = np.unique(data, return_counts=True)
         if vals.size <= MAX_VOLUME_LABELS:
-            console.print("  labels (voxels): " + ", ".join(f"{int(a)}: {int(c)}" for a, c in zip(vals, counts)))
+            rows = [[int(a), int(c), f"{c * d['voxel_mm3']:.6g}"] for a, c in zip(vals, counts)]
+            console.print(table("values", ["value", "voxels", "volume [mm^3]"], rows))
         else:
             console.print(f"  {vals.size} distinct values in [{vals.min()}, {vals.max()}] (intensity image)")
     elif data.size:
-        console.print(f"  values in [{float(np.nanmin(data)):.6g}, {float(np.nanmax(data)):.6g}]")
+        lo, hi = d["value_range"]
+        console.print(f"  values in [{lo:.6g}, {hi:.6g}]" if lo is not None else "  no finite value")
+
+
+#: Letter of the world direction each voxel axis points to (LPS world frame).
+AXIS_WORDS = {"L": "left", "R": "right", "P": "posterior", "A": "anterior", "S": "superior", "I": "inferior"}
+
+
+def orientation_code(direction) -> str:
+    """Three letters: the world direction (LPS frame) each voxel axis i, j, k points to most, e.g. ``LPS``."""
+    import numpy as np
+
+    d = np.asarray(direction, float)
+    letters = (("L", "R"), ("P", "A"), ("S", "I"))
+    code = ""
+    for col in d.T:
+        axis = int(np.argmax(np.abs(col)))
+        code += letters[axis][0 if col[axis] > 0 else 1]
+    return code
