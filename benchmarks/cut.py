@@ -26,7 +26,6 @@ def bench(shape, steps):
     setup = time.perf_counter() - t0
     nx, ny, nz = shape
     times = []
-    cut = 0
     # constant advance per step (0.1 cube), so every size sweeps the same area per step
     for i, x in enumerate(-0.5 + 0.1 * np.arange(steps)):
         tip = [x, ny / 2 + 0.37 + 0.2 * np.sin(0.3 * i), nz - 2.3]

@@ -23,7 +23,6 @@ from cutkit.decimate import decimate, quality_summary
 from cutkit.isovolume import isovolume
 from cutkit.mesh.check import check_mesh
 from cutkit.mesh.quality import signed_volumes
-from cutkit.model.tetmodel import TetModel
 from cutkit.volumes import read_volume
 
 KNEE = Path(__file__).resolve().parent.parent / "sample_volumes" / "knee_labels.nrrd"

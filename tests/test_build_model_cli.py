@@ -3,6 +3,7 @@
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from cutkit.cli.main import main
 from cutkit.io.model_h5 import read_model
@@ -37,6 +38,7 @@ def test_empty_threshold_is_one_line_error(tmp_path, capsys):
     assert not (tmp_path / "m.h5").exists()
 
 
+@pytest.mark.slow
 def test_demo_build_is_reused_while_inputs_are_unchanged(tmp_path):
     from cutkit.simulate.demo import build_or_reuse
 

@@ -235,6 +235,7 @@ def test_bad_input_one_line_errors(volume, kwargs, error, message):
     assert str(info.value) == message
 
 
+@pytest.mark.slow
 def test_knee_label_map_at_full_resolution_has_no_tet_below_ten_degrees():
     """Interior cone centres move off slivers: the native 1.5 mm knee meshes at >= 10 degrees (13.6 measured).
 

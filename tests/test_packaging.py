@@ -20,6 +20,7 @@ def test_cli_and_pipelines_are_subpackages_of_cutkit():
     assert Path(cutkit.pipelines.__file__).parent == ROOT / "pipelines"
 
 
+@pytest.mark.slow
 def test_wheel_holds_only_the_cutkit_import_name(tmp_path):
     proc = subprocess.run(
         [sys.executable, "-m", "pip", "wheel", str(ROOT), "--no-deps", "-q", "-w", str(tmp_path)],

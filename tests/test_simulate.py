@@ -13,6 +13,9 @@ from cutkit.io.model_h5 import read_model, write_model
 from cutkit.mesh.generate import box_mesh
 from cutkit.model.tetmodel import BoundaryConditions, Materials, Prestress, TetModel
 
+#: Every test here simulates a cut (tens of seconds each on two cores).
+pytestmark = pytest.mark.slow
+
 #: Slab 32 x 12 x 16 mm (x, y, z); the blade enters its y = 0 face.
 SHAPE, H = (16, 6, 8), 2.0
 

@@ -139,7 +139,6 @@ def label_volume_change(u, v, points, tets, tet_lab, adj_start, adj_len, pool, d
     """Change of each label's volume (mm^3) by the collapse ``u -> v``, written to ``dvol``."""
     dvol[:] = 0.0
     s0 = adj_start[u]
-    pv = points[v]
     for i in range(adj_len[u]):
         t = pool[s0 + i]
         a, b, c, d = tets[t, 0], tets[t, 1], tets[t, 2], tets[t, 3]

@@ -164,7 +164,7 @@ def export_arrays(model: TetModel, rest: bool = False) -> tuple[np.ndarray, dict
         the materials table, -1 for none) and one float array per material
         column (``E`` in Pa, ``density`` in kg/m^3, ...; units in docs/model-format.md).
     """
-    n, m = model.n_points, model.n_tets
+    n = model.n_points
     points = np.asarray(model.points, np.float64)
     pd = {k: np.asarray(v) for k, v in model.point_data.items()}
     disp = pd.get("displacement")
