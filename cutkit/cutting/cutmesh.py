@@ -27,7 +27,8 @@ from cutkit.errors import InputError
 from cutkit.mesh.topology import TET_EDGES, TET_FACES, unique_edges, unique_faces, tet_neighbors
 from cutkit.cutting import subdivision as S
 from cutkit.cutting import _kernels_step as K
-from cutkit.cutting.splits import COMPACT_VOL_MIN, SPLIT_ANGLE_GAIN, SPLIT_ANGLE_GOOD, compact_split, min_angle
+from cutkit.cutting.splits import (COMPACT_VOL_MIN, SPLIT_ANGLE_GAIN, SPLIT_ANGLE_GOOD, compact_split,
+                                   min_angles_per_group)
 
 #: Edge intersection parameters are clamped into [EDGE_SNAP, 1 - EDGE_SNAP]
 #: (a crossing near a vertex, or through it, becomes a crossing near it).
@@ -458,20 +459,24 @@ class CutMesh:
 
         With ``free`` (no tip inside), T is moved from the cut nodes' centroid
         ``tb`` towards the tet's centroid by each of ``T_BLENDS`` and the
-        best-shaped cone is kept.  T is tried in the spare row ``n_points`` of
-        the node arrays (no node is made).
+        best-shaped cone is kept.  The candidates are tried in the spare rows
+        from ``n_points`` on of the node arrays (no node is made), all in one
+        kernel call.
         """
-        self._grow_nodes()
+        blends = T_BLENDS if free else (0.0,)
+        while self._x.shape[0] < self.n_points + len(blends):
+            self.n_points += len(blends)  # make _grow_nodes double the arrays
+            self._grow_nodes()
+            self.n_points -= len(blends)
         i = self.n_points
-        cone = np.array([(tri[0], tri[2], tri[1], i) for tri, _, _ in tris], np.int64)
-        best, best_angle = tb, -1.0
-        for w in (T_BLENDS if free else (0.0,)):
-            b = _clamp_bary((1.0 - w) * np.asarray(tb) + 0.25 * w, TET_BARY_MIN)
-            self._x[i] = b @ self._x[v]
-            angle = min_angle(self._x, cone)
-            if angle > best_angle:
-                best, best_angle = b, angle
-        return best, best_angle
+        cands = [_clamp_bary((1.0 - w) * np.asarray(tb) + 0.25 * w, TET_BARY_MIN) for w in blends]
+        self._x[i:i + len(blends)] = np.array(cands) @ self._x[v]
+        base = np.array([(tri[0], tri[2], tri[1], 0) for tri, _, _ in tris], np.int64)
+        cones = np.tile(base, (len(blends), 1))
+        cones[:, 3] = np.repeat(np.arange(i, i + len(blends)), base.shape[0])
+        angles = min_angles_per_group(self._x, cones, len(blends))
+        k = int(np.argmax(angles))
+        return cands[k], float(angles[k])
 
     def _add_tets(self, new, o):
         """Append the tets ``new`` (list of 4-tuples) as sub-tets of original ``o``; returns their ids."""

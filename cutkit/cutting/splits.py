@@ -34,11 +34,9 @@ SPLIT_ANGLE_GOOD = 10.0
 SPLIT_ANGLE_GAIN = 2.0
 
 
-def min_angle(x, tets):
-    """Smallest dihedral angle (degrees) of the tets (k, 4) int64 over positions x; 180 if none."""
-    if tets.shape[0] == 0:
-        return 180.0
-    return float(Q.dihedral_angles(x, tets).min())
+def min_angles_per_group(x, tets, n_groups):
+    """Smallest dihedral angle (degrees) of each of ``n_groups`` equal consecutive groups of tets (k, 4)."""
+    return Q.dihedral_angles(x, tets).min(axis=1).reshape(n_groups, -1).min(axis=1)
 
 
 def _cut_loop(cm, o, tris, vgroup):

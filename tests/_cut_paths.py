@@ -1,0 +1,101 @@
+"""Blade paths and meshes for the cutting property tests (plain NumPy).
+
+A path is a list of poses (tip (3,), a (3,) unit, handle to tip) and
+``None`` entries where the blade is lifted out (the sweep restarts).
+Meshes span [0, L] along each axis with cells about 1 mm wide, so tremor
+amplitudes in mm are fractions of an edge.
+"""
+
+import numpy as np
+
+from cutkit.mesh.generate import box_mesh
+from cutkit.mesh.quality import signed_volumes
+
+KINDS = ("straight", "curved", "tremor", "reversal", "reentry", "crossing", "vertex", "edge", "face",
+         "guillotine")
+
+
+def jittered_block(shape=(5, 3, 3), jitter=0.2, seed=0):
+    """Kuhn-split block with interior nodes moved (no exactly planar contacts inside)."""
+    p, t = box_mesh(shape)
+    rng = np.random.default_rng(seed)
+    inner = np.all((p > 0) & (p < np.array(shape)), axis=1)
+    return p + np.where(inner[:, None], rng.uniform(-jitter, jitter, p.shape), 0.0), t
+
+
+def delaunay_ball(n=260, radius=3.0, seed=1):
+    """Delaunay tetrahedralisation of random points in a ball (as an imported TetGen/gmsh mesh would be)."""
+    from scipy.spatial import Delaunay
+
+    rng = np.random.default_rng(seed)
+    d = rng.normal(size=(n, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    r = radius * np.concatenate([np.ones(n // 3), rng.uniform(0, 1, n - n // 3) ** (1 / 3)])
+    p = d * r[:, None] + radius
+    t = Delaunay(p).simplices.astype(np.int64)
+    v = signed_volumes(p, t)
+    t[v < 0] = t[v < 0][:, [0, 2, 1, 3]]
+    keep = np.abs(v) > 1e-6 * radius ** 3
+    used = np.unique(t[keep])
+    remap = -np.ones(n, np.int64)
+    remap[used] = np.arange(used.size)
+    return p[used], remap[t[keep]]
+
+
+def _unit(v):
+    v = np.asarray(v, float)
+    return v / np.linalg.norm(v)
+
+
+def make_path(kind, rng, L, tremor=0.0):
+    """Poses of one blade path of ``kind`` over a mesh spanning [0, L] (3,)."""
+    L = np.asarray(L, float)
+    n = int(rng.integers(4, 16))
+    y0, z0 = rng.uniform(0.3, L[1] - 0.3), rng.uniform(0.2 * L[2], L[2] + 0.5)
+    a = _unit([rng.uniform(-0.4, 0.4), rng.uniform(-0.4, 0.4), 1.0])
+    xs = np.linspace(-0.5, L[0] + 0.5, n)
+
+    def line(xs, y, z, a, wobble=0.0):
+        return [(np.array([x, y + wobble * np.sin(1.3 * x), z]), a) for x in xs]
+
+    if kind == "straight":
+        poses = line(xs, y0, z0, a)
+    elif kind == "curved":
+        poses = line(xs, y0, z0, a, wobble=rng.uniform(0.2, 0.8))
+    elif kind == "tremor":
+        poses = line(xs, y0, z0, a)
+    elif kind == "reversal":
+        xm = rng.uniform(0.3, 0.8) * L[0]
+        poses = line(np.concatenate([np.linspace(-0.5, xm, n), np.linspace(xm, 0.2 * xm, n // 2)]), y0, z0, a)
+    elif kind == "reentry":
+        out = np.array([0.0, 0.0, L[2] + 3.0])
+        first = line(xs[: n // 2], y0, z0, a)
+        poses = first + [(first[-1][0] + out, a)] + line(xs[n // 2:], y0, z0, a)
+    elif kind == "crossing":
+        ys = np.linspace(-0.5, L[1] + 0.5, n)
+        x0 = rng.uniform(0.3, L[0] - 0.3)
+        poses = line(xs, y0, z0, a) + [None] + [(np.array([x0, y, z0]), a) for y in ys]
+    elif kind == "vertex":  # the tip's path runs through grid nodes
+        y, z = float(rng.integers(1, int(L[1]))), float(rng.integers(1, int(L[2])))
+        poses = line(np.arange(-1.0, L[0] + 1.5), y, z, _unit([0, 0, 1.0]))
+    elif kind == "edge":  # the blade lies along grid edges, moving along y
+        x = float(rng.integers(1, int(L[0])))
+        ys = np.linspace(-0.5, L[1] + 0.5, n)
+        poses = [(np.array([x, y, -0.5]), _unit([0, 0, -1.0])) for y in ys]
+    elif kind == "face":  # the blade in a grid plane
+        y = float(rng.integers(1, int(L[1])))
+        poses = line(xs, y, -0.5, _unit([0, 0, -1.0]))
+    else:  # guillotine: one step from above to below, the blade longer than the mesh
+        x = rng.uniform(0.3, L[0] - 0.3)
+        a = _unit([0, -1.0, rng.uniform(-0.3, 0.3)])
+        poses = [(np.array([x, -1.0, L[2] + 2.0]), a), (np.array([x, -1.0, -2.0]), a)]
+    if tremor > 0:
+        poses = [None if q is None else (q[0] + rng.normal(0, tremor / 3, 3), q[1]) for q in poses]
+    return poses
+
+
+def lift(cm):
+    """The blade leaves the tissue: the next pose starts a new sweep."""
+    cm.prev_pose = None
+    cm.tip_tet = -1
+    cm.active_tets = np.zeros(0, np.int64)
