@@ -1,5 +1,9 @@
 """Views of a live session: the off-screen VTK window and the OpenIGTLink POLYDATA stream."""
 
+import json
+import shutil
+import subprocess
+import sys
 import time
 from pathlib import Path
 
@@ -229,3 +233,55 @@ def test_igtl_transforms_in_polydata_with_the_cut_out(monkeypatch):
         client.stop()
         source.close()
         view.close()
+
+
+ON_SCREEN = """
+import json, sys
+sys.path.insert(0, {tests!r})
+from test_live_views import slab_with_wound
+from cutkit.live import MouseKeyboardPoseSource
+from cutkit.live.window import WindowView, cut_colour_fraction
+src = MouseKeyboardPoseSource(depth=3.0)
+view = WindowView(off_screen=False, window_size=(400, 300), pose_source=src)
+frame = slab_with_wound()
+view.show(frame)
+view._pl.camera_position = [(22.0, -30.0, 30.0), (0.0, 0.0, -4.0), (0.0, 0.0, 1.0)]
+for i in range(10):
+    frame.points = frame.points + [0.0, 0.0, 0.001]
+    view.show(frame)
+iren = view._pl.iren.interactor
+iren.SetKeySym("Up")
+iren.InvokeEvent("KeyPressEvent")  # through VTK's own event machinery
+start = view.world_to_display([8.0, -15.0, 0.0])
+end = view.world_to_display([12.0, -15.0, 0.0])
+iren.SetEventPosition(round(start[0]), round(start[1]))
+iren.InvokeEvent("LeftButtonPressEvent")
+iren.SetEventPosition(round(end[0]), round(end[1]))
+iren.InvokeEvent("MouseMoveEvent")
+iren.InvokeEvent("LeftButtonReleaseEvent")
+tips = [src.poll() for _ in range(4)]
+out = dict(interactive=view.interactive, frames=view.frames_shown, depth=src.depth,
+           tips=[None if p is None else p.tip.tolist() for p in tips],
+           cut=cut_colour_fraction(view.screenshot()))
+view.close()
+out["closed"] = view.closed
+print(json.dumps(out))
+"""
+
+
+@pytest.mark.skipif(shutil.which("xvfb-run") is None, reason="needs Xvfb (xvfb-run)")
+def test_the_window_on_screen_under_xvfb():
+    """The on-screen window under Xvfb: frames drawn, keys and a drag through VTK's events, the cut visible."""
+    tests = str(Path(__file__).resolve().parent)
+    res = subprocess.run(["xvfb-run", "-a", sys.executable, "-c", ON_SCREEN.format(tests=tests)],
+                         capture_output=True, text=True, timeout=180)
+    assert res.returncode == 0, res.stderr[-2000:]
+    out = json.loads(res.stdout.strip().splitlines()[-1])
+    assert out["interactive"] and out["frames"] == 11 and out["closed"]
+    assert out["depth"] == 3.5  # the Up key reached the pose source, not the camera zoom
+    press, drag, release, none = out["tips"]
+    assert none is None
+    np.testing.assert_allclose(press, [8.0, -15.0, 5.0], atol=0.3)
+    np.testing.assert_allclose(drag, [12.0, -15.0, -3.5], atol=0.3)
+    np.testing.assert_allclose(release, [12.0, -15.0, 5.0], atol=0.3)
+    assert out["cut"] > 0.003

@@ -18,11 +18,15 @@ bevel (the arrows no longer zoom).
 
 from __future__ import annotations
 
+import logging
+import os
 import time
 
 import numpy as np
 
 from cutkit.live.views import LiveFrame, blade_quad
+
+log = logging.getLogger("cutkit.live")
 
 __all__ = ["WindowView", "CUT_RGB", "TISSUE_RGB", "vertex_normals", "cut_colour_fraction"]
 
@@ -135,6 +139,7 @@ class WindowView:
         self.force_scale = float(force_scale)
         self.background = background
         self.cut_mode = pose_source is not None
+        self.interactive = not self.off_screen  # events processed at each frame
         self.frames_shown = 0
         self.fps = 0.0
         self._pl = None
@@ -146,6 +151,11 @@ class WindowView:
 
     # ------------------------------------------------------------------ building
     def _build(self, frame: LiveFrame) -> None:
+        if not self.off_screen and os.environ.get("DISPLAY"):
+            # VTK wheels that can render through EGL may pick it even under X (Xvfb), and an
+            # EGL window cannot take the X interactor's events: ask for the X window (read when
+            # VTK's rendering module loads, so this works only if nothing loaded it before)
+            os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkXOpenGLRenderWindow")
         import pyvista as pv
         import vtk
 
@@ -284,10 +294,17 @@ class WindowView:
             self._upload(frame)
         self._update_tools(frame)
         self._text.SetText(2, self._status(frame))  # corner 2: upper left
-        if self.off_screen:
+        if self.off_screen or not self.interactive:
             self._pl.render()
         else:
-            self._pl.update(1, force_redraw=True)
+            try:
+                self._pl.update(1, force_redraw=True)
+            except Exception as err:  # pyvista's MismatchedInteractorError: an EGL window under X
+                log.warning("the window cannot process events (%s); drawing without interaction. "
+                            "Set VTK_DEFAULT_OPENGL_WINDOW=vtkXOpenGLRenderWindow before starting.",
+                            str(err).split(".")[0])
+                self.interactive = False
+                self._pl.render()
         now = time.perf_counter()
         if self._last_render is not None and now > self._last_render:
             rate = 1.0 / (now - self._last_render)
