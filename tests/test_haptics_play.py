@@ -57,8 +57,10 @@ def test_play_streams_the_incision_to_a_simulation_in_order(server):
                 states.append(source.state)
             if play.poll() is not None and pose is None and len(poses) > 0:
                 time.sleep(0.05)  # let the last forwarded frame in
-                if source.poll() is None:
+                late = source.poll()
+                if late is None:
                     break
+                poses.append(late)
             time.sleep(0.001)
         out, err = play.communicate(timeout=30)
     finally:
