@@ -23,6 +23,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "relax": ("cutkit.cli.relax", "Relax a model under prestress, boundary conditions and gravity."),
     "simulate": ("cutkit.cli.simulate", "Cut and relax a model along a trajectory with the scalpel force model."),
     "trajectory": ("cutkit.cli.trajectory", "Write the trajectory of a straight or arc incision (depth, blade angle, speed, tremor)."),
+    "sweep": ("cutkit.cli.sweep", "Run a parameter study of many simulations on Dask (local or an existing cluster)."),
     "haptics": ("cutkit.cli.haptics", "The 1 kHz haptic scalpel service and its benchmark client."),
     "demo": ("cutkit.cli.demo", "Build the knee phantom and cut it along the shipped incision."),
     "render": ("cutkit.cli.render", "Render an output folder again: pictures in other views, a movie of the cut."),
