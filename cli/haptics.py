@@ -14,7 +14,8 @@ def command():
               help="TCP port; 0 picks a free one (printed on start).")
 @click.option("--model", "model_path", type=click.Path(dir_okay=False), default=None,
               help="Model file whose material sets the scalpel's default cut parameters.")
-@click.option("--material", default="muscle", show_default=True, help="Material name (or label number) to take from --model.")
+@click.option("--material", default="muscle", show_default=True,
+              help="Material name (or label number) to take from --model.")
 @click.option("--priority", type=click.Choice(["normal", "high", "realtime"]), default="high", show_default=True,
               help="Scheduling priority of the loop (high = nice -10, realtime = SCHED_FIFO); falls back if refused.")
 @click.option("-v", "--verbose", is_flag=True, help="Log every connection, not only rejected frames.")

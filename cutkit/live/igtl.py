@@ -9,7 +9,8 @@ connection as POLYDATA messages, at a capped rate, so Slicer shows the cut.
 
 Frames: Slicer and PLUS speak RAS (x towards the patient's Right, y
 Anterior, z Superior); cutkit models are LPS (x Left, y Posterior, z
-Superior), the frame of DICOM and of the volumes cutkit reads.  ``frame="RAS"`` (default) flips x and y both ways; an optional
+Superior), the frame of DICOM and of the volumes cutkit reads.
+``frame="RAS"`` (default) flips x and y both ways; an optional
 ``registration`` (4x4, model LPS <- tracker frame after the flip) maps a
 tracker's space onto the model.  Units are mm on both sides.
 
