@@ -163,3 +163,28 @@ def test_play_user_errors_are_one_line(tmp_path):
     res = subprocess.run([sys.executable, "-m", "cutkit.cli.main", "haptics", "play", str(tmp_path / "no.csv")],
                          capture_output=True, text=True, timeout=60)
     assert res.returncode == 2 and res.stderr.strip() == f"cutkit: error: {tmp_path / 'no.csv'}: no such file"
+
+
+def test_play_loops_until_ctrl_c(server):
+    import signal
+
+    host, port = server
+    cmd = [sys.executable, "-m", "cutkit.cli.main", "haptics", "play", str(INCISION), "--host", host,
+           "--port", str(port), "--priority", "normal", "--loop", "--json"]
+    with HapticsClient(host, port, "simulation", forward_poses=True) as sim:
+        play = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        try:
+            seen = 0
+            t_end = time.monotonic() + 60.0
+            while seen < 50 and time.monotonic() < t_end:  # the device is streaming
+                seen += sum(f[0] == P.DEVICE_POSE for f in sim.drain())
+                time.sleep(0.01)
+            assert seen >= 50
+            play.send_signal(signal.SIGINT)
+            out, err = play.communicate(timeout=30)
+        finally:
+            if play.poll() is None:
+                play.kill()
+    assert play.returncode == 0, err
+    stats = json.loads(out)
+    assert stats["ended"] == "stopped" and stats["poses_sent"] >= 50
