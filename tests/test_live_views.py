@@ -33,7 +33,7 @@ def _tris(quads):
     return np.vstack([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]]).astype(np.int64)
 
 
-def slab_with_wound(depth=8.0, half_width=1.5, half_length=10.0):
+def slab_with_wound(depth=8.0, half_width=2.0, half_length=10.0):
     """A skin plane z = 0 with an open slot along y and the slot's two walls as the cut surface."""
     pts, quads = _grid(-20, 20, -20, 20, 40, 40)
     faces = _tris(quads)

@@ -171,6 +171,7 @@ class WindowView:
         self._cut_actor = pl.add_mesh(self._cut, color=self.cut_rgb, show_scalar_bar=False, name="cut")
         for actor in (self._tissue_actor, self._cut_actor):
             actor.prop.interpolation = "gouraud"
+        self._cut_actor.prop.ambient = 0.3  # the wound's walls face away from the light: keep their colour
         self._blade = pv.PolyData(np.zeros((4, 3)), faces=np.array([4, 0, 1, 2, 3]))
         self._blade_actor = pl.add_mesh(self._blade, color=BLADE_RGB, specular=0.6, name="blade")
         arrow = pv.Arrow(start=(0.0, 0.0, 0.0), direction=(1.0, 0.0, 0.0), tip_length=0.25, tip_radius=0.08,
@@ -278,7 +279,7 @@ class WindowView:
         r = frame.rates
         parts = [f"haptics {r['haptic_hz']:.0f} Hz" if "haptic_hz" in r else "haptics -",
                  f"relaxation {r['relax_passes_per_s']:.0f} passes/s" if "relax_passes_per_s" in r else "relaxation -",
-                 f"{r.get('fps', self.fps):.0f} fps"]
+                 f"{r['fps']:.0f} fps" if "fps" in r else (f"{self.fps:.0f} fps" if self.fps > 0 else "- fps")]
         line2 = (f"t {frame.t:.2f} s   tets cut {frame.tets_cut}   force {np.linalg.norm(frame.force):.2f} N"
                  + ("   [mouse cuts]" if self.cut_mode else ""))
         return "   ".join(parts) + "\n" + line2
