@@ -71,8 +71,9 @@ class SweepSpec:
     path : Path
     name : str
     retries : int
-        Extra attempts of a run whose worker died or whose task raised
-        outside the run (a run that fails inside is recorded, not retried).
+        Dask's retries of a task that raised outside the run (a run that
+        fails inside is recorded, not retried; a run whose worker died is
+        rescheduled by the scheduler up to its ``allowed-failures``).
     threads_per_run : int
         numba threads of each run.
     options : dict

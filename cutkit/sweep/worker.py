@@ -21,7 +21,7 @@ from cutkit.errors import CutkitError, InputError
 
 #: The measured figures of a result row, in column order (units in the names).
 FIGURES = ("peak_force_N", "mean_cut_force_N", "cut_tets", "opening_mm", "inverted_tets", "volume_change",
-           "simulated_per_wall", "wall_s")
+           "simulated_per_wall", "wall_s", "cpu_s")
 
 # Runs in one worker process take turns: numba's default thread pool is not
 # safe for parallel calls from several threads at once.  (Sweeps run one
@@ -121,7 +121,7 @@ def run_one(model, run: dict, out_root: str, before_run=None) -> dict:
         ``key``, ``model``, ``trajectory``, the parameters, ``status``
         (``"ok"`` or ``"failed"``), ``error`` and the :data:`FIGURES`.
     """
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     row = {"key": run["key"], "model": run["model"], "trajectory": run["trajectory"], **run["params"],
            "status": "failed", "error": ""}
     row.update({k: None for k in FIGURES})
@@ -135,6 +135,7 @@ def run_one(model, run: dict, out_root: str, before_run=None) -> dict:
         except Exception as exc:  # the run failed: recorded, the sweep goes on
             row["error"] = one_line(exc)
     row["wall_s"] = time.perf_counter() - t0
+    row["cpu_s"] = time.process_time() - c0
     try:
         from dask.distributed import get_worker
 
