@@ -22,7 +22,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "cut": ("cutkit.cli.cut", "Cut a model kinematically along a blade trajectory."),
     "relax": ("cutkit.cli.relax", "Relax a model under prestress, boundary conditions and gravity."),
     "simulate": ("cutkit.cli.simulate", "Cut and relax a model along a trajectory with the scalpel force model."),
-    "trajectory": ("cutkit.cli.trajectory", "Write a straight or arc incision (depth, angle, speed, tremor) as a trajectory."),
+    "trajectory": ("cutkit.cli.trajectory", "Write the trajectory of a straight or arc incision."),
     "sweep": ("cutkit.cli.sweep", "Run a parameter study of many simulations on Dask (local or an existing cluster)."),
     "haptics": ("cutkit.cli.haptics", "The 1 kHz haptic scalpel service and its benchmark client."),
     "demo": ("cutkit.cli.demo", "Build the knee phantom and cut it along the shipped incision."),
