@@ -21,7 +21,7 @@ else:  # pragma: no cover
     import tomli as tomllib
 
 from cutkit.errors import InputError
-from cutkit.model.tetmodel import MATERIAL_FIELDS
+from cutkit.model.tetmodel import MATERIAL_FIELDS, MATERIAL_MODELS
 
 _NUM = (int, float)
 _VEC3 = "vec3"
@@ -45,6 +45,7 @@ SCHEMA: dict[str, dict[str, object]] = {
     "decimate": {"ratio": _NUM, "target_tets": int, "surface_tolerance_mm": _NUM, "min_dihedral_deg": _NUM, "optimize": str},
     "texture": {"volume": str, "register": str, "max_voxels": int},
     "boundary": {"fixed_labels": list, "fixed_regions": list, "prescribed": list},
+    "mechanics": {"material_model": str},
 }
 _MATERIAL_KEYS = {"label": int, "name": str, **{k: _NUM for k in MATERIAL_FIELDS}}
 _REGION_KEYS = {"axis": str, "side": str, "depth_mm": _NUM, "box_min": _VEC3, "box_max": _VEC3}
@@ -125,6 +126,12 @@ def validate_recipe(data: dict, where: str = "recipe") -> None:
                 raise InputError(f"{here}: {key} must not be negative")
         if mat.get("E", 1.0) <= 0 or mat.get("density", 1.0) <= 0:
             raise InputError(f"{here}: E and density must be positive")
+        if not 0.0 <= mat.get("poisson_ratio", 0.25) < 0.5:
+            raise InputError(f"{here}: poisson_ratio must lie in [0, 0.5), got {mat['poisson_ratio']}")
+    model_name = data.get("mechanics", {}).get("material_model")
+    if model_name is not None and model_name not in MATERIAL_MODELS:
+        raise InputError(f"{where}: [mechanics] material_model must be one of {', '.join(MATERIAL_MODELS)}, "
+                         f"not {model_name!r}")
     for i, pre in enumerate(_array_of_tables(data, "prestress", where)):
         here = f"{where}: [[prestress]] #{i + 1}"
         _check_keys(pre, _PRESTRESS_KEYS, here)

@@ -114,7 +114,7 @@ def _replace(name, data):
 @pytest.mark.parametrize(
     "edit, message",
     [
-        (lambda f: f["cutkit"].attrs.__setitem__("schema_version", 99), "schema version 99 is not supported (this cutkit reads version 1)"),
+        (lambda f: f["cutkit"].attrs.__setitem__("schema_version", 99), "schema version 99 is not supported (this cutkit reads versions 1, 2)"),
         (lambda f: f.__delitem__("cutkit"), "not a cutkit model (no /cutkit group)"),
         (lambda f: f.__delitem__("VTKHDF/Points"), "VTKHDF/Points is missing"),
         (_replace("VTKHDF/Points", np.zeros((10, 2))), "VTKHDF/Points has shape (10, 2), expected (*, 3)"),

@@ -8,7 +8,7 @@ import numpy as np
 
 from cutkit.assign.defaults import DEFAULT_MATERIALS, GENERIC_SOFT_TISSUE
 from cutkit.errors import InputError
-from cutkit.model.tetmodel import MATERIAL_FIELDS, BoundaryConditions, Materials, Prestress, TetModel
+from cutkit.model.tetmodel import DEFAULT_MATERIAL_MODEL, MATERIAL_FIELDS, BoundaryConditions, Materials, Prestress, TetModel
 
 _AXES = {"x": 0, "y": 1, "z": 2}
 
@@ -30,7 +30,8 @@ def assign(model: TetModel, recipe: dict) -> TetModel:
     ``boundary.fixed_labels`` (rigid bone) plus the nodes of each
     ``boundary.fixed_regions`` entry.
     """
-    materials = _materials(model, recipe.get("materials", []))
+    materials = _materials(model, recipe.get("materials", []),
+                           recipe.get("mechanics", {}).get("material_model", DEFAULT_MATERIAL_MODEL))
     boundary = _boundary(model, recipe.get("boundary", {}))
     prestress = _prestress(model, recipe.get("prestress", []))
     provenance = dict(model.provenance)
@@ -44,7 +45,7 @@ def assign(model: TetModel, recipe: dict) -> TetModel:
     return dataclasses.replace(model, materials=materials, boundary=boundary, prestress=prestress, provenance=provenance)
 
 
-def _materials(model: TetModel, rows: list[dict]) -> Materials:
+def _materials(model: TetModel, rows: list[dict], material_model: str) -> Materials:
     by_label = {int(r["label"]): r for r in rows}
     out = []
     for label in np.unique(model.labels):
@@ -54,7 +55,9 @@ def _materials(model: TetModel, rows: list[dict]) -> Materials:
         row = {"label": label, "name": spec["name"]}
         row.update({k: float(spec.get(k, base[k])) for k in MATERIAL_FIELDS})
         out.append(row)
-    return Materials.from_rows(out) if out else Materials.empty()
+    if not out:
+        return dataclasses.replace(Materials.empty(), material_model=material_model)
+    return Materials.from_rows(out, material_model=material_model)
 
 
 def region_nodes(points: np.ndarray, region: dict) -> np.ndarray:

@@ -16,6 +16,12 @@ tissue varies by a factor of several between studies, sites and subjects):
   J. Physiol. 521:307).
 * E, bone 17 GPa: cortical bone (Reilly & Burstein 1975, J. Biomech. 8:393).
   Bone is normally held rigid by a boundary condition instead.
+* Poisson ratio: soft tissue is nearly incompressible (0.45-0.5; e.g.
+  skin and muscle 0.45-0.49 in Fung 1993, *Biomechanics*, and the
+  elastography literature, which assumes 0.499).  0.45 is used for every
+  soft tissue: closer to 0.5, linear tetrahedra lock (a known limit of P1
+  elements) and the solver converges more slowly; 0.3 for cortical bone
+  (Reilly & Burstein 1975).
 * density: IT'IS Foundation tissue property database v4 (Hasgall et al.
   2018): skin 1109, fat 911, muscle 1090, tendon 1142, cortical bone
   1908 kg/m^3.
@@ -36,15 +42,15 @@ from cutkit.model.tetmodel import MATERIAL_FIELDS
 
 #: Default material of each tissue name (without label).
 DEFAULT_MATERIALS: dict[str, dict[str, float]] = {
-    "skin": dict(E=150e3, density=1109.0, damping=8.0, F_enter=1.5, mu_static=1.0e-6, mu_dynamic=4.0e-7,
+    "skin": dict(poisson_ratio=0.45, E=150e3, density=1109.0, damping=8.0, F_enter=1.5, mu_static=1.0e-6, mu_dynamic=4.0e-7,
                  rho_dynamic=2.0e-8, alpha_static=0.3, alpha_dynamic=0.15, c_edge=1.0, c_shape=1.0),
-    "fat": dict(E=3e3, density=911.0, damping=8.0, F_enter=0.3, mu_static=1.0e-5, mu_dynamic=4.0e-6,
+    "fat": dict(poisson_ratio=0.45, E=3e3, density=911.0, damping=8.0, F_enter=0.3, mu_static=1.0e-5, mu_dynamic=4.0e-6,
                 rho_dynamic=2.0e-7, alpha_static=0.2, alpha_dynamic=0.1, c_edge=1.0, c_shape=1.0),
-    "muscle": dict(E=30e3, density=1090.0, damping=8.0, F_enter=0.8, mu_static=2.5e-6, mu_dynamic=1.0e-6,
+    "muscle": dict(poisson_ratio=0.45, E=30e3, density=1090.0, damping=8.0, F_enter=0.8, mu_static=2.5e-6, mu_dynamic=1.0e-6,
                    rho_dynamic=5.0e-8, alpha_static=0.3, alpha_dynamic=0.15, c_edge=1.0, c_shape=1.0),
-    "tendon": dict(E=1.2e9, density=1142.0, damping=8.0, F_enter=3.0, mu_static=2.0e-10, mu_dynamic=8.0e-11,
+    "tendon": dict(poisson_ratio=0.45, E=1.2e9, density=1142.0, damping=8.0, F_enter=3.0, mu_static=2.0e-10, mu_dynamic=8.0e-11,
                    rho_dynamic=4.0e-12, alpha_static=0.3, alpha_dynamic=0.15, c_edge=1.0, c_shape=1.0),
-    "bone": dict(E=17e9, density=1908.0, damping=8.0, F_enter=50.0, mu_static=3.0e-10, mu_dynamic=3.0e-10,
+    "bone": dict(poisson_ratio=0.3, E=17e9, density=1908.0, damping=8.0, F_enter=50.0, mu_static=3.0e-10, mu_dynamic=3.0e-10,
                  rho_dynamic=1.0e-12, alpha_static=0.5, alpha_dynamic=0.5, c_edge=1.0, c_shape=1.0),
 }
 

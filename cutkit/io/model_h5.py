@@ -18,6 +18,7 @@ Everything else reads and writes models through :func:`read_model` and
     /cutkit
         attrs schema_version=int, cutkit_version=str, provenance=JSON str
         materials/label (k,) int32, materials/name (k,) str, materials/<field> (k,) float64
+            attrs material_model="neohookean" | "springs"            (schema version 2)
         boundary/fixed_nodes (f,) int64
         boundary/prescribed_nodes (p,) int64, boundary/prescribed_displacement (p, 3) float64
         prestress/label (q,) int32, prestress/fibre_direction (q, 3) float64, prestress/prestrain (q,) float64
@@ -42,7 +43,9 @@ from cutkit import __version__
 from cutkit.errors import InputError, ModelFormatError
 from cutkit.io.atomic import atomic_output
 from cutkit.model.tetmodel import (
+    DEFAULT_MATERIAL_MODEL,
     MATERIAL_FIELDS,
+    MATERIAL_MODELS,
     BoundaryConditions,
     Materials,
     Prestress,
@@ -51,7 +54,14 @@ from cutkit.model.tetmodel import (
 )
 
 #: Version of the layout above; bump on any incompatible change.
-SCHEMA_VERSION = 1
+#: Version 2 added materials/poisson_ratio and the materials' material_model.
+SCHEMA_VERSION = 2
+#: Older versions this module still reads (upgraded on reading, see :data:`V1_POISSON_RATIO`).
+READABLE_VERSIONS = (1, 2)
+#: Poisson ratio given to every material of a version-1 file (which has none):
+#: soft tissue is nearly incompressible (docs/model-format.md).  Reading
+#: records it in the provenance under ``schema_upgrade``.
+V1_POISSON_RATIO = 0.45
 
 #: VTKHDF version written under /VTKHDF (1.0 is read by every ParaView since 5.10).
 VTKHDF_VERSION = (1, 0)
@@ -129,6 +139,7 @@ def _write_cutkit(f: h5py.File, model: TetModel) -> None:
     mat.create_dataset("name", data=np.array(model.materials.name, dtype=object), dtype=h5py.string_dtype("utf-8"))
     for key in MATERIAL_FIELDS:
         mat.create_dataset(key, data=np.asarray(model.materials.values[key], np.float64))
+    mat.attrs["material_model"] = model.materials.material_model
 
     bc = g.create_group("boundary")
     bc.create_dataset("fixed_nodes", data=np.asarray(model.boundary.fixed_nodes, np.int64))
@@ -222,11 +233,12 @@ def read_model(path: str | os.PathLike) -> TetModel:
     path = Path(path)
     with _open(path) as f:
         version = _schema_version(f, path)
-        if version != SCHEMA_VERSION:
+        if version not in READABLE_VERSIONS:
             raise ModelFormatError(
-                f"{path}: schema version {version} is not supported (this cutkit reads version {SCHEMA_VERSION})"
+                f"{path}: schema version {version} is not supported (this cutkit reads versions "
+                f"{', '.join(map(str, READABLE_VERSIONS))})"
             )
-        r = _Reader(f, path)
+        r = _Reader(f, path, version)
         model = r.read()
     return model
 
@@ -255,9 +267,10 @@ def _schema_version(f: h5py.File, path: Path) -> int:
 class _Reader:
     """Reads datasets with checks; every error names ``path`` and the dataset."""
 
-    def __init__(self, f: h5py.File, path: Path):
+    def __init__(self, f: h5py.File, path: Path, version: int = SCHEMA_VERSION):
         self.f = f
         self.path = path
+        self.version = version
 
     def fail(self, name: str, what: str):
         raise ModelFormatError(f"{self.path}: {name} {what}")
@@ -371,6 +384,10 @@ class _Reader:
             provenance = json.loads(f["cutkit"].attrs.get("provenance", "{}"))
         except (TypeError, ValueError):
             self.fail("cutkit provenance attribute", "is not valid JSON")
+        if self.version < SCHEMA_VERSION:
+            provenance["schema_upgrade"] = {"from_version": self.version, "to_version": SCHEMA_VERSION,
+                                            "poisson_ratio": V1_POISSON_RATIO,
+                                            "material_model": DEFAULT_MATERIAL_MODEL}
 
         extra = {}
         if "cutkit/extra" in f:
@@ -401,10 +418,24 @@ class _Reader:
         names = self.get("cutkit/materials/name", "O", (k,))
         values = {}
         for key in MATERIAL_FIELDS:
+            if self.version == 1 and key == "poisson_ratio":
+                values[key] = np.full(k, V1_POISSON_RATIO)
+                continue
             col = self.get(f"cutkit/materials/{key}", "f", (k,)).astype(np.float64)
             self._finite(f"cutkit/materials/{key}", col)
             values[key] = col
-        return Materials(label=label, name=[str(s) for s in names], values=values)
+        nu = values["poisson_ratio"]
+        if np.any((nu < 0.0) | (nu >= 0.5)):
+            self.fail("cutkit/materials/poisson_ratio", f"has {float(nu[np.argmax((nu < 0) | (nu >= 0.5))])}, "
+                      "outside [0, 0.5)")
+        material_model = DEFAULT_MATERIAL_MODEL
+        if self.version >= 2 and "cutkit/materials" in self.f:
+            raw = self.f["cutkit/materials"].attrs.get("material_model", DEFAULT_MATERIAL_MODEL)
+            material_model = raw.decode() if isinstance(raw, bytes) else str(raw)
+            if material_model not in MATERIAL_MODELS:
+                self.fail("cutkit/materials attribute material_model",
+                          f"is {material_model!r}, not one of {', '.join(MATERIAL_MODELS)}")
+        return Materials(label=label, name=[str(s) for s in names], values=values, material_model=material_model)
 
     def _node_index(self, name: str, n: int) -> np.ndarray:
         idx = self.get(name, "iu", (None,)).astype(np.int64)

@@ -5,7 +5,9 @@ See :mod:`cutkit.model.tetmodel` for the containers and
 """
 
 from cutkit.model.tetmodel import (
+    DEFAULT_MATERIAL_MODEL,
     MATERIAL_FIELDS,
+    MATERIAL_MODELS,
     BoundaryConditions,
     Materials,
     Prestress,
@@ -14,7 +16,9 @@ from cutkit.model.tetmodel import (
 )
 
 __all__ = [
+    "DEFAULT_MATERIAL_MODEL",
     "MATERIAL_FIELDS",
+    "MATERIAL_MODELS",
     "BoundaryConditions",
     "Materials",
     "Prestress",

@@ -17,6 +17,7 @@ import numpy as np
 #: The cut parameters are those of the paper's section 6 (eqs. 12-18).
 MATERIAL_FIELDS: dict[str, str] = {
     "E": "Pa",  # Young's modulus; also the stiffness eta of eqs. (13), (16), (17)
+    "poisson_ratio": "1",  # of the element model (schema version 2); the springs have their own, see docs
     "density": "kg/m^3",
     "damping": "1/s",  # mass-proportional damping: D = damping * m in eq. (1)
     "F_enter": "N",  # static cut friction threshold, eq. (12)
@@ -28,6 +29,13 @@ MATERIAL_FIELDS: dict[str, str] = {
     "c_edge": "1",  # sharpness of the blade's edge (small = sharp)
     "c_shape": "1",  # shape of the blade
 }
+
+
+#: Constitutive models a model can name: the element model (stable
+#: neo-Hookean tetrahedra, docs/relaxation.md) and the paper's springs.
+MATERIAL_MODELS = ("neohookean", "springs")
+#: What a model that names none is simulated with.
+DEFAULT_MATERIAL_MODEL = "neohookean"
 
 
 @dataclass
@@ -42,11 +50,15 @@ class Materials:
         Tissue name of each row (``"skin"``, ``"muscle"``, ...).
     values : dict of str to (k,) float64
         One column per entry of :data:`MATERIAL_FIELDS`.
+    material_model : str
+        One of :data:`MATERIAL_MODELS`: how the tissue is simulated unless a
+        run says otherwise.
     """
 
     label: np.ndarray
     name: list[str]
     values: dict[str, np.ndarray]
+    material_model: str = DEFAULT_MATERIAL_MODEL
 
     def __getitem__(self, column: str) -> np.ndarray:
         return self.values[column]
@@ -83,12 +95,12 @@ class Materials:
         )
 
     @classmethod
-    def from_rows(cls, rows: list[dict]) -> "Materials":
+    def from_rows(cls, rows: list[dict], material_model: str = DEFAULT_MATERIAL_MODEL) -> "Materials":
         """Build the table from dicts with ``label``, ``name`` and every material field."""
         label = np.array([int(r["label"]) for r in rows], np.int32)
         name = [str(r["name"]) for r in rows]
         values = {k: np.array([float(r[k]) for r in rows], np.float64) for k in MATERIAL_FIELDS}
-        return cls(label=label, name=name, values=values)
+        return cls(label=label, name=name, values=values, material_model=material_model)
 
     def rows(self) -> list[dict]:
         """The table as a list of dicts (label, name and every material field)."""

@@ -32,12 +32,16 @@ from pathlib import Path
 import numpy as np
 
 from cutkit.errors import InputError
+from cutkit.model.tetmodel import MATERIAL_MODELS
 
 #: The haptic step, s: the force model runs at 1 kHz whatever else happens (section 6).
 HAPTIC_DT = 1e-3
 #: The blade has left the tissue once the hand's tip is this far outside the
 #: entry face's plane, mm (a small margin so surface noise does not flicker).
 LEAVE_MARGIN_MM = 0.5
+#: Most settle sweeps of each material model by default: the element model
+#: stops earlier at its residual (SimulateOptions.settle_rtol).
+SETTLE_MAX_SWEEPS = {"neohookean": 3000, "springs": 100}
 #: Default volume stiffness (bulk modulus of the volume term over E): see
 #: docs/simulate.md for what it does to the demo's inverted tets and opening.
 VOLUME_STIFFNESS = 0.0
@@ -50,17 +54,24 @@ class SimulateOptions:
     Attributes
     ----------
     fps : float
-        Frames per simulated second.
+        Frames per simulated second (output only: never changes what is simulated).
     geometry_rate_hz : float
-        Collision, cut and relaxation updates per simulated second.
-    settle_iterations : int
-        Relaxation sweeps of the whole model at the large step
-        ``settle_step_s`` before the trajectory starts: the model settles
-        under its prestress and boundary conditions (at steps far beyond
-        the explicit limit the semi-implicit update is a Gauss-Seidel
-        relaxation towards equilibrium, docs/relaxation.md).
+        Collision, cut and relaxation updates per simulated second; the
+        element model makes one implicit step of ``1 / geometry_rate_hz``
+        per update.
+    material_model : str or None
+        ``"neohookean"`` (stable neo-Hookean elements, vertex block descent)
+        or ``"springs"`` (the paper's); None: what the model names.
+    settle_iterations : int or None
+        The most sweeps the settle before the trajectory may make: the model
+        settles under its prestress and boundary conditions.  The element
+        model stops at the relative residual ``settle_rtol``; the springs
+        make exactly this many sweeps at the step ``settle_step_s``.  None:
+        :data:`SETTLE_MAX_SWEEPS` of the material model.
+    settle_rtol : float
+        Relative residual the element model's settle reaches.
     settle_step_s : float
-        s.
+        s (springs).
     hold_s : float
         Simulated seconds after the trajectory's last row (the cut opens).
     dt0 : float
@@ -78,7 +89,7 @@ class SimulateOptions:
         its volume with ``bulk = volume_stiffness * E``; 0 is the paper's
         springs only.
     png : bool
-        Pictures of selected frames under ``pictures/``.
+        Pictures under ``pictures/`` after the run (:func:`cutkit.render.render_output`).
     realtime : bool
         Pace to the wall clock and report the rates reached.
     haptics : str or None
@@ -91,7 +102,9 @@ class SimulateOptions:
 
     fps: float = 30.0
     geometry_rate_hz: float = 50.0
-    settle_iterations: int = 100
+    material_model: str | None = None
+    settle_iterations: int | None = None
+    settle_rtol: float = 1e-3
     settle_step_s: float = 0.02
     hold_s: float = 0.5
     dt0: float = 2e-3
@@ -111,8 +124,13 @@ class SimulateOptions:
             v = getattr(self, name)
             if not (np.isfinite(v) and v > 0):
                 raise InputError(f"{name.replace('_', '-')} must be a positive number, got {v}")
-        if not 0 <= int(self.settle_iterations) <= 100000:
+        if self.settle_iterations is not None and not 0 <= int(self.settle_iterations) <= 100000:
             raise InputError(f"settle-iterations must lie in 0..100000, got {self.settle_iterations}")
+        if self.material_model is not None and self.material_model not in MATERIAL_MODELS:
+            raise InputError(f"material-model must be one of {', '.join(MATERIAL_MODELS)}, "
+                             f"not {self.material_model!r}")
+        if not (np.isfinite(self.settle_rtol) and 0 < self.settle_rtol < 1):
+            raise InputError(f"settle-rtol must lie in (0, 1), got {self.settle_rtol}")
         for name in ("settle_step_s", "hold_s"):
             v = getattr(self, name)
             if not (np.isfinite(v) and v >= 0):
@@ -173,11 +191,9 @@ def simulate(model, trajectory, out_dir, options: SimulateOptions | None = None,
     from cutkit.io.model_h5 import write_model
     from cutkit.io.series import SeriesWriter
     from cutkit.mesh.topology import boundary_faces
-    from cutkit.relax import Control
     from cutkit.scalpel import CUTTING, FREE, O_A, O_CUT, O_D_A, O_FORCE, O_N, STATE_NAMES
     from cutkit.simulate.blade import InProcessScalpel, ServiceScalpel, parse_host_port
-    from cutkit.simulate.outputs import ForceLog, SurfaceSeries, render_picture
-    from cutkit.simulate.tissue import Tissue
+    from cutkit.simulate.outputs import ForceLog, SurfaceSeries
 
     opt = options or SimulateOptions()
     opt.check()
@@ -190,13 +206,15 @@ def simulate(model, trajectory, out_dir, options: SimulateOptions | None = None,
     wall0 = time.perf_counter()
     task_s = {"setup": 0.0, "settle": 0.0, "haptics": 0.0, "collision_and_cut": 0.0, "relaxation": 0.0,
               "output": 0.0}
-    tis = Tissue(model, blade_length=blade_length, dt0=opt.dt0, n_lists=opt.n_lists,
-                 tolerance_fraction=opt.tolerance_fraction, centre_nodes=opt.centre_nodes,
-                 volume_stiffness=opt.volume_stiffness)
-    cm, sm, st = tis.cm, tis.springs, tis.state
+    material_model = opt.material_model or model.materials.material_model
+    tis = make_tissue(model, material_model, opt, blade_length)
+    cm = tis.cm
     n0, m0 = cm.n_orig_points, tis.n_orig_tets
+    if not tis.fixed.any():
+        warnings.append("the model has no fixed node: nothing holds it, it may drift (add [boundary] "
+                        "fixed_labels or fixed_regions to its recipe and run `cutkit assign`)")
     faces, face_tet = boundary_faces(cm.orig_tets)
-    bvh = SurfaceBVH.build(st.positions[:n0].copy(), faces)
+    bvh = SurfaceBVH.build(tis.positions[:n0].copy(), faces)
     rows = model.materials.rows()
     row_of_tet = model.materials.row_of(cm.labels)
     texture = model.texture if (model.texture is not None and model.texcoords is not None) else None
@@ -205,16 +223,18 @@ def simulate(model, trajectory, out_dir, options: SimulateOptions | None = None,
 
     # the model settles under its prestress and boundary conditions first
     t1 = time.perf_counter()
-    if opt.settle_iterations > 0:
-        from cutkit.relax import step as relax_step
-        for _ in range(int(opt.settle_iterations)):
-            relax_step(sm, st, Control(), opt.settle_step_s, gauss_seidel=True)
+    settle_sweeps = SETTLE_MAX_SWEEPS[material_model] if opt.settle_iterations is None else opt.settle_iterations
+    settle_info = {"iterations": 0}
+    if settle_sweeps > 0:
         # the settled state is the start: at rest, at time 0
-        st.velocities[:] = 0.0
-        st.time = 0.0
-        st.time_stamps[:] = 0.0
-        tis.lists.list_time[:] = 0.0
-        bvh.update(st.positions[:n0])
+        if material_model == "springs":
+            settle_info = tis.settle(settle_sweeps, opt.settle_step_s)
+        else:
+            settle_info = tis.settle(settle_sweeps, opt.settle_rtol)
+            if not settle_info["converged"]:
+                warnings.append(f"the settle stopped after {settle_info['iterations']} sweeps at relative "
+                                f"residual {settle_info['relative_residual']:.1e} (asked: {opt.settle_rtol:.0e})")
+        bvh.update(tis.positions[:n0])
     task_s["settle"] = time.perf_counter() - t1
 
     if opt.haptics:
@@ -236,10 +256,9 @@ def simulate(model, trajectory, out_dir, options: SimulateOptions | None = None,
     series = SeriesWriter(out_dir, "cut")
     surface = SurfaceSeries(out_dir)
     pictures: list[str] = []
-    picture_times = [t_start + 0.5 * (t_traj_end - t_start), t_traj_end, t_end] if opt.png else []
     states_seen: list[str] = []
     counts = {"cut_steps": 0, "geometry_updates": 0, "haptic_ticks": 0, "relax_passes": 0,
-              "nodes_added": 0, "springs_added": 0, "springs_removed": 0, "entries": 0}
+              "nodes_added": 0, "entries": 0}
     opening_at_traj_end = None
     cut_plane = {"entry": None, "a": None, "b": None, "n": None}
 
@@ -250,47 +269,23 @@ def simulate(model, trajectory, out_dir, options: SimulateOptions | None = None,
         nonlocal rgb
         t1 = time.perf_counter()
         tets, ids = tis.alive_tets()
-        n = st.positions.shape[0]
+        n = tis.n_nodes
         if rgb is not None and rgb.shape[0] < n:
             rgb = np.concatenate([rgb, np.asarray(texture.sample_rgb(cm.texcoords[rgb.shape[0]:n]))])
-        pd = {"displacement": st.positions - sm.rest_positions, "velocity": st.velocities,
-              "fixed": sm.fixed.astype(np.uint8), "node_list": st.node_list.astype(np.int32)}
+        pd = {"displacement": tis.displacement, "velocity": tis.velocities,
+              "fixed": tis.fixed.astype(np.uint8), **tis.point_data()}
         if rgb is not None:
             pd["texture_rgb"] = rgb
         cd = {"label": cm.labels[cm._tet_orig[ids]].astype(np.int32), "new_tet": (ids >= m0).astype(np.uint8)}
         kept, new_index = compact_nodes(tets, n)  # no orphan node in a frame
-        series.write(t, st.positions[kept], new_index[tets], point_data={k: v[kept] for k, v in pd.items()},
+        series.write(t, tis.positions[kept], new_index[tets], point_data={k: v[kept] for k, v in pd.items()},
                      cell_data=cd)
         surf_faces = cut_surface_faces(cm)
         spd = {"displacement": pd["displacement"]}
         if rgb is not None:
             spd["texture_rgb"] = rgb
-        surface.write(t, st.positions, surf_faces, spd)
-        if picture_times and t >= picture_times[0] - 1e-9:
-            while picture_times and t >= picture_times[0] - 1e-9:
-                picture_times.pop(0)
-            pictures.append(_picture(out_dir, series.n_frames - 1, t, tets, rgb))
+        surface.write(t, tis.positions, surf_faces, spd)
         task_s["output"] += time.perf_counter() - t1
-
-    def _picture(out_dir, index, t, tets, rgb):
-        pts = st.positions
-        if cut_plane["entry"] is not None:
-            focal = cut_plane["entry"]
-            opened = _cut_opening(cm, pts)
-            cut_nodes = np.arange(n0, pts.shape[0])
-            if cut_nodes.size:
-                focal = pts[cut_nodes].mean(axis=0)
-            view = cut_plane["a"] + 0.35 * cut_plane["b"]
-            up = cut_plane["b"]
-            title = f"t = {t:.2f} s, {len(cm.subtets)} tets cut, opening {opened.mean() if opened.size else 0:.2f} mm"
-        else:
-            focal = pts.mean(axis=0)
-            view, up, title = np.array([0.0, 1.0, -0.3]), np.array([0.0, 0.0, 1.0]), f"t = {t:.2f} s (no cut)"
-        diag = float(np.linalg.norm(pts.max(axis=0) - pts.min(axis=0)))
-        path = out_dir / "pictures" / f"{index:04d}.png"
-        path.parent.mkdir(exist_ok=True)
-        render_picture(path, pts, tets, rgb, focal, view, up, 0.7 * diag, title=title)
-        return str(path.relative_to(out_dir))
 
     prev_tip = None
     cutting_pending = False
@@ -312,12 +307,12 @@ def simulate(model, trajectory, out_dir, options: SimulateOptions | None = None,
                 # contact from the whole blade against the current surface: the tip's path, the
                 # blade now (the surface may have moved past it), the quad it swept since the last tick
                 prev_a = trajectory.pose_at(t - HAPTIC_DT)[1]
-                hit = blade_entry(bvh, st.positions[:n0], prev_tip, prev_tip - blade_length * prev_a,
+                hit = blade_entry(bvh, tis.positions[:n0], prev_tip, prev_tip - blade_length * prev_a,
                                   tip, tip - blade_length * a_traj)
                 if hit is not None:
                     f = hit.face
                     fv = bvh.faces[f]
-                    x = st.positions[fv]
+                    x = tis.positions[fv]
                     normal = np.cross(x[1] - x[0], x[2] - x[0])
                     contact.entry = hit.point.copy()
                     contact.inward = -normal / np.linalg.norm(normal)
@@ -358,15 +353,14 @@ def simulate(model, trajectory, out_dir, options: SimulateOptions | None = None,
             blade_tip = tis.blade_to_rest(scalpel.proxy, near)
             if cutting_pending:
                 res = cut_step(cm, blade_tip, axis)
-                c = tis.apply_cut(res)
-                for key in ("nodes_added", "springs_added", "springs_removed"):
-                    counts[key] += c[key]
+                for key, value in tis.apply_cut(res).items():
+                    counts[key] = counts.get(key, 0) + value
                 counts["cut_steps"] += 1
                 cutting_pending = False
             elif code != FREE:
                 # in tissue but not cutting: the blade rests or backs out, the sweep restarts here
                 cm.prev_pose = (blade_tip, blade_tip - cm.blade_length * axis)
-            f_ext = np.zeros((st.positions.shape[0], 3))
+            f_ext = np.zeros((tis.n_nodes, 3))
             if code == CUTTING and cm.active_tets.size:
                 # the tissue along the blade feels the reaction of the cut force (eqs. 16-18);
                 # before the blade enters, the surface is not indented (the entry point stays
@@ -377,21 +371,18 @@ def simulate(model, trajectory, out_dir, options: SimulateOptions | None = None,
             task_s["collision_and_cut"] += time.perf_counter() - tg
             # ---- relaxation (section 5)
             tr = time.perf_counter()
-            control = Control(external_forces=f_ext)
-            # nodes in coarse lists stay at their own time stamps between frames (section 5.2);
-            # the whole state is brought to one time only where it is looked at
-            counts["relax_passes"] += tis.lists.advance(control, tissue_time(t), synchronise=False)
+            # the whole tissue is brought to the same time at every update, whether a
+            # frame is written or not: output never changes what is simulated
+            counts["relax_passes"] += tis.advance(f_ext, tissue_time(t))
             frame_due = opt.frames and (t >= next_frame - 1e-9 or k == n_ticks)
             at_traj_end = opening_at_traj_end is None and t >= t_traj_end - 1e-9
-            if frame_due or at_traj_end or k == n_ticks:
-                tis.lists.synchronise(tissue_time(t), f_ext, control.gravity)
             task_s["relaxation"] += time.perf_counter() - tr
             if scalpel.code == FREE:  # the hierarchy serves the entry test: refit to the relaxed surface
                 tg = time.perf_counter()
-                bvh.update(st.positions[:n0])
+                bvh.update(tis.positions[:n0])
                 task_s["collision_and_cut"] += time.perf_counter() - tg
             if at_traj_end:
-                o = _cut_opening(cm, st.positions)
+                o = _cut_opening(cm, tis.positions)
                 opening_at_traj_end = float(o.mean()) if o.size else 0.0
             if frame_due:
                 write_frame(t)
@@ -412,7 +403,8 @@ def simulate(model, trajectory, out_dir, options: SimulateOptions | None = None,
             model=model, model_path=model_path, trajectory=trajectory, tis=tis, counts=counts, task_s=task_s,
             loop_wall=loop_wall, t_start=t_start, t_end=t_end, t_traj_end=t_traj_end, warnings=warnings,
             states_seen=states_seen, pictures=pictures, frames=series.n_frames, interrupted=interrupted,
-            opening_at_traj_end=opening_at_traj_end, realtime=realtime, opt=opt, m0=m0, forces=forces))
+            opening_at_traj_end=opening_at_traj_end, realtime=realtime, opt=opt, m0=m0, forces=forces,
+            material_model=material_model, settle_info=settle_info))
         if interrupted:
             _write_json(out_dir / "summary.json", summary)
     if counts["entries"] == 0:
@@ -425,8 +417,29 @@ def simulate(model, trajectory, out_dir, options: SimulateOptions | None = None,
         write_model(out_dir / "model.h5", cut_model(tis, model, summary))
         task_s["output"] += time.perf_counter() - t1
         summary["time_per_task_s"] = dict(task_s)
+    if hasattr(tis, "counts"):
+        summary["counts"].update({f"relax_{k}": v for k, v in tis.counts.items()})
     _write_json(out_dir / "summary.json", summary)
+    if opt.png:
+        # drawn from the files just written, as `cutkit render` draws any folder again
+        from cutkit.render import render_output
+
+        summary["pictures"] = render_output(out_dir)["pictures"]
     return summary
+
+
+def make_tissue(model, material_model: str, opt: SimulateOptions, blade_length: float):
+    """The tissue of a run: :class:`ElasticTissue` or the paper's springs (:class:`Tissue`)."""
+    if material_model == "springs":
+        from cutkit.simulate.tissue import Tissue
+
+        return Tissue(model, blade_length=blade_length, dt0=opt.dt0, n_lists=opt.n_lists,
+                      tolerance_fraction=opt.tolerance_fraction, centre_nodes=opt.centre_nodes,
+                      volume_stiffness=opt.volume_stiffness)
+    from cutkit.simulate.elastic_tissue import ElasticTissue
+
+    return ElasticTissue(model, blade_length=blade_length, step_s=1.0 / opt.geometry_rate_hz,
+                         centre_nodes=opt.centre_nodes)
 
 
 def cut_model(tis, model, summary: dict | None = None):
@@ -443,8 +456,8 @@ def cut_model(tis, model, summary: dict | None = None):
 
     from cutkit.cutting import to_model
 
-    cm, st, sm = tis.cm, tis.state, tis.springs
-    m = to_model(cm, model, points=cm.points, point_data={"displacement": st.positions - sm.rest_positions})
+    cm = tis.cm
+    m = to_model(cm, model, points=cm.points, point_data={"displacement": tis.displacement})
     provenance = dict(m.provenance)
     stages = dict(provenance.get("stages", {}))
     if summary is not None:
@@ -457,11 +470,11 @@ def cut_model(tis, model, summary: dict | None = None):
 def _summary(locals_: dict) -> dict:
     L = locals_
     tis, counts, task_s = L["tis"], L["counts"], L["task_s"]
-    cm, st, sm = tis.cm, tis.state, tis.springs
-    simulated = float(st.time)
+    cm = tis.cm
+    simulated = tis.time
     n_cut = len(cm.subtets)
     new_tets = int(sum(len(v) for v in cm.subtets.values()))
-    opening = _cut_opening(cm, st.positions)
+    opening = _cut_opening(cm, tis.positions)
     loop_wall = max(L["loop_wall"], 1e-12)
     work = task_s["haptics"] + task_s["collision_and_cut"] + task_s["relaxation"]
     summary = {
@@ -469,7 +482,9 @@ def _summary(locals_: dict) -> dict:
         "tets_initial": int(L["m0"]),
         "nodes_initial": int(cm.n_orig_points),
         "tets_final": int(cm._alive[:cm.n_tets_total].sum()),
-        "nodes_final": int(st.positions.shape[0]),
+        "nodes_final": tis.n_nodes,
+        "material_model": L["material_model"],
+        "settle": L["settle_info"],
         "cut_tets": n_cut,
         "new_tets": new_tets,
         "new_tets_per_cut_tet": (new_tets / n_cut) if n_cut else 0.0,
@@ -487,8 +502,8 @@ def _summary(locals_: dict) -> dict:
             "final_mean": float(opening.mean()) if opening.size else 0.0,
             "final_max": float(opening.max()) if opening.size else 0.0,
         },
-        "inverted_tets_deformed": _count_inverted(st.positions, cm.tets),
-        "max_displacement_mm": float(np.linalg.norm(st.positions - sm.rest_positions, axis=1).max(initial=0.0)),
+        "inverted_tets_deformed": _count_inverted(tis.positions, cm.tets),
+        "max_displacement_mm": float(np.linalg.norm(tis.displacement, axis=1).max(initial=0.0)),
         "max_F_ext_N": float(np.linalg.norm(L["forces"].rows[:, 2:5], axis=1).max(initial=0.0)),
         "interrupted": bool(L["interrupted"]),
         "options": asdict(L["opt"]),

@@ -30,7 +30,7 @@ import numpy as np
 
 from cutkit.cutting import CutMesh
 from cutkit.mesh.topology import TET_EDGES, unique_edges
-from cutkit.relax import NodeLists, build_spring_model, initial_state
+from cutkit.relax import Control, NodeLists, build_spring_model, initial_state
 from cutkit.relax.model import KG_M3_TO_T_MM3, PA_TO_MPA, STIFFNESS_CALIBRATION
 from cutkit.relax.topology import _recolour
 from cutkit.simulate._kernels import lookup_springs
@@ -60,8 +60,75 @@ def _shape_quality(X: np.ndarray, tets: np.ndarray, V: np.ndarray) -> np.ndarray
     return 6.0 * np.sqrt(2.0) * V / np.maximum(l_rms, 1e-300) ** 3
 
 
-class Tissue:
-    """Cut mesh + mass-spring model + node lists of one tissue model.
+class TissueBase:
+    """What both tissue kinds share: the cut mesh, node interpolation, the live tets.
+
+    Subclasses set ``cm`` (:class:`~cutkit.cutting.CutMesh`) and provide
+    ``positions``, ``rest_positions``, ``velocities``, ``fixed``, ``time``,
+    :meth:`settle`, :meth:`advance` and :meth:`apply_cut`.
+    """
+
+    cm: CutMesh
+
+    def interpolate_positions(self, nodes: np.ndarray) -> np.ndarray:
+        """Current positions of cut nodes from their defining nodes, (p, 3) float64.
+
+        The cut mesh works in the rest configuration; a cut node's weights
+        over its defining original nodes carry over to the deformed ones.
+        """
+        cm = self.cm
+        par = cm._def_nodes[nodes]
+        w = np.where(par >= 0, cm._def_w[nodes], 0.0)
+        return np.einsum("pq,pqc->pc", w, self.positions[np.where(par >= 0, par, 0)])
+
+    def _interpolation_weights(self, nodes: np.ndarray):
+        """Defining nodes (p, q) and their normalised weights (p, q) of cut nodes (invalid slots weigh 0)."""
+        cm = self.cm
+        par = cm._def_nodes[nodes]
+        valid = par >= 0
+        wz = np.where(valid, cm._def_w[nodes], 0.0)
+        wsum = wz.sum(axis=1, keepdims=True)
+        return np.where(valid, par, 0), wz / np.where(wsum > 0, wsum, 1.0), valid
+
+    def blade_to_rest(self, point, near_nodes: np.ndarray) -> np.ndarray:
+        """Carry a point of the deformed tissue into the rest configuration.
+
+        The cut is made in the rest configuration, where no original
+        tetrahedron is ever inverted, so the cut's topology does not depend
+        on how far the tissue has moved.  The blade is moved back by the mean
+        displacement of the nodes around it (first order: the local
+        rotation and stretch are neglected).
+
+        Parameters
+        ----------
+        point : (3,) float64
+        near_nodes : (k,) int64
+            Nodes around the blade.
+        """
+        if len(near_nodes) == 0:
+            return np.asarray(point, np.float64).copy()
+        u = self.positions[near_nodes] - self.rest_positions[near_nodes]
+        return np.asarray(point, np.float64) - u.mean(axis=0)
+
+
+    def alive_tets(self) -> tuple[np.ndarray, np.ndarray]:
+        """(k, 4) int64 current tets and (k,) int64 their CutMesh ids."""
+        cm = self.cm
+        ids = np.flatnonzero(cm._alive[:cm.n_tets_total])
+        return cm._tets[ids], ids
+
+    @property
+    def displacement(self) -> np.ndarray:
+        """(n, 3) float64 positions minus rest positions, mm."""
+        return self.positions - self.rest_positions
+
+    def point_data(self) -> dict:
+        """Further per-node arrays for the frames."""
+        return {}
+
+
+class Tissue(TissueBase):
+    """Cut mesh + mass-spring model + node lists of one tissue model (the paper's springs).
 
     Parameters
     ----------
@@ -151,37 +218,6 @@ class Tissue:
         return V, sv
 
     # ------------------------------------------------------------------ cut
-    def interpolate_positions(self, nodes: np.ndarray) -> np.ndarray:
-        """Current positions of cut nodes from their defining nodes, (p, 3) float64.
-
-        The cut mesh works in the rest configuration; a cut node's weights
-        over its defining original nodes carry over to the deformed ones.
-        """
-        cm = self.cm
-        par = cm._def_nodes[nodes]
-        w = np.where(par >= 0, cm._def_w[nodes], 0.0)
-        return np.einsum("pq,pqc->pc", w, self.state.positions[np.where(par >= 0, par, 0)])
-
-    def blade_to_rest(self, point, near_nodes: np.ndarray) -> np.ndarray:
-        """Carry a point of the deformed tissue into the rest configuration.
-
-        The cut is made in the rest configuration, where no original
-        tetrahedron is ever inverted, so the cut's topology does not depend
-        on how far the tissue has moved.  The blade is moved back by the mean
-        displacement of the nodes around it (first order: the local
-        rotation and stretch are neglected).
-
-        Parameters
-        ----------
-        point : (3,) float64
-        near_nodes : (k,) int64
-            Nodes around the blade.
-        """
-        if len(near_nodes) == 0:
-            return np.asarray(point, np.float64).copy()
-        u = self.state.positions[near_nodes] - self.springs.rest_positions[near_nodes]
-        return np.asarray(point, np.float64) - u.mean(axis=0)
-
     def apply_cut(self, res) -> dict:
         """Carry a :class:`~cutkit.cutting.StepResult` over to the springs.
 
@@ -375,13 +411,63 @@ class Tissue:
         # section 5.2: nodes made by a cut enter the finest list
         st.node_list = np.concatenate([st.node_list, np.where(held, -1, 0).astype(np.int32)])
 
-    # ------------------------------------------------------------------ views
+    # ------------------------------------------------------------------ the shared interface
     @property
     def n_nodes(self) -> int:
         return int(self.springs.n_nodes)
 
-    def alive_tets(self) -> tuple[np.ndarray, np.ndarray]:
-        """(k, 4) int64 current tets and (k,) int64 their CutMesh ids."""
-        cm = self.cm
-        ids = np.flatnonzero(cm._alive[:cm.n_tets_total])
-        return cm._tets[ids], ids
+    @property
+    def positions(self) -> np.ndarray:
+        return self.state.positions
+
+    @property
+    def rest_positions(self) -> np.ndarray:
+        return self.springs.rest_positions
+
+    @property
+    def velocities(self) -> np.ndarray:
+        return self.state.velocities
+
+    @property
+    def fixed(self) -> np.ndarray:
+        return self.springs.fixed
+
+    @property
+    def time(self) -> float:
+        return float(self.state.time)
+
+    def point_data(self) -> dict:
+        return {"node_list": self.state.node_list.astype(np.int32)}
+
+    def settle(self, iterations: int, step_s: float) -> dict:
+        """Gauss-Seidel sweeps of the whole model at a large step, then at rest at time 0.
+
+        Returns
+        -------
+        info : dict
+            ``iterations`` and the relative residual (out-of-balance spring
+            forces against their first value) they reached.
+        """
+        from cutkit.relax import spring_forces
+        from cutkit.relax import step as relax_step
+
+        sm, st = self.springs, self.state
+        free = ~sm.fixed
+        r0 = float(np.linalg.norm(spring_forces(sm, st.positions)[free]))
+        for _ in range(int(iterations)):
+            relax_step(sm, st, Control(), step_s, gauss_seidel=True)
+        r = float(np.linalg.norm(spring_forces(sm, st.positions)[free]))
+        st.velocities[:] = 0.0
+        st.time = 0.0
+        st.time_stamps[:] = 0.0
+        self.lists.list_time[:] = 0.0
+        return {"iterations": int(iterations), "relative_residual": r / r0 if r0 > 0 else 0.0}
+
+    def advance(self, f_ext: np.ndarray, until: float) -> int:
+        """Process the node lists up to ``until`` s and bring every node there; returns list passes.
+
+        Every node is brought to the same time at every call, whether a frame
+        is written or not, so what is written never changes what is simulated.
+        """
+        return self.lists.advance(Control(external_forces=f_ext), until, synchronise=True)
+

@@ -1,0 +1,310 @@
+"""Numba kernels of the element model: stable neo-Hookean tetrahedra, vertex block descent.
+
+The energy of one tetrahedron (docs/relaxation.md, "Element model") is
+
+    W = V psi(F),  psi = mu/2 (tr F^T F - 3) - mu (J - 1) + (lam + mu)/2 (J - 1)^2
+
+with ``F = Ds Dminv`` and ``J = det F`` (Smith, de Goes & Kim 2018, in the
+form of Kim & Eberle's course notes whose small-strain limit is linear
+elasticity with Lame parameters mu, lam).  ``J`` is affine in any single
+vertex position, so the energy of the tets around one vertex is an exact
+convex quadratic in that vertex: its 3x3 Newton step (Chen et al. 2024,
+vertex block descent) is the exact minimiser, whatever the step size and
+even for an inverted tetrahedron.
+
+The kernels take three struct-like arguments: ``el`` (:class:`Elements`),
+``adj`` (:class:`Adjacency`) and ``nt`` (:class:`NodeTerms`); they check
+nothing (:mod:`cutkit.relax.elastic` does).
+"""
+
+from __future__ import annotations
+
+from collections import namedtuple
+
+import numpy as np
+from numba import njit, prange
+
+#: tets (m, 4) int64, Dminv (m, 3, 3) float64, volume (m,) float64 (0: inactive), mu, lam (m,) float64 MPa
+Elements = namedtuple("Elements", ["tets", "Dminv", "volume", "mu", "lam"])
+#: tets (n, K) int32, corner (n, K) int8, degree (n,) int32: the tets around each node
+Adjacency = namedtuple("Adjacency", ["tets", "corner", "degree"])
+#: inertia (n,) m/h^2, damping (n,) c m / h, fixed (n, 3) bool, target y (n, 3), previous x (n, 3),
+#: external force (n, 3) N (gravity included)
+NodeTerms = namedtuple("NodeTerms", ["inertia", "damping", "fixed", "target", "previous", "force"])
+
+#: A node whose 3x3 block has |det| below this times its trace cubed is left where it is
+#: (no tet and no mass: an orphan the cut left behind).
+SINGULAR_BLOCK = 1e-14
+
+
+@njit(cache=True, nogil=True)
+def _corner_row(D, c):
+    """Row c of the gradient operator: dF/dx_c = I (x) b (b_0 = -(b_1 + b_2 + b_3))."""
+    if c == 0:
+        return -(D[0, 0] + D[1, 0] + D[2, 0]), -(D[0, 1] + D[1, 1] + D[2, 1]), -(D[0, 2] + D[1, 2] + D[2, 2])
+    return D[c - 1, 0], D[c - 1, 1], D[c - 1, 2]
+
+
+@njit(cache=True, nogil=True)
+def _accumulate(i, x, el, adj):
+    """-dW/dx_i (f0, f1, f2) and the upper triangle of d2W/dx_i^2 over the tets of node i.
+
+    Scalars only: no heap allocation in the innermost loop.
+    """
+    f0 = f1 = f2 = 0.0
+    h00 = h01 = h02 = h11 = h12 = h22 = 0.0
+    for k in range(adj.degree[i]):
+        t = adj.tets[i, k]
+        V = el.volume[t]
+        if V <= 0.0:
+            continue
+        mu = el.mu[t]
+        lm = el.lam[t] + mu
+        D = el.Dminv[t]
+        a0, a1, a2, a3 = el.tets[t, 0], el.tets[t, 1], el.tets[t, 2], el.tets[t, 3]
+        # Ds = [x1 - x0, x2 - x0, x3 - x0]
+        u0, u1, u2 = x[a1, 0] - x[a0, 0], x[a1, 1] - x[a0, 1], x[a1, 2] - x[a0, 2]
+        v0, v1, v2 = x[a2, 0] - x[a0, 0], x[a2, 1] - x[a0, 1], x[a2, 2] - x[a0, 2]
+        w0, w1, w2 = x[a3, 0] - x[a0, 0], x[a3, 1] - x[a0, 1], x[a3, 2] - x[a0, 2]
+        # F = Ds Dminv: F_rc = u_r D0c + v_r D1c + w_r D2c
+        F00 = u0 * D[0, 0] + v0 * D[1, 0] + w0 * D[2, 0]
+        F01 = u0 * D[0, 1] + v0 * D[1, 1] + w0 * D[2, 1]
+        F02 = u0 * D[0, 2] + v0 * D[1, 2] + w0 * D[2, 2]
+        F10 = u1 * D[0, 0] + v1 * D[1, 0] + w1 * D[2, 0]
+        F11 = u1 * D[0, 1] + v1 * D[1, 1] + w1 * D[2, 1]
+        F12 = u1 * D[0, 2] + v1 * D[1, 2] + w1 * D[2, 2]
+        F20 = u2 * D[0, 0] + v2 * D[1, 0] + w2 * D[2, 0]
+        F21 = u2 * D[0, 1] + v2 * D[1, 1] + w2 * D[2, 1]
+        F22 = u2 * D[0, 2] + v2 * D[1, 2] + w2 * D[2, 2]
+        # cofactor G = dJ/dF, columns g0 = f1 x f2, g1 = f2 x f0, g2 = f0 x f1
+        g00 = F11 * F22 - F21 * F12
+        g10 = F21 * F02 - F01 * F22
+        g20 = F01 * F12 - F11 * F02
+        g01 = F12 * F20 - F22 * F10
+        g11 = F22 * F00 - F02 * F20
+        g21 = F02 * F10 - F12 * F00
+        g02 = F10 * F21 - F20 * F11
+        g12 = F20 * F01 - F00 * F21
+        g22 = F00 * F11 - F10 * F01
+        J = F00 * g00 + F10 * g10 + F20 * g20
+        s = lm * (J - 1.0) - mu
+        b0, b1, b2 = _corner_row(D, adj.corner[i, k])
+        gb0 = g00 * b0 + g01 * b1 + g02 * b2
+        gb1 = g10 * b0 + g11 * b1 + g12 * b2
+        gb2 = g20 * b0 + g21 * b1 + g22 * b2
+        # dW/dx_i = V P b with P = mu F + s G
+        f0 -= V * (mu * (F00 * b0 + F01 * b1 + F02 * b2) + s * gb0)
+        f1 -= V * (mu * (F10 * b0 + F11 * b1 + F12 * b2) + s * gb1)
+        f2 -= V * (mu * (F20 * b0 + F21 * b1 + F22 * b2) + s * gb2)
+        # the J-Hessian term vanishes here: J is affine in one vertex
+        d = V * mu * (b0 * b0 + b1 * b1 + b2 * b2)
+        w = V * lm
+        h00 += d + w * gb0 * gb0
+        h11 += d + w * gb1 * gb1
+        h22 += d + w * gb2 * gb2
+        h01 += w * gb0 * gb1
+        h02 += w * gb0 * gb2
+        h12 += w * gb1 * gb2
+    return f0, f1, f2, h00, h01, h02, h11, h12, h22
+
+
+@njit(cache=True, nogil=True)
+def _node_update(i, x, el, adj, nt):
+    """Move x_i to the exact minimiser of the incremental potential in x_i; return the squared residual."""
+    f0, f1, f2, h00, h01, h02, h11, h12, h22 = _accumulate(i, x, el, adj)
+    m, c = nt.inertia[i], nt.damping[i]
+    f0 += m * (nt.target[i, 0] - x[i, 0]) - c * (x[i, 0] - nt.previous[i, 0]) + nt.force[i, 0]
+    f1 += m * (nt.target[i, 1] - x[i, 1]) - c * (x[i, 1] - nt.previous[i, 1]) + nt.force[i, 1]
+    f2 += m * (nt.target[i, 2] - x[i, 2]) - c * (x[i, 2] - nt.previous[i, 2]) + nt.force[i, 2]
+    h00 += m + c
+    h11 += m + c
+    h22 += m + c
+    # held components: their row and column become the identity, their force zero
+    if nt.fixed[i, 0]:
+        f0, h00, h01, h02 = 0.0, 1.0, 0.0, 0.0
+    if nt.fixed[i, 1]:
+        f1, h11, h01, h12 = 0.0, 1.0, 0.0, 0.0
+    if nt.fixed[i, 2]:
+        f2, h22, h02, h12 = 0.0, 1.0, 0.0, 0.0
+    r2 = f0 * f0 + f1 * f1 + f2 * f2
+    i00 = h11 * h22 - h12 * h12
+    i01 = h02 * h12 - h01 * h22
+    i02 = h01 * h12 - h02 * h11
+    det = h00 * i00 + h01 * i01 + h02 * i02
+    tr = h00 + h11 + h22
+    if not det > SINGULAR_BLOCK * tr * tr * tr:
+        return r2
+    i11 = h00 * h22 - h02 * h02
+    i12 = h02 * h01 - h00 * h12
+    i22 = h00 * h11 - h01 * h01
+    x[i, 0] += (i00 * f0 + i01 * f1 + i02 * f2) / det
+    x[i, 1] += (i01 * f0 + i11 * f1 + i12 * f2) / det
+    x[i, 2] += (i02 * f0 + i12 * f1 + i22 * f2) / det
+    return r2
+
+
+@njit(cache=True, parallel=True, nogil=True)
+def vbd_sweep(x, el, adj, nt, colour_offsets, colour_nodes, r2):
+    """One Gauss-Seidel sweep of vertex block descent, colour class by colour class.
+
+    Nodes of one colour share no tet, so they update in parallel and the
+    result does not depend on the number of threads.  ``r2[i]`` receives the
+    squared residual (out-of-balance force, N^2) of node i before its update.
+    """
+    for c in range(colour_offsets.shape[0] - 1):
+        lo, hi = colour_offsets[c], colour_offsets[c + 1]
+        for q in prange(lo, hi):
+            i = colour_nodes[q]
+            r2[i] = _node_update(i, x, el, adj, nt)
+
+
+@njit(cache=True, parallel=True, nogil=True)
+def node_forces(x, el, adj, out):
+    """Elastic force -dW/dx on every node, N: ``out`` (n, 3)."""
+    for i in prange(x.shape[0]):
+        f0, f1, f2, h00, h01, h02, h11, h12, h22 = _accumulate(i, x, el, adj)
+        out[i, 0] = f0
+        out[i, 1] = f1
+        out[i, 2] = f2
+
+
+@njit(cache=True, nogil=True)
+def element_energy(x, el):
+    """Total elastic energy sum V psi(F), N mm (= mJ)."""
+    total = 0.0
+    for t in range(el.tets.shape[0]):
+        V = el.volume[t]
+        if V <= 0.0:
+            continue
+        a0 = el.tets[t, 0]
+        D = el.Dminv[t]
+        F = np.zeros((3, 3))
+        for j in range(3):
+            aj = el.tets[t, j + 1]
+            for r in range(3):
+                ej = x[aj, r] - x[a0, r]
+                for c in range(3):
+                    F[r, c] += ej * D[j, c]
+        J = np.linalg.det(F)
+        mu = el.mu[t]
+        ic = 0.0
+        for r in range(3):
+            for c in range(3):
+                ic += F[r, c] * F[r, c]
+        total += V * (0.5 * mu * (ic - 3.0) - mu * (J - 1.0) + 0.5 * (el.lam[t] + mu) * (J - 1.0) ** 2)
+    return total
+
+
+@njit(cache=True, nogil=True)
+def colour_nodes_greedy(adj, tets, colour, nodes):
+    """Give each node of ``nodes`` the smallest colour no node sharing a tet with it has.
+
+    Only ``nodes`` change; the others keep theirs (-1 = none yet).
+    """
+    for q in range(nodes.shape[0]):
+        i = nodes[q]
+        used = np.zeros(256, np.bool_)
+        for k in range(adj.degree[i]):
+            t = adj.tets[i, k]
+            for j in range(4):
+                a = tets[t, j]
+                if a != i and colour[a] >= 0 and colour[a] < 256:
+                    used[colour[a]] = True
+        c = 0
+        while c < 255 and used[c]:
+            c += 1
+        colour[i] = c
+
+
+@njit(cache=True, nogil=True)
+def colour_classes(colour, movable, n_colours):
+    """Counting sort of the movable nodes by colour: ``offsets`` (n_colours + 1,), ``nodes``."""
+    counts = np.zeros(n_colours + 1, np.int64)
+    for i in range(colour.shape[0]):
+        if movable[i]:
+            counts[colour[i] + 1] += 1
+    for c in range(n_colours):
+        counts[c + 1] += counts[c]
+    nodes = np.empty(counts[n_colours], np.int64)
+    fill = counts[:-1].copy()
+    for i in range(colour.shape[0]):
+        if movable[i]:
+            nodes[fill[colour[i]]] = i
+            fill[colour[i]] += 1
+    return counts, nodes
+
+
+@njit(cache=True, nogil=True)
+def add_to_adjacency(adj, tets, ids):
+    """Append tets ``ids`` to the lists of their nodes (capacity checked by the caller)."""
+    for q in range(ids.shape[0]):
+        t = ids[q]
+        for c in range(4):
+            i = tets[t, c]
+            k = adj.degree[i]
+            adj.tets[i, k] = t
+            adj.corner[i, k] = c
+            adj.degree[i] = k + 1
+
+
+@njit(cache=True, nogil=True)
+def remove_from_adjacency(adj, tets, ids):
+    """Remove tets ``ids`` from the lists of their nodes (order of the rest kept)."""
+    for q in range(ids.shape[0]):
+        t = ids[q]
+        for c in range(4):
+            i = tets[t, c]
+            k_out = 0
+            for k in range(adj.degree[i]):
+                if adj.tets[i, k] != t:
+                    adj.tets[i, k_out] = adj.tets[i, k]
+                    adj.corner[i, k_out] = adj.corner[i, k]
+                    k_out += 1
+            adj.degree[i] = k_out
+
+
+@njit(cache=True, nogil=True)
+def colour_classes_of(colour, nodes, n_colours):
+    """Counting sort of ``nodes`` by colour: ``offsets`` (n_colours + 1,), ``sorted`` (k,) int64."""
+    counts = np.zeros(n_colours + 1, np.int64)
+    for q in range(nodes.shape[0]):
+        counts[colour[nodes[q]] + 1] += 1
+    for c in range(n_colours):
+        counts[c + 1] += counts[c]
+    out = np.empty(nodes.shape[0], np.int64)
+    fill = counts[:-1].copy()
+    for q in range(nodes.shape[0]):
+        c = colour[nodes[q]]
+        out[fill[c]] = nodes[q]
+        fill[c] += 1
+    return counts, out
+
+
+@njit(cache=True, nogil=True)
+def awake_after_sweep(adj, tets, movable, r2, tau2, nodes, mark):
+    """The nodes the next sweep moves: those of ``nodes`` still out of balance by more than
+    sqrt(tau2), and every movable node sharing a tet with one of them.
+
+    ``mark`` (n,) bool is all False on entry and on return.
+    """
+    out = np.empty(nodes.shape[0] * 4 + 16, np.int64)
+    k = 0
+    for q in range(nodes.shape[0]):
+        i = nodes[q]
+        if r2[i] <= tau2:
+            continue
+        for d in range(adj.degree[i]):
+            t = adj.tets[i, d]
+            for c in range(4):
+                a = tets[t, c]
+                if movable[a] and not mark[a]:
+                    mark[a] = True
+                    if k == out.shape[0]:
+                        grown = np.empty(2 * k, np.int64)
+                        grown[:k] = out
+                        out = grown
+                    out[k] = a
+                    k += 1
+    for q in range(k):
+        mark[out[q]] = False
+    return out[:k]

@@ -1,0 +1,540 @@
+"""The element model: stable neo-Hookean tetrahedra relaxed by vertex block descent.
+
+What a step never changes (except by a topology edit) is the
+:class:`ElementModel`; what changes every step is the
+:class:`ElementState`.  One implicit (backward Euler) step of length ``h``
+minimises the incremental potential
+
+    G(x) = sum_i m_i / (2 h^2) |x_i - y_i|^2 + c_i m_i / (2 h) |x_i - x_i^n|^2 + W(x) - f_ext . x
+
+(``y = x^n + h v^n``) by vertex block descent (Chen, Macklin, Kim, Yuksel,
+SIGGRAPH 2024): the nodes of one colour class move in parallel, each to the
+exact minimiser of G in its own position (a 3x3 solve, exact because the
+stable neo-Hookean energy is quadratic in one vertex,
+:mod:`cutkit.relax._elastic_kernels`).  ``h = None`` drops the inertia and
+damping: the sweeps then relax to static equilibrium.  Iterations stop at a
+residual, never after a fixed count (:data:`DEFAULT_RTOL`).
+
+Units as the spring model's (mm, t, s, N, MPa; :mod:`cutkit.relax.model`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from cutkit.errors import InputError
+from cutkit.relax import _elastic_kernels as K
+from cutkit.relax.model import KG_M3_TO_T_MM3, MAX_PRESTRAIN, PA_TO_MPA
+
+#: The iterations of a solve stop once the residual (the 2-norm of the
+#: out-of-balance node forces, N) has fallen to this fraction of its first value...
+DEFAULT_RTOL = 1e-4
+#: ... or below this absolute value, N (a strain of about 1e-7 on a soft-tissue tet of 3 mm).
+DEFAULT_ATOL_N = 1e-7
+#: The most sweeps one solve makes before it reports that it did not converge.
+DEFAULT_MAX_ITERATIONS = 10000
+#: A tet whose normalised rest volume 6 sqrt(2) V / l_rms^3 (1 for a regular
+#: tet) is below this carries mass but no energy: its inverse rest shape would
+#: amplify rounding errors past any use.  A cut makes such a tet only where
+#: the blade passes within about 1e-6 of an edge length from a node.
+MIN_ELEMENT_QUALITY = 1e-6
+#: Spare tets per node in the adjacency table when it is (re)allocated.
+ADJACENCY_SLACK = 16
+
+
+def lame(E, nu):
+    """Lame parameters (mu, lam) of Young's modulus E and Poisson ratio nu (same units as E)."""
+    E = np.asarray(E, np.float64)
+    nu = np.asarray(nu, np.float64)
+    return E / (2.0 * (1.0 + nu)), E * nu / ((1.0 + nu) * (1.0 - 2.0 * nu))
+
+
+def rest_shape(X, tets, prestrain=None, fibre=None):
+    """Inverse rest shapes and volumes of tetrahedra, with an optional prestrain along a fibre.
+
+    The prestrained tissue's natural (stress-free) shape is the rest shape
+    shortened by the fraction ``prestrain`` along ``fibre``: ``Dm' = (I - p f
+    f^T) Dm`` (paper section 7.3, as a rest shape instead of rest lengths).
+
+    Parameters
+    ----------
+    X : (n, 3) float64
+        Rest positions, mm.
+    tets : (m, 4) int64
+    prestrain : (m,) float64, optional
+    fibre : (m, 3) float64, optional
+        Unit fibre directions.
+
+    Returns
+    -------
+    Dminv : (m, 3, 3) float64
+        Inverse natural shapes (zero for inactive tets).
+    volume : (m,) float64
+        Natural volumes, mm^3 (zero for tets below :data:`MIN_ELEMENT_QUALITY`).
+    rest_volume : (m,) float64
+        Volumes of the rest shape, mm^3 (what the mass is lumped from).
+    """
+    p = X[tets]
+    Dm = np.stack([p[:, 1] - p[:, 0], p[:, 2] - p[:, 0], p[:, 3] - p[:, 0]], axis=2)  # columns
+    rest_volume = np.linalg.det(Dm) / 6.0
+    if prestrain is not None:
+        ff = np.einsum("mi,mj->mij", fibre, fibre)
+        Dm = Dm - prestrain[:, None, None] * np.einsum("mij,mjk->mik", ff, Dm)
+    volume = np.linalg.det(Dm) / 6.0
+    edges = np.concatenate([Dm, Dm[:, :, [1, 2, 0]] - Dm], axis=2)
+    l_rms = np.sqrt(np.einsum("mij,mij->m", edges, edges) / 6.0)
+    quality = 6.0 * np.sqrt(2.0) * volume / np.maximum(l_rms, 1e-300) ** 3
+    active = quality >= MIN_ELEMENT_QUALITY
+    Dminv = np.zeros_like(Dm)
+    if active.any():
+        Dminv[active] = np.linalg.inv(Dm[active])
+    return Dminv, np.where(active, volume, 0.0), rest_volume
+
+
+@dataclass
+class ElementModel:
+    """What a step never changes (warp.sim's Model), grown and shrunk by topology edits.
+
+    Element arrays have a capacity; ``n_elements`` of them are in use and an
+    element with ``volume == 0`` contributes nothing (removed or inactive).
+
+    Attributes
+    ----------
+    tets : (cap, 4) int64
+    Dminv : (cap, 3, 3) float64
+        Inverse natural shape of each element.
+    volume : (cap,) float64
+        Natural volume (energy weight), mm^3; 0 = no energy.
+    mu, lam : (cap,) float64
+        Lame parameters, MPa.
+    mass_share : (cap,) float64
+        Mass each element gives each of its four nodes, t.
+    masses : (n,) float64
+        Lumped node masses, t.
+    damping : (n,) float64
+        Mass-proportional damping per node, 1/s.
+    fixed : (n, 3) bool
+        Components held at their current value.
+    adj_tets, adj_corner, adj_degree : the elements around each node
+        ``(n, K) int32, (n, K) int8, (n,) int32``.
+    colour : (n,) int32
+        No two nodes of one element share a colour: the parallel classes.
+    """
+
+    tets: np.ndarray
+    Dminv: np.ndarray
+    volume: np.ndarray
+    mu: np.ndarray
+    lam: np.ndarray
+    mass_share: np.ndarray
+    n_elements: int
+    masses: np.ndarray
+    damping: np.ndarray
+    fixed: np.ndarray
+    adj_tets: np.ndarray = field(default=None)
+    adj_corner: np.ndarray = field(default=None)
+    adj_degree: np.ndarray = field(default=None)
+    colour: np.ndarray = field(default=None)
+    _classes: tuple | None = None
+
+    @property
+    def n_nodes(self) -> int:
+        return int(self.masses.shape[0])
+
+    @property
+    def elements(self) -> K.Elements:
+        return K.Elements(self.tets, self.Dminv, self.volume, self.mu, self.lam)
+
+    @property
+    def adjacency(self) -> K.Adjacency:
+        return K.Adjacency(self.adj_tets, self.adj_corner, self.adj_degree)
+
+    # ------------------------------------------------------------ building
+    @classmethod
+    def empty(cls, n_nodes: int, capacity: int) -> "ElementModel":
+        cap = max(int(capacity), 1)
+        return cls(
+            tets=np.zeros((cap, 4), np.int64), Dminv=np.zeros((cap, 3, 3)), volume=np.zeros(cap),
+            mu=np.zeros(cap), lam=np.zeros(cap), mass_share=np.zeros(cap), n_elements=0,
+            masses=np.zeros(n_nodes), damping=np.zeros(n_nodes), fixed=np.zeros((n_nodes, 3), bool),
+            adj_tets=np.zeros((n_nodes, ADJACENCY_SLACK), np.int32),
+            adj_corner=np.zeros((n_nodes, ADJACENCY_SLACK), np.int8),
+            adj_degree=np.zeros(n_nodes, np.int32), colour=np.full(n_nodes, -1, np.int32))
+
+    def add_nodes(self, count: int, damping=0.0, fixed=None) -> np.ndarray:
+        """Append ``count`` nodes without elements (mass comes with their elements); returns their ids."""
+        n, p = self.n_nodes, int(count)
+        self.masses = np.concatenate([self.masses, np.zeros(p)])
+        self.damping = np.concatenate([self.damping, np.broadcast_to(np.asarray(damping, np.float64), (p,))])
+        fx = np.zeros((p, 3), bool) if fixed is None else np.broadcast_to(np.asarray(fixed, bool).reshape(p, -1),
+                                                                             (p, 3))
+        self.fixed = np.concatenate([self.fixed, fx])
+        self.adj_tets = np.concatenate([self.adj_tets, np.zeros((p, self.adj_tets.shape[1]), np.int32)])
+        self.adj_corner = np.concatenate([self.adj_corner, np.zeros((p, self.adj_corner.shape[1]), np.int8)])
+        self.adj_degree = np.concatenate([self.adj_degree, np.zeros(p, np.int32)])
+        self.colour = np.concatenate([self.colour, np.full(p, -1, np.int32)])
+        self._classes = None
+        return np.arange(n, n + p)
+
+    def add_elements(self, X, tets, mu, lam, density, prestrain=None, fibre=None, ids=None) -> np.ndarray:
+        """Add tetrahedra with their rest shape, Lame parameters (MPa) and density (t/mm^3).
+
+        Parameters
+        ----------
+        X : (n, 3) float64
+            Rest positions of all nodes, mm.
+        tets : (k, 4) int64
+        mu, lam, density : (k,) float64
+        prestrain : (k,) float64, optional
+        fibre : (k, 3) float64, optional
+        ids : (k,) int64, optional
+            Element ids to use (default: the next ``k``); the arrays grow to fit.
+
+        Returns
+        -------
+        ids : (k,) int64
+        """
+        tets = np.asarray(tets, np.int64).reshape(-1, 4)
+        k = tets.shape[0]
+        if ids is None:
+            ids = np.arange(self.n_elements, self.n_elements + k)
+        ids = np.asarray(ids, np.int64)
+        if k == 0:
+            return ids
+        self._reserve(int(ids.max()) + 1)
+        Dminv, volume, rest_volume = rest_shape(np.asarray(X, np.float64), tets, prestrain, fibre)
+        self.tets[ids] = tets
+        self.Dminv[ids] = Dminv
+        self.volume[ids] = volume
+        self.mu[ids] = mu
+        self.lam[ids] = lam
+        share = np.asarray(density, np.float64) * np.maximum(rest_volume, 0.0) / 4.0
+        self.mass_share[ids] = share
+        np.add.at(self.masses, tets.ravel(), np.repeat(share, 4))
+        self.n_elements = max(self.n_elements, int(ids.max()) + 1)
+        deg = np.bincount(tets.ravel(), minlength=self.n_nodes)
+        need = int((self.adj_degree + deg[: self.n_nodes]).max())
+        if need > self.adj_tets.shape[1]:
+            self._widen(need + ADJACENCY_SLACK)
+        K.add_to_adjacency(self.adjacency, self.tets, ids)
+        self._classes = None
+        return ids
+
+    def remove_elements(self, ids) -> None:
+        """Take elements out: their energy, their mass and their place in the node lists."""
+        ids = np.asarray(ids, np.int64)
+        if ids.size == 0:
+            return
+        K.remove_from_adjacency(self.adjacency, self.tets, ids)
+        np.add.at(self.masses, self.tets[ids].ravel(), np.repeat(-self.mass_share[ids], 4))
+        self.masses[self.adj_degree == 0] = 0.0  # exactly: what is left is rounding
+        self.volume[ids] = 0.0
+        self.mass_share[ids] = 0.0
+        self._classes = None
+
+    def _reserve(self, cap: int) -> None:
+        old = self.tets.shape[0]
+        if cap <= old:
+            return
+        new = max(cap, 2 * old)
+        grow = new - old
+        self.tets = np.concatenate([self.tets, np.zeros((grow, 4), np.int64)])
+        self.Dminv = np.concatenate([self.Dminv, np.zeros((grow, 3, 3))])
+        for name in ("volume", "mu", "lam", "mass_share"):
+            setattr(self, name, np.concatenate([getattr(self, name), np.zeros(grow)]))
+
+    def _widen(self, width: int) -> None:
+        n, old = self.adj_tets.shape
+        self.adj_tets = np.concatenate([self.adj_tets, np.zeros((n, width - old), np.int32)], axis=1)
+        self.adj_corner = np.concatenate([self.adj_corner, np.zeros((n, width - old), np.int8)], axis=1)
+
+    # ------------------------------------------------------------ colouring
+    def recolour(self, nodes=None) -> None:
+        """Colour ``nodes`` (default: all) so that no element has two nodes of one colour."""
+        if nodes is None:
+            self.colour[:] = -1
+            nodes = np.arange(self.n_nodes)
+        nodes = np.asarray(nodes, np.int64)
+        self.colour[nodes] = -1
+        K.colour_nodes_greedy(self.adjacency, self.tets, self.colour, nodes)
+        self._classes = None
+
+    def colour_classes(self) -> tuple[np.ndarray, np.ndarray]:
+        """``offsets`` (c + 1,) int64 and ``nodes`` (k,) int64 of the nodes a sweep moves, by colour."""
+        if self._classes is None:
+            movable = ~self.fixed.all(axis=1) & (self.adj_degree > 0)
+            if np.any(self.colour[movable] < 0):
+                self.recolour(np.flatnonzero(movable & (self.colour < 0)))
+            n_colours = int(self.colour.max(initial=-1)) + 1
+            self._classes = K.colour_classes(self.colour, movable, n_colours)
+        return self._classes
+
+
+@dataclass
+class ElementState:
+    """What changes every step (warp.sim's State).
+
+    Attributes
+    ----------
+    positions : (n, 3) float64
+        mm.
+    velocities : (n, 3) float64
+        mm/s.
+    time : float
+        s.
+    """
+
+    positions: np.ndarray
+    velocities: np.ndarray
+    time: float = 0.0
+
+
+@dataclass
+class SolveInfo:
+    """How a solve ended: sweeps made, residual before the first and after the last (N)."""
+
+    iterations: int
+    initial_residual: float
+    residual: float
+    converged: bool
+
+
+def build_element_model(model, *, poisson_ratio=None) -> ElementModel:
+    """The element model of a :class:`~cutkit.model.TetModel` in its rest configuration.
+
+    Materials come from the model's table (``E`` Pa, ``poisson_ratio``,
+    ``density`` kg/m^3, ``damping`` 1/s), prestress from its prestress
+    table, fixed nodes from its boundary conditions.
+
+    Parameters
+    ----------
+    model : TetModel
+    poisson_ratio : float, optional
+        Override the table's Poisson ratio for every label.
+    """
+    mat = material_of_tets(model, model.labels, poisson_ratio=poisson_ratio)
+    n = model.n_points
+    em = ElementModel.empty(n, model.n_tets)
+    prestrain, fibre = prestress_of_tets(model, model.labels)
+    em.add_elements(model.points, model.tets, mat["mu"], mat["lam"], mat["density"], prestrain, fibre)
+    em.damping[:] = node_damping(n, model.tets, mat["damping"])
+    em.fixed[:] = fixed_nodes_mask(model)[:, None]
+    em.recolour()
+    return em
+
+
+def material_of_tets(model, labels, poisson_ratio=None) -> dict:
+    """Per-tet material in solver units: ``mu``, ``lam`` (MPa), ``density`` (t/mm^3), ``damping`` (1/s), ``E`` (MPa).
+
+    Raises
+    ------
+    InputError
+        A label has no row in the materials table, or a Poisson ratio lies outside [0, 0.5).
+    """
+    rows = model.materials.row_of(labels)
+    if np.any(rows < 0):
+        bad = int(np.asarray(labels)[np.argmax(rows < 0)])
+        raise InputError(f"label {bad} has no row in the materials table")
+    nu = model.materials["poisson_ratio"][rows] if poisson_ratio is None else np.full(rows.shape, poisson_ratio)
+    if np.any(~np.isfinite(nu) | (nu < 0.0) | (nu >= 0.5)):
+        raise InputError(f"Poisson ratio must lie in [0, 0.5), got {float(nu[np.argmax((nu < 0) | (nu >= 0.5))])}")
+    E = model.materials["E"][rows] * PA_TO_MPA
+    mu, lam = lame(E, nu)
+    return {"E": E, "mu": mu, "lam": lam, "density": model.materials["density"][rows] * KG_M3_TO_T_MM3,
+            "damping": model.materials["damping"][rows]}
+
+
+def prestress_of_tets(model, labels):
+    """Prestrain (m,) and unit fibre direction (m, 3) of each tet from the model's prestress table."""
+    labels = np.asarray(labels)
+    prestrain = np.zeros(labels.shape[0])
+    fibre = np.zeros((labels.shape[0], 3))
+    ps = model.prestress
+    for lab, f, eps in zip(ps.label, np.asarray(ps.fibre_direction, np.float64).reshape(-1, 3),
+                           np.asarray(ps.prestrain, np.float64)):
+        if not abs(eps) < MAX_PRESTRAIN:
+            raise InputError(f"prestrain of label {int(lab)} must lie in (-{MAX_PRESTRAIN}, {MAX_PRESTRAIN}), got {eps}")
+        sel = labels == lab
+        prestrain[sel] = eps
+        fibre[sel] = f / np.linalg.norm(f)
+    return prestrain, fibre
+
+
+def node_damping(n: int, tets, damping) -> np.ndarray:
+    """Damping per node: the mean over its tets of their material's (1/s), (n,) float64."""
+    tets = np.asarray(tets, np.int64)
+    s = np.bincount(tets.ravel(), np.repeat(np.asarray(damping, np.float64), 4), minlength=n)
+    c = np.bincount(tets.ravel(), minlength=n)
+    return np.divide(s, c, out=np.zeros(n), where=c > 0)
+
+
+def fixed_nodes_mask(model) -> np.ndarray:
+    """(n,) bool: nodes the boundary conditions hold (fixed or prescribed)."""
+    mask = np.zeros(model.n_points, bool)
+    mask[np.asarray(model.boundary.fixed_nodes, np.int64)] = True
+    mask[np.asarray(model.boundary.prescribed_nodes, np.int64)] = True
+    return mask
+
+
+def initial_element_state(model) -> ElementState:
+    """Rest positions (prescribed displacements applied), zero velocities."""
+    x = np.array(model.points, np.float64, copy=True)
+    pn = np.asarray(model.boundary.prescribed_nodes, np.int64)
+    if pn.size:
+        x[pn] += np.asarray(model.boundary.prescribed_displacement, np.float64).reshape(-1, 3)
+    return ElementState(positions=x, velocities=np.zeros_like(x))
+
+
+# ---------------------------------------------------------------- solving
+def _node_terms(em: ElementModel, x, h, f_ext, gravity, y=None):
+    n = em.n_nodes
+    force = np.zeros((n, 3)) if f_ext is None else np.array(f_ext, np.float64, copy=True)
+    if gravity is not None and np.any(gravity):
+        force += em.masses[:, None] * np.asarray(gravity, np.float64)[None, :]
+    if h is None:
+        zero = np.zeros(n)
+        return K.NodeTerms(zero, zero, em.fixed, x, x, force)
+    inertia = em.masses / (h * h)
+    damping = em.damping * em.masses / h
+    return K.NodeTerms(inertia, damping, em.fixed, y, x.copy(), force)
+
+
+def iterate(em: ElementModel, x, terms, *, rtol=DEFAULT_RTOL, atol=DEFAULT_ATOL_N,
+            max_iterations=DEFAULT_MAX_ITERATIONS, min_iterations=1, chebyshev=None) -> SolveInfo:
+    """Vertex block descent sweeps on ``x`` (in place) until the residual criterion holds.
+
+    ``chebyshev`` (a spectral radius estimate in (0, 1)) turns on the
+    Chebyshev semi-iterative acceleration that vertex block descent uses
+    (Wang 2015): ``x = w (x_sweep - x_prev2) + x_prev2``.
+    """
+    offsets, nodes = em.colour_classes()
+    r2 = np.zeros(em.n_nodes)
+    el, adj = em.elements, em.adjacency
+    r0 = res = 0.0
+    it = 0
+    prev2 = prev = None
+    omega = 1.0
+    while it < max_iterations:
+        if chebyshev is not None:
+            prev2, prev = prev, x.copy()
+        K.vbd_sweep(x, el, adj, terms, offsets, nodes, r2)
+        it += 1
+        res = float(np.sqrt(r2.sum()))
+        if it == 1:
+            r0 = res
+        if it >= min_iterations and (res <= rtol * r0 or res <= atol):
+            return SolveInfo(it, r0, res, True)
+        if chebyshev is not None and prev2 is not None:
+            rho2 = chebyshev * chebyshev
+            omega = 2.0 / (2.0 - rho2) if omega == 1.0 else 4.0 / (4.0 - rho2 * omega)
+            x[:] = omega * (x - prev2) + prev2
+    return SolveInfo(it, r0, res, False)
+
+
+def implicit_step(em: ElementModel, state: ElementState, h: float, f_ext=None, gravity=None,
+                  **tolerances) -> SolveInfo:
+    """Advance ``state`` by one backward Euler step of ``h`` seconds.
+
+    Parameters
+    ----------
+    em : ElementModel
+    state : ElementState
+        Changed in place.
+    h : float
+        s.
+    f_ext : (n, 3) float64, optional
+        External node forces, N.
+    gravity : (3,) float64, optional
+        mm/s^2.
+    **tolerances
+        ``rtol``, ``atol``, ``max_iterations`` of :func:`iterate`.
+    """
+    chebyshev = tolerances.pop("chebyshev", None)
+    x0 = state.positions.copy()
+    free = ~em.fixed
+    y = np.where(free, x0 + h * state.velocities, x0)
+    state.positions[:] = y  # the inertial prediction is the first guess
+    terms = _node_terms(em, x0, h, f_ext, gravity, y)
+    info = iterate(em, state.positions, terms, chebyshev=chebyshev, **tolerances)
+    state.velocities[:] = np.where(free, (state.positions - x0) / h, 0.0)
+    state.time += h
+    return info
+
+
+def local_step(em: ElementModel, state: ElementState, h: float, f_ext, r2, seeds, *,
+               atol: float, max_iterations: int = DEFAULT_MAX_ITERATIONS, chebyshev=None) -> SolveInfo:
+    """One backward Euler step that moves only the nodes out of balance (and their neighbours).
+
+    A node whose out-of-balance force stays below ``tau = atol / (2 sqrt(n))``
+    and that does not move (its inertial force ``m |v| / h`` below tau)
+    sleeps: it keeps its position and its last residual ``r2``.  The nodes of
+    ``seeds`` (touched by a cut, loaded) are awake, and so is every neighbour
+    of a node still out of balance after a sweep, so a disturbance spreads
+    exactly as far as it is felt.  The step ends when the residual of all
+    nodes, sleeping ones with their last value, is at most ``atol``; with
+    every node awake this is :func:`implicit_step`.
+
+    Parameters
+    ----------
+    r2 : (n,) float64
+        Squared residual of every node at its last sweep, N^2; updated in place.
+    seeds : (k,) int64
+        Nodes to wake.
+    """
+    x, v = state.positions, state.velocities
+    n = em.n_nodes
+    tau2 = (0.5 * atol) ** 2 / max(n, 1)
+    movable = ~em.fixed.all(axis=1) & (em.adj_degree > 0)
+    moving = movable & (em.masses * np.linalg.norm(v, axis=1) / h > np.sqrt(tau2))
+    seeds = np.unique(np.concatenate([np.asarray(seeds, np.int64), np.flatnonzero(moving),
+                                      np.flatnonzero(movable & (r2 > tau2))]))
+    mark = np.zeros(n, bool)
+    awake = K.awake_after_sweep(em.adjacency, em.tets, movable, r2, -1.0, seeds, mark)
+    x0 = x.copy()
+    y = x0.copy()
+    y[awake] += h * np.where(em.fixed[awake], 0.0, v[awake])
+    x[awake] = y[awake]
+    terms = _node_terms(em, x0, h, f_ext, None, y)
+    n_colours = int(em.colour.max(initial=-1)) + 1
+    r0 = res = 0.0
+    it = 0
+    prev2 = prev = None
+    omega = 1.0
+    while it < max_iterations and awake.size:
+        offsets, nodes = K.colour_classes_of(em.colour, awake, n_colours)
+        if chebyshev is not None:
+            prev2, prev = prev, x.copy()
+        K.vbd_sweep(x, em.elements, em.adjacency, terms, offsets, nodes, r2)
+        it += 1
+        if chebyshev is not None and prev2 is not None:  # as in iterate(); nodes that slept are unchanged
+            rho2 = chebyshev * chebyshev
+            omega = 2.0 / (2.0 - rho2) if omega == 1.0 else 4.0 / (4.0 - rho2 * omega)
+            x[:] = omega * (x - prev2) + prev2
+        res = float(np.sqrt(r2.sum()))
+        if it == 1:
+            r0 = res
+        if res <= atol:
+            break
+        awake = K.awake_after_sweep(em.adjacency, em.tets, movable, r2, tau2, awake, mark)
+    v[:] = np.where(em.fixed, 0.0, (x - x0) / h)
+    state.time += h
+    return SolveInfo(it, r0, res, res <= atol)
+
+
+def static_solve(em: ElementModel, positions, f_ext=None, gravity=None, **tolerances) -> SolveInfo:
+    """Relax ``positions`` (in place) to static equilibrium under the external forces."""
+    return iterate(em, positions, _node_terms(em, positions, None, f_ext, gravity), **tolerances)
+
+
+def elastic_forces(em: ElementModel, positions) -> np.ndarray:
+    """Elastic node forces -dW/dx, N: (n, 3) float64 (reaction forces at held nodes)."""
+    out = np.zeros((em.n_nodes, 3))
+    K.node_forces(np.ascontiguousarray(positions, np.float64), em.elements, em.adjacency, out)
+    return out
+
+
+def elastic_energy(em: ElementModel, positions) -> float:
+    """Total stored energy, N mm."""
+    return float(K.element_energy(np.ascontiguousarray(positions, np.float64), em.elements))

@@ -1,0 +1,242 @@
+"""The tissue being cut as stable neo-Hookean elements (the default material model).
+
+Node ``k`` of the :class:`~cutkit.cutting.CutMesh` is node ``k`` of the
+:class:`~cutkit.relax.elastic.ElementModel`, and element ``t`` is the cut
+mesh's tetrahedron ``t``, so a cut step carries over without any search:
+
+* a removed tetrahedron takes its energy and its mass share out;
+* an added one (a sub-tetrahedron of a cut) gets its own rest shape from
+  the cut mesh's rest positions, with the material, prestrain and fibre of
+  the tetrahedron it was cut from;
+* the tetrahedra of a node the blade moved (tip and crack-front nodes) get
+  their rest shape again;
+* new nodes take position and velocity interpolated from their defining
+  nodes and a colour no node of their tetrahedra has.
+
+The rest positions are the cut mesh's (one store); this module keeps only
+the current positions and velocities.  Every step is local to the cut: no
+work proportional to the model except the O(n) counting sort of the
+colour classes.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from cutkit.cutting import CutMesh
+from cutkit.relax.elastic import (
+    DEFAULT_ATOL_N,
+    ElementModel,
+    ElementState,
+    fixed_nodes_mask,
+    local_step,
+    initial_element_state,
+    material_of_tets,
+    node_damping,
+    prestress_of_tets,
+    static_solve,
+)
+from cutkit.simulate.tissue import TissueBase
+
+#: Each implicit step of a simulation is solved until its residual is below
+#: this fraction of the model's force scale (the out-of-balance force of the
+#: unsettled model, see :meth:`ElasticTissue.force_scale`): the same
+#: accuracy as the settle's (docs/relaxation.md, "Accuracy of a step").
+STEP_RTOL = 1e-2
+#: Sweeps one step may take before it moves on (counted in the summary).
+STEP_MAX_ITERATIONS = 50
+#: Relative residual the settle before a cut reaches (docs/relaxation.md).
+SETTLE_RTOL = 1e-3
+#: Chebyshev spectral radius estimate of the settle's sweeps (Wang 2015);
+#: 0.95 diverged on none of the test and demo models, 0.98 did on a bar.
+SETTLE_CHEBYSHEV = 0.9
+STEP_CHEBYSHEV = 0.9
+
+
+class ElasticTissue(TissueBase):
+    """Cut mesh + element model + state of one tissue model.
+
+    Parameters
+    ----------
+    model : TetModel
+        Needs a materials row (with a Poisson ratio) for every label.
+    blade_length : float
+        mm.
+    step_s : float
+        Implicit step, s.
+    centre_nodes : bool
+        Fig. 2c centre nodes in split faces.
+    poisson_ratio : float, optional
+        Overrides the materials table for every label.
+    """
+
+    def __init__(self, model, *, blade_length: float, step_s: float, centre_nodes: bool = False,
+                 poisson_ratio: float | None = None, step_rtol: float = STEP_RTOL,
+                 step_max_iterations: int = STEP_MAX_ITERATIONS):
+        self.model = model
+        self.cm = cm = CutMesh.from_model(model, blade_length=blade_length, centre_nodes=centre_nodes)
+        self.step_s = float(step_s)
+        self.step_rtol = float(step_rtol)
+        self.step_max_iterations = int(step_max_iterations)
+        n, m = cm.n_orig_points, cm.orig_tets.shape[0]
+        self.n_orig_tets = m
+        # material of each original tet (a sub-tet has its original's)
+        mat = material_of_tets(model, cm.labels, poisson_ratio=poisson_ratio)
+        self.mu, self.lam, self.density = mat["mu"], mat["lam"], mat["density"]
+        self.prestrain, self.fibre = prestress_of_tets(model, cm.labels)
+        self.em = em = ElementModel.empty(n, cm._tets.shape[0])
+        em.add_elements(cm._X[:n], cm.orig_tets, self.mu, self.lam, self.density, self.prestrain, self.fibre,
+                        ids=np.arange(m))
+        em.damping[:] = node_damping(n, cm.orig_tets, mat["damping"])
+        self.bc_fixed = fixed_nodes_mask(model)
+        em.fixed[:] = self.bc_fixed[:, None]
+        em.recolour()
+        self.state: ElementState = initial_element_state(model)
+        self.counts = {"steps": 0, "sweeps": 0, "steps_not_converged": 0}
+        self.force_scale = self._force_scale()
+        # last squared residual of every node and the nodes a cut or a load wakes (elastic.local_step)
+        self.r2 = np.zeros(em.n_nodes)
+        self._seeds: list[np.ndarray] = []
+
+    def _force_scale(self) -> float:
+        """N: the out-of-balance force of the model as built (prestress, prescribed
+        displacements), or, without either, that of a 1 % strain of every tet."""
+        from cutkit.relax.elastic import elastic_forces
+
+        free = ~self.em.fixed
+        r = float(np.linalg.norm(elastic_forces(self.em, self.state.positions)[free]))
+        if r > 0.0:
+            return r
+        x = self.rest_positions * 1.01
+        return float(np.linalg.norm(elastic_forces(self.em, x)[free]))
+
+    # ------------------------------------------------------------ the shared interface
+    @property
+    def n_nodes(self) -> int:
+        return self.em.n_nodes
+
+    @property
+    def positions(self) -> np.ndarray:
+        return self.state.positions
+
+    @property
+    def rest_positions(self) -> np.ndarray:
+        return self.cm._X[: self.em.n_nodes]
+
+    @property
+    def velocities(self) -> np.ndarray:
+        return self.state.velocities
+
+    @property
+    def fixed(self) -> np.ndarray:
+        return self.em.fixed.all(axis=1)
+
+    @property
+    def time(self) -> float:
+        return float(self.state.time)
+
+    def settle(self, max_iterations: int, rtol: float = SETTLE_RTOL) -> dict:
+        """Relax to static equilibrium under prestress and boundary conditions, then rest at time 0."""
+        info = static_solve(self.em, self.state.positions, rtol=rtol, atol=DEFAULT_ATOL_N,
+                            max_iterations=max(int(max_iterations), 1), chebyshev=SETTLE_CHEBYSHEV)
+        self.state.velocities[:] = 0.0
+        self.state.time = 0.0
+        return {"iterations": info.iterations, "relative_residual": info.residual / info.initial_residual
+                if info.initial_residual > 0 else 0.0, "converged": info.converged, "rtol": rtol}
+
+    def advance(self, f_ext: np.ndarray, until: float) -> int:
+        """Implicit steps of :attr:`step_s` up to ``until`` s; returns the sweeps made."""
+        n_steps = int(np.floor((until - self.state.time) / self.step_s + 1e-6))
+        sweeps = 0
+        loaded = np.flatnonzero(np.any(f_ext != 0.0, axis=1))
+        for _ in range(max(n_steps, 0)):
+            seeds = np.concatenate([loaded, *self._seeds]) if self._seeds else loaded
+            self._seeds = []
+            info = local_step(self.em, self.state, self.step_s, f_ext, self.r2, seeds,
+                              atol=max(self.step_rtol * self.force_scale, DEFAULT_ATOL_N),
+                              max_iterations=self.step_max_iterations, chebyshev=STEP_CHEBYSHEV)
+            sweeps += info.iterations
+            self.counts["steps"] += 1
+            self.counts["sweeps"] += info.iterations
+            self.counts["steps_not_converged"] += int(not info.converged)
+        return sweeps
+
+    # ------------------------------------------------------------ cut
+    def apply_cut(self, res) -> dict:
+        """Carry a :class:`~cutkit.cutting.StepResult` over to the elements.
+
+        Returns
+        -------
+        counts : dict
+            ``nodes_added``, ``elements_added``, ``elements_removed``.
+        """
+        cm, em = self.cm, self.em
+        n_old, n_new = em.n_nodes, cm.n_points
+        added = np.asarray(res.added_tets, np.int64)
+        removed = np.asarray(res.removed_tets, np.int64)
+        both = np.intersect1d(added, removed)  # made and unmade within one step: never simulated
+        added, removed = np.setdiff1d(added, both), np.setdiff1d(removed, both)
+        moved = np.asarray(res.moved_nodes, np.int64)
+        if n_new > n_old:
+            self._append_nodes(np.arange(n_old, n_new))
+        # tets of moved nodes (and not otherwise touched) get their rest shape again
+        again = np.zeros(0, np.int64)
+        if moved.size:
+            self.state.positions[moved] = self.interpolate_positions(moved)
+            around = [em.adj_tets[k, : em.adj_degree[k]] for k in moved]
+            again = np.setdiff1d(np.concatenate(around).astype(np.int64), np.concatenate([added, removed]))
+        em.remove_elements(np.concatenate([removed, again]))
+        redo = np.concatenate([added, again])
+        if redo.size:
+            orig = cm._tet_orig[redo]
+            em.add_elements(cm._X, cm._tets[redo], self.mu[orig], self.lam[orig], self.density[orig],
+                            self.prestrain[orig], self.fibre[orig], ids=redo)
+        self._hold_orphans()
+        self._recolour(added, n_old)
+        if self.r2.shape[0] < em.n_nodes:
+            self.r2 = np.concatenate([self.r2, np.zeros(em.n_nodes - self.r2.shape[0])])
+        touched = [np.arange(n_old, em.n_nodes), moved]
+        if redo.size:
+            touched.append(em.tets[redo].ravel())
+        self._seeds.append(np.unique(np.concatenate(touched)))
+        return {"nodes_added": int(n_new - n_old), "elements_added": int(added.size),
+                "elements_removed": int(removed.size)}
+
+    def _append_nodes(self, new: np.ndarray) -> None:
+        em, st = self.em, self.state
+        par, w, valid = self._interpolation_weights(new)
+        held = np.all(~valid | self.bc_fixed[par], axis=1)  # a node between held nodes only is held too
+        damping = (w * em.damping[par]).sum(axis=1)
+        vel = np.einsum("pq,pqc->pc", w, st.velocities[par])
+        x = self.interpolate_positions(new)
+        self.bc_fixed = np.concatenate([self.bc_fixed, held])
+        em.add_nodes(new.size, damping=damping, fixed=held)
+        st.positions = np.concatenate([st.positions, x])
+        st.velocities = np.concatenate([st.velocities, np.where(held[:, None], 0.0, vel)])
+
+    def _hold_orphans(self) -> None:
+        """Nodes no tet uses any more stay where they are; nodes with tets are free unless held by a condition."""
+        em = self.em
+        fixed = self.bc_fixed | (em.adj_degree == 0)
+        changed = np.flatnonzero(fixed != em.fixed.all(axis=1))
+        if changed.size:
+            em.fixed[changed] = fixed[changed, None]
+            self.state.velocities[changed[fixed[changed]]] = 0.0
+            em._classes = None
+
+    def _recolour(self, added: np.ndarray, n_old: int) -> None:
+        """New nodes get a colour; so does any node of a new tet that shares one with another."""
+        em = self.em
+        new = np.arange(n_old, em.n_nodes)
+        if new.size:
+            em.recolour(new)
+        if added.size:
+            q = em.tets[added]
+            c = em.colour[q]
+            clash = np.zeros(q.shape, bool)
+            for a in range(4):
+                for b in range(a + 1, 4):
+                    clash[:, b] |= c[:, a] == c[:, b]
+            if clash.any():
+                em.recolour(np.unique(q[clash]))
+        em._classes = None

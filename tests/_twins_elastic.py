@@ -1,0 +1,64 @@
+"""Slow, obviously correct NumPy twins of cutkit.relax._elastic_kernels."""
+
+import numpy as np
+
+
+def deformation_gradients(x, tets, Dminv):
+    """F = Ds Dminv of every tet: (m, 3, 3)."""
+    p = x[tets]
+    Ds = np.stack([p[:, 1] - p[:, 0], p[:, 2] - p[:, 0], p[:, 3] - p[:, 0]], axis=2)
+    return Ds @ Dminv
+
+
+def energy(x, tets, Dminv, volume, mu, lam):
+    """sum V [mu/2 (|F|^2 - 3) - mu (J - 1) + (lam + mu)/2 (J - 1)^2]."""
+    F = deformation_gradients(x, tets, Dminv)
+    J = np.linalg.det(F)
+    ic = np.einsum("mij,mij->m", F, F)
+    return float(np.sum(volume * (0.5 * mu * (ic - 3.0) - mu * (J - 1.0) + 0.5 * (lam + mu) * (J - 1.0) ** 2)))
+
+
+def forces(x, tets, Dminv, volume, mu, lam):
+    """-dW/dx from P = mu F + ((lam + mu)(J - 1) - mu) J F^-T: (n, 3)."""
+    F = deformation_gradients(x, tets, Dminv)
+    J = np.linalg.det(F)
+    G = J[:, None, None] * np.linalg.inv(F).transpose(0, 2, 1)
+    P = mu[:, None, None] * F + ((lam + mu) * (J - 1.0) - mu)[:, None, None] * G
+    # dF/dx_j = I (x) b_j, b_j = row j-1 of Dminv, b_0 = -sum
+    B = np.concatenate([-Dminv.sum(axis=1, keepdims=True), Dminv], axis=1)  # (m, 4, 3)
+    g = np.einsum("mrc,mjc->mjr", P, B) * volume[:, None, None]  # (m, 4, 3) dW/dx_j
+    out = np.zeros_like(x)
+    np.add.at(out, tets.ravel(), -g.reshape(-1, 3))
+    return out
+
+
+def node_hessian_fd(x, i, tets, Dminv, volume, mu, lam, h=1e-6):
+    """d2W/dx_i^2 by central differences of the twin's forces: (3, 3)."""
+    H = np.zeros((3, 3))
+    for c in range(3):
+        xp, xm = x.copy(), x.copy()
+        xp[i, c] += h
+        xm[i, c] -= h
+        H[:, c] = -(forces(xp, tets, Dminv, volume, mu, lam)[i] - forces(xm, tets, Dminv, volume, mu, lam)[i]) / (2 * h)
+    return H
+
+
+def vbd_sweep(x, tets, Dminv, volume, mu, lam, inertia, target, force, fixed, order, newton_steps=1):
+    """Gauss-Seidel over ``order``: each node moves by Newton steps on its own incremental potential.
+
+    Uses finite-difference Hessians of the twin's forces, so it shares no
+    formula with the kernel.
+    """
+    x = x.copy()
+    for i in order:
+        for _ in range(newton_steps):
+            f = forces(x, tets, Dminv, volume, mu, lam)[i] + inertia[i] * (target[i] - x[i]) + force[i]
+            H = node_hessian_fd(x, i, tets, Dminv, volume, mu, lam) + inertia[i] * np.eye(3)
+            for c in range(3):
+                if fixed[i, c]:
+                    f[c] = 0.0
+                    H[c, :] = 0.0
+                    H[:, c] = 0.0
+                    H[c, c] = 1.0
+            x[i] += np.linalg.solve(H, f)
+    return x
