@@ -8,7 +8,7 @@ from cutkit.cutting import CutMesh
 from cutkit.cutting import _kernels as K
 from cutkit.cutting import _kernels_step as KS
 from cutkit.mesh.generate import box_mesh
-from cutkit.cutting._geometry import segment_hits_tet, segment_triangle
+from cutkit.cutting._geometry import edge_crosses_triangle, segment_hits_tet, segment_triangle
 
 
 def test_seg_tri_and_seg_tet_match_twins():
@@ -30,8 +30,11 @@ def test_tet_sweep_matches_twin():
     x = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1.0]])
     tv = np.arange(4)
     oe, of = np.empty(6), np.empty(4)
-    for _ in range(100):
+    for it in range(200):
         swept = rng.uniform(-0.5, 1.5, (2, 3, 3))
+        if it % 2:  # the swept surface through a vertex of the tet: only edges going up cross
+            v = x[rng.integers(4)]
+            swept[:, 0] = v - 0.5 * (swept[:, 1] - v) - 0.5 * (swept[:, 2] - v)
         blade = rng.uniform(-0.5, 1.5, (2, 3))
         K.tet_sweep(x, tv, swept, blade, oe, of)
         k = 0
@@ -39,7 +42,7 @@ def test_tet_sweep_matches_twin():
             for j in range(i + 1, 4):
                 ref = -1.0
                 for s in range(2):
-                    r = segment_triangle(x[i], x[j], *swept[s])
+                    r = edge_crosses_triangle(x[i], x[j], swept[s], K.EDGE_END_EPS, K.EDGE_BARY_EPS)
                     if r >= 0:
                         ref = r
                         break

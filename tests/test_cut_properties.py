@@ -70,7 +70,7 @@ def run_path(cm, poses, v0, check=True):
     return swept
 
 
-@settings(max_examples=250, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(st.sampled_from(sorted(MESHES)), st.sampled_from(KINDS), st.sampled_from([0.0, 0.1, 0.3, 1.0]),
        st.integers(0, 2**31 - 1), st.sampled_from([2.5, 10.0]))
 def test_every_step_is_a_clean_mesh(name, kind, tremor, seed, blade_length):
@@ -102,7 +102,7 @@ def crossed_edges(p, edges, swept):
     return out
 
 
-@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=100, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(st.sampled_from(["jittered", "delaunay"]), st.sampled_from(["straight", "guillotine"]),
        st.integers(0, 2**31 - 1))
 def test_oracle_every_crossed_edge_is_cut(name, kind, seed):
@@ -160,3 +160,26 @@ def test_knee_sized_block(kind, seed):
     cm = CutMesh(p, t, blade_length=40.0)
     run_path(cm, poses, v0, check=False)
     assert_clean(cm, v0, "end")
+
+
+@pytest.mark.parametrize("what", ["face", "edge", "vertex"])
+def test_blade_on_mesh_features_makes_one_wall(what):
+    """A blade in a face plane, along edges or through vertices cuts on one side only: two pieces, not a loose slab."""
+    from _twins_cut import components
+
+    p, t, v0, L = mesh("block")
+    cm = CutMesh(p, t, blade_length=10.0)
+    a = np.array([0.0, 0.0, -1.0])
+    if what == "face":  # the blade sweeps the grid plane y = 1
+        poses = [(np.array([x, 1.0, -0.5]), a) for x in np.linspace(-0.5, L[0] + 0.5, 9)]
+    elif what == "edge":  # the blade lies along the grid edges x = 2, y = 1 and moves along them
+        poses = [(np.array([2.0, 1.0, z]), np.array([0.0, 1.0, 0.0])) for z in np.linspace(-0.5, L[2] + 0.5, 7)]
+        poses = [(tip + [0, 6.0, 0], a_) for tip, a_ in poses]
+    else:  # the blade's plane x + y = 3 passes through grid nodes
+        d = np.array([-1.0, 1.0, 0.0]) / np.sqrt(2)
+        poses = [(np.array([3.0, 0.0, -0.5]) + s * d, a) for s in np.linspace(-0.5, 4.8, 9)]
+    run_path(cm, poses, v0)
+    new = cm.points[cm.n_orig_points:]
+    assert components(cm.tets) == 2
+    if what == "face":
+        assert np.all(new[:, 1] > 1.0)  # one wall, above the plane

@@ -74,3 +74,30 @@ def segment_hits_tet(p0, p1, tet_points):
         if lo > hi:
             return False
     return True
+
+
+def edge_crosses_triangle(p, q, tri, end_eps=1e-9, bary_eps=1e-12):
+    """Twin of ``_kernels.edge_cross``: parameter where edge p-q crosses triangle tri (3, 3), or -1.
+
+    An end within ``end_eps`` (relative to the edge's length) of the plane
+    is on it and counts as just below it; the crossing point must lie in the
+    closed triangle.
+    """
+    tri = np.asarray(tri, float)
+    n = np.cross(tri[1] - tri[0], tri[2] - tri[0])
+    if not np.any(n):
+        return -1.0
+    n = n / np.linalg.norm(n)
+    dp, dq = float(n @ (p - tri[0])), float(n @ (q - tri[0]))
+    tol = end_eps * float(np.linalg.norm(q - p))
+    if (dp > tol) == (dq > tol):
+        return -1.0
+    dp = 0.0 if abs(dp) <= tol else dp
+    dq = 0.0 if abs(dq) <= tol else dq
+    t = dp / (dp - dq)
+    x = p + t * (q - p)
+    m = np.stack([tri[1] - tri[0], tri[2] - tri[0]], axis=1)
+    b1, b2 = np.linalg.lstsq(m, x - tri[0], rcond=None)[0]
+    if b1 < -bary_eps or b2 < -bary_eps or b1 + b2 > 1 + bary_eps:
+        return -1.0
+    return t

@@ -5,6 +5,15 @@ from numba import njit
 
 #: Relative tolerance of the segment/triangle test (scaled by the lengths).
 SEG_TRI_EPS = 1e-12
+#: A vertex within this distance (relative to its edge's length) of the
+#: swept surface's plane lies on it, and counts as lying just below it (a
+#: symbolic perturbation): only its edges to vertices above the surface are
+#: cut.  A blade through a vertex, along an edge or in a face plane then makes
+#: one wall, not one on each side (which would free a slab between them).
+EDGE_END_EPS = 1e-9
+#: Closed-triangle slack of the edge crossing's barycentric coordinates, so an
+#: edge crossing the swept quad on its diagonal is found by one of its halves.
+EDGE_BARY_EPS = 1e-12
 
 
 @njit(cache=True, nogil=True)
@@ -35,6 +44,48 @@ def seg_tri(p0, p1, a, b, c):
 
 
 @njit(cache=True, nogil=True)
+def edge_cross(p, q, tri):
+    """Parameter in [0, 1] where the edge p-q crosses triangle ``tri`` (3, 3), or -1.
+
+    The edge crosses when one end lies above the triangle's plane and the
+    other does not, an end within EDGE_END_EPS (relative to the edge's
+    length) of the plane counting as on it, i.e. just below (a symbolic
+    perturbation); then the crossing point must lie in the closed triangle
+    (barycentric coordinates >= -EDGE_BARY_EPS).  An edge in the plane never
+    crosses; an edge from a vertex on the plane crosses at that vertex only
+    if it goes up.  The result depends on the edge's ends, not their order.
+    """
+    ux, uy, uz = tri[1, 0] - tri[0, 0], tri[1, 1] - tri[0, 1], tri[1, 2] - tri[0, 2]
+    vx, vy, vz = tri[2, 0] - tri[0, 0], tri[2, 1] - tri[0, 1], tri[2, 2] - tri[0, 2]
+    nx, ny, nz = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
+    nn = np.sqrt(nx * nx + ny * ny + nz * nz)
+    if nn == 0.0:
+        return -1.0
+    dp = (nx * (p[0] - tri[0, 0]) + ny * (p[1] - tri[0, 1]) + nz * (p[2] - tri[0, 2])) / nn
+    dq = (nx * (q[0] - tri[0, 0]) + ny * (q[1] - tri[0, 1]) + nz * (q[2] - tri[0, 2])) / nn
+    tol = EDGE_END_EPS * np.sqrt((q[0] - p[0]) ** 2 + (q[1] - p[1]) ** 2 + (q[2] - p[2]) ** 2)
+    if (dp > tol) == (dq > tol):
+        return -1.0
+    if abs(dp) <= tol:
+        dp = 0.0
+    if abs(dq) <= tol:
+        dq = 0.0
+    t = dp / (dp - dq)
+    # barycentric coordinates of the crossing point (closed-form 2x2 normal equations)
+    wx = p[0] + t * (q[0] - p[0]) - tri[0, 0]
+    wy = p[1] + t * (q[1] - p[1]) - tri[0, 1]
+    wz = p[2] + t * (q[2] - p[2]) - tri[0, 2]
+    g11, g12, g22 = ux * ux + uy * uy + uz * uz, ux * vx + uy * vy + uz * vz, vx * vx + vy * vy + vz * vz
+    r1, r2 = ux * wx + uy * wy + uz * wz, vx * wx + vy * wy + vz * wz
+    det = g11 * g22 - g12 * g12
+    b1 = (g22 * r1 - g12 * r2) / det
+    b2 = (g11 * r2 - g12 * r1) / det
+    if b1 < -EDGE_BARY_EPS or b2 < -EDGE_BARY_EPS or b1 + b2 > 1.0 + EDGE_BARY_EPS:
+        return -1.0
+    return t
+
+
+@njit(cache=True, nogil=True)
 def tet_sweep(x, tv, swept, blade, out_edge, out_face):
     """Edges of one tet met by the swept surface and faces met by the blade.
 
@@ -53,7 +104,7 @@ def tet_sweep(x, tv, swept, blade, out_edge, out_face):
         for j in range(i + 1, 4):
             out_edge[k] = -1.0
             for s in range(2):
-                t = seg_tri(x[tv[i]], x[tv[j]], swept[s, 0], swept[s, 1], swept[s, 2])
+                t = edge_cross(x[tv[i]], x[tv[j]], swept[s])
                 if t >= 0.0:
                     out_edge[k] = t
                     break
