@@ -51,11 +51,12 @@ def key_frames(folder: Folder) -> list[int]:
     """Frames worth a picture: half-way along the trajectory, its end, the last frame."""
     times = np.array([t for t, _ in folder.frames])
     t0 = times[0]
-    t_end = folder.summary.get("trajectory_end_s")
-    if t_end is None:
-        states = np.array(folder.path_state)
-        moving = folder.path_t[states != "free"] if states.size else np.zeros(0)
-        t_end = float(moving[-1]) if moving.size else float(times[-1])
+    t_end = float(times[-1])
+    if len(folder.path_tip) > 1:
+        # the trajectory ends where the tip stops moving (the hold keeps its last pose)
+        moved = np.flatnonzero(np.any(np.abs(folder.path_tip - folder.path_tip[-1]) > 1e-9, axis=1))
+        if moved.size:
+            t_end = float(folder.path_t[min(moved[-1] + 1, len(folder.path_t) - 1)])
     wanted = [t0 + 0.5 * (t_end - t0), t_end, float(times[-1])]
     idx = []
     for w in wanted:
