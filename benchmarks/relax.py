@@ -11,6 +11,12 @@ Prints one JSON object with ``--json``:
   adaptive_steps_per_s_100k_tets        finest steps dt_0 of simulated time per wall second,
                                         adaptive node lists, local load on a ~100k-tet grid
   adaptive_update_fraction_100k_tets    node updates of the adaptive run / those of a uniform run at dt_0
+  element_sweep_ms_1m_tets              one vertex block descent sweep of the element model, same grid
+  element_over_spring_sweep             element sweep / spring Gauss-Seidel sweep (goal <= 3)
+  knee (with --knee MODEL.h5): wall time to a relative residual of 1e-4 of the settle problem
+  (prestress and boundary conditions, from rest), for the element model (vertex block descent)
+  and the springs (uniform Gauss-Seidel steps and adaptive node lists), and the sweeps or node
+  updates each took: the equal-accuracy comparison of docs/relaxation.md.
 """
 
 from __future__ import annotations
@@ -76,11 +82,71 @@ def best_of(fn, repeats):
     return best
 
 
+def element_sweep(tm) -> dict:
+    """One vertex block descent sweep of the element model over all free nodes, ms (best of 5)."""
+    from cutkit.relax import _elastic_kernels as EK
+    from cutkit.relax.elastic import _node_terms, build_element_model
+
+    em = build_element_model(tm, poisson_ratio=0.45)
+    rng = np.random.default_rng(0)
+    x = tm.points + rng.normal(scale=1e-3, size=tm.points.shape) * ~em.fixed
+    terms = _node_terms(em, x, 0.01, None, None, x.copy())
+    offsets, nodes = em.colour_classes()
+    r2 = np.zeros(em.n_nodes)
+
+    def sweep():
+        EK.vbd_sweep(x, em.elements, em.adjacency, terms, offsets, nodes, r2)
+
+    sweep()
+    return {"element_sweep_ms_1m_tets": best_of(sweep, 5) * 1e3, "element_colours": int(offsets.shape[0] - 1)}
+
+
+def knee_to_residual(model, rtol: float) -> dict:
+    """Wall time and work to bring the settle problem to ``rtol`` with each model and schedule."""
+    from cutkit.relax import spring_forces
+    from cutkit.relax.elastic import build_element_model, elastic_forces, initial_element_state, static_solve
+    from cutkit.simulate.elastic_tissue import SETTLE_CHEBYSHEV
+
+    res = {"tets": model.n_tets, "rtol": rtol}
+    em = build_element_model(model)
+    st = initial_element_state(model)
+    static_solve(em, st.positions.copy(), max_iterations=2)  # compile
+    t0 = time.perf_counter()
+    info = static_solve(em, st.positions, rtol=rtol, atol=0.0, max_iterations=200000, chebyshev=SETTLE_CHEBYSHEV)
+    free = ~em.fixed
+    exact = np.linalg.norm(elastic_forces(em, st.positions)[free]) / info.initial_residual
+    res["element"] = {"wall_s": time.perf_counter() - t0, "sweeps": info.iterations, "converged": info.converged,
+                      "relative_residual_exact": float(exact)}
+
+    sm = build_spring_model(model)
+    free = ~sm.fixed
+
+    def relative(stt):
+        return float(np.linalg.norm(spring_forces(sm, stt.positions)[free]) / r0)
+
+    r0 = float(np.linalg.norm(spring_forces(sm, sm.rest_positions)[free]))
+    dt0 = explicit_time_limit(sm)
+    for name, n_lists in (("springs_uniform", 1), ("springs_adaptive", 6)):
+        stt = initial_state(sm)
+        lists = NodeLists(sm, stt, dt0, n_lists, displacement_tolerance=1e-4 * float(np.mean(sm.rest_length)))
+        t0 = time.perf_counter()
+        t_sim, reached = 0.0, relative(stt)
+        while reached > rtol and time.perf_counter() - t0 < 600:
+            t_sim += 64 * dt0
+            lists.advance(None, t_sim)
+            reached = relative(stt)
+        res[name] = {"wall_s": time.perf_counter() - t0, "node_updates": int(stt.n_updates.sum()),
+                     "simulated_s": t_sim, "relative_residual": reached, "converged": reached <= rtol}
+    return res
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--json", action="store_true")
     ap.add_argument("--big", type=int, default=55, help="cubes per side of the ~1M-tet grid (55 -> 998k tets)")
     ap.add_argument("--small", type=int, default=26, help="cubes per side of the ~100k-tet grid (26 -> 105k tets)")
+    ap.add_argument("--knee", help="model file for the equal-accuracy comparison (e.g. cutkit-demo/knee.h5)")
+    ap.add_argument("--rtol", type=float, default=1e-4, help="relative residual of the equal-accuracy comparison")
     args = ap.parse_args(argv)
     out = {}
 
@@ -115,6 +181,8 @@ def main(argv=None):
 
     gs()
     out["gauss_seidel_sweep_ms_1m_tets"] = best_of(gs, 5) * 1e3
+    out.update(element_sweep(tm))
+    out["element_over_spring_sweep"] = out["element_sweep_ms_1m_tets"] / out["gauss_seidel_sweep_ms_1m_tets"]
     x, v = st.positions.copy(), st.velocities.copy()
     np_step = best_of(lambda: numpy_explicit_step(x, v, sm.springs, sm.rest_length, sm.stiffness, sm.masses, dt), 3)
     # the NumPy step touches every spring once (both ends): 2 s spring-end updates
@@ -142,6 +210,10 @@ def main(argv=None):
     out["adaptive_steps_per_s_100k_tets"] = n_steps / wall
     out["adaptive_update_fraction_100k_tets"] = float(st.n_updates.sum() / ((8 + n_steps) * len(sm.free_nodes)))
     out["adaptive_list_sizes"] = [int(len(x)) for x in lists.node_lists]
+    if args.knee:
+        from cutkit.io.model_h5 import read_model
+
+        out["knee"] = knee_to_residual(read_model(args.knee), args.rtol)
     import numba
 
     out["threads"] = numba.get_num_threads()

@@ -137,6 +137,10 @@ def command(volume, output, recipe_path, threshold, channel, otsu, labels_path, 
     warning = cleanup_warning(seg_report)
     if warning:
         console.print(f"[yellow]warning:[/] {warning}")
+    if not recipe.get("boundary"):
+        console.print("note: no boundary condition: nothing holds this model when it is simulated; add a "
+                      "[boundary] table (fixed_labels, fixed_regions) to a recipe and run `cutkit assign "
+                      f"{output} --recipe R.toml -o OUT.h5` (docs/recipes.md)")
 
 
 def _parse_threshold(text: str):

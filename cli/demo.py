@@ -9,7 +9,9 @@ import click
 @click.option("--fps", default=10.0, show_default=True, type=float, help="Frames per simulated second.")
 @click.option("--no-png", is_flag=True, help="Skip the pictures.")
 @click.option("--movie", is_flag=True, help="Also a movie of the cut, OUT/cut.mp4.")
-def command(out_dir, fps, no_png, movie):
+@click.option("--material-model", type=click.Choice(["neohookean", "springs"]), default=None,
+              help="Tissue model [default: the recipe's, neohookean].")
+def command(out_dir, fps, no_png, movie, material_model):
     """Build pipelines/knee.toml (reused when unchanged), cut sample_volumes/incision.csv, take pictures."""
     import time
 
@@ -23,14 +25,14 @@ def command(out_dir, fps, no_png, movie):
     # a second process compiles the decimation and simulation kernels while this one builds
     warm = start_background()
     try:
-        _run(out_dir, fps, no_png, movie, trajectory, warm, t0)
+        _run(out_dir, fps, no_png, movie, trajectory, warm, t0, material_model)
     finally:
         if warm is not None and warm.poll() is None:
             warm.terminate()
             warm.wait()
 
 
-def _run(out_dir, fps, no_png, movie, trajectory, warm, t0):
+def _run(out_dir, fps, no_png, movie, trajectory, warm, t0, material_model=None):
     import time
 
     from cutkit.build import STAGES
@@ -50,7 +52,7 @@ def _run(out_dir, fps, no_png, movie, trajectory, warm, t0):
     model = read_model(model_path)
     console.print(f"model {model_path}: {model.tets.shape[0]} tets, {model.points.shape[0]} nodes"
                   + (" (inputs unchanged, build reused)" if reused else ""))
-    opt = SimulateOptions(fps=fps, png=False)
+    opt = SimulateOptions(fps=fps, png=False, material_model=material_model)
     summary = run_with_progress(model, read_trajectory(trajectory), out_dir, opt, model_path=str(model_path))
     render_with_progress(summary, out_dir, not no_png, movie)
     report(console, summary, out_dir)

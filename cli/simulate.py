@@ -20,12 +20,15 @@ import click
 @click.option("--geometry-rate", "geometry_rate_hz", default=50.0, show_default=True, type=float,
               help="Cut and relaxation updates per simulated second.")
 @click.option("--blade-length", default=None, type=float, help="Blade length, mm [default: 20, the trajectory reader's; a trajectory file stores no blade size].")
+@click.option("--material-model", type=click.Choice(["neohookean", "springs"]), default=None,
+              help="Tissue model: stable neo-Hookean elements with the Poisson ratio of the materials table, "
+                   "or the paper's springs [default: what the model file names, neohookean for most].")
 @click.option("--volume-stiffness", default=0.0, show_default=True, type=float,
-              help="Volume term: each tet resists a change of volume with bulk = this x E (0: springs only, "
+              help="Springs only: each tet resists a change of volume with bulk = this x E (0: springs only, "
                    "as in the paper; 0.3 leaves a tenth of the inverted tets on the demo knee, at about four "
                    "times the relaxation time).")
 def command(model, trajectory, out_dir, fps, png, movie, realtime, haptics, hold_s, geometry_rate_hz, blade_length,
-            volume_stiffness):
+            material_model, volume_stiffness):
     """Cut MODEL along TRAJECTORY with the scalpel force model and relax it; write frames and logs."""
     from cutkit.io.atomic import check_writable
     from cutkit.cli._ui import console
@@ -37,7 +40,7 @@ def command(model, trajectory, out_dir, fps, png, movie, realtime, haptics, hold
                  volume_stiffness=volume_stiffness)
     opt = SimulateOptions(fps=fps, png=False, realtime=realtime, haptics=haptics, hold_s=hold_s,
                           geometry_rate_hz=geometry_rate_hz, blade_length=blade_length,
-                          volume_stiffness=volume_stiffness)
+                          volume_stiffness=volume_stiffness, material_model=material_model)
     opt.check()
     check_writable(out_dir, folder=True)
     tet_model = read_model(model)
