@@ -73,7 +73,8 @@ def local_cluster(n_workers: int | None = None):
     if n < 1:
         raise InputError(f"workers must be a whole number >= 1, got {n_workers}")
     return LocalCluster(n_workers=n, threads_per_worker=1, processes=True, env=dict(WORKER_ENV),
-                        dashboard_address=None, silence_logs=logging.ERROR)
+                        dashboard_address=None, silence_logs=logging.ERROR,
+                        preload=["cutkit.sweep._worker_setup"])
 
 
 def run_sweep(spec: SweepSpec | str | Path, out_dir, *, scheduler: str | None = None, client=None,
