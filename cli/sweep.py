@@ -29,7 +29,7 @@ def command(spec, out_dir, scheduler, n_workers, resume, retry_failed):
     def on_event(kind, info):
         if kind == "start":
             console.print(f"{sweep.name}: {info['total']} runs, {info['skipped']} with results already, "
-                          f"{info['todo']} to run on {info['workers']} workers")
+                          f"{info['todo']} to run on {info['workers']} worker{'s' if info['workers'] != 1 else ''}")
             state["task"] = bar.add_task("sweep", total=info["todo"], failed=0)
         else:
             bar.update(state["task"], completed=info["done"], failed=info["failed"])

@@ -215,3 +215,16 @@ def test_cli_on_an_existing_cluster(tmp_path, client, capsys):
                    "or choose another folder"]
     assert main(["sweep", str(spec_path), "-o", str(out), "--scheduler", address, "--resume"]) == 0
     assert "0 runs in" in capsys.readouterr().out
+
+
+@pytest.mark.slow
+def test_cli_on_an_embedded_local_cluster(tmp_path, capsys):
+    spec_path = write_spec(tmp_path, f_enter=(0.5,), explicit=False)  # 2 runs
+    out = tmp_path / "out"
+    assert main(["sweep", str(spec_path), "-o", str(out), "--workers", "1", "--threads", "1"]) == 0
+    text = capsys.readouterr().out
+    assert "block study: 2 runs, 0 with results already, 2 to run on 1 worker\n" in text
+    assert "2 runs in" in text and "0 failed" in text
+    rows = pq.read_table(out / "results.parquet").to_pylist()
+    assert [r["status"] for r in rows] == ["ok", "ok"]
+    assert sorted(r["incision.depth"] for r in rows) == [2.0, 3.0]
