@@ -1,0 +1,123 @@
+"""Quality of the cuts over random blade paths: worst angles, lost edges, tets per cut tet.
+
+For each mesh (jittered block, Delaunay ball) and path kind (see
+``tests/_cut_paths.py``), random paths are cut and measured on the mesh as
+written (``to_model``):
+
+* the smallest dihedral angle of the tetrahedra the cut made (per path; the
+  distribution over paths is reported);
+* lost edges: original edges the swept surface crossed strictly inside
+  (parameter in [1e-6, 1 - 1e-6]) that are not cut, as a fraction of the
+  crossed ones;
+* new tetrahedra per cut tetrahedron.
+
+    python benchmarks/cut_quality.py [--json] [--paths 20]
+"""
+
+import argparse
+import json
+import os
+import sys
+
+import numpy as np
+
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "tests"))
+
+KINDS = ("straight", "curved", "reversal", "crossing", "vertex", "face", "guillotine")
+TREMORS = (0.0, 0.1, 0.3, 1.0)
+
+
+def measure(p, t, poses, blade_length=10.0):
+    from _cut_paths import lift
+    from cutkit.cutting import CutMesh, cut_step, to_model
+    from cutkit.cutting._kernels import edge_cross
+    from cutkit.mesh.quality import min_dihedral_angles
+
+    cm = CutMesh(p, t, blade_length=blade_length)
+    crossed = set()
+    for pose in poses:
+        if pose is None:
+            lift(cm)
+            continue
+        prev = cm.prev_pose
+        cut_step(cm, *pose)
+        if prev is None:
+            continue
+        P1, Q1 = cm.prev_pose
+        for tri in (np.array([prev[0], prev[1], Q1]), np.array([prev[0], Q1, P1])):
+            lo, hi = tri.min(axis=0), tri.max(axis=0)
+            a, b = p[cm.edges[:, 0]], p[cm.edges[:, 1]]
+            for e in np.flatnonzero(np.all((np.minimum(a, b) <= hi) & (np.maximum(a, b) >= lo), axis=1)):
+                s = edge_cross(p[cm.edges[e, 0]], p[cm.edges[e, 1]], tri)
+                if 1e-6 <= s <= 1 - 1e-6:
+                    crossed.add(int(e))
+    m = to_model(cm)
+    is_new = m.cell_data["new_tet"] == 1
+    worst = rel = None
+    if is_new.any():
+        ang = min_dihedral_angles(m.points, m.tets[is_new])
+        orig = min_dihedral_angles(p, t[cm.tet_origin[is_new]])
+        worst, rel = float(ang.min()), float((ang / orig).min())
+    lost = len(crossed - set(np.flatnonzero(np.isfinite(cm.edge_t)).tolist()))
+    return worst, rel, lost, len(crossed), len(cm.subtets), sum(len(v) for v in cm.subtets.values())
+
+
+def run(n_paths):
+    from _cut_paths import delaunay_ball, jittered_block, make_path
+    from cutkit.mesh.generate import box_mesh
+    from cutkit.cutting import CutMesh, cut_step
+
+    meshes = {"jittered block": jittered_block((5, 3, 3), 0.2, 0), "delaunay ball": delaunay_ball()}
+    out = {}
+    for name, (p, t) in meshes.items():
+        L = p.max(axis=0)
+        from cutkit.mesh.quality import min_dihedral_angles
+        out[f"{name}: original mesh"] = {"tets": int(len(t)),
+                                         "worst_angle_deg": float(min_dihedral_angles(p, t).min())}
+        for tremor in TREMORS:
+            worst, rels, lost, crossed, cut, new, by_kind = [], [], 0, 0, 0, 0, {}
+            for kind in KINDS:
+                kl = kc = 0
+                for seed in range(n_paths):
+                    w, r, lo, cr, c, nw = measure(p, t, make_path(kind, np.random.default_rng(seed), L, tremor))
+                    if w is not None:
+                        worst.append(w)
+                        rels.append(r)
+                    lost, crossed, cut, new = lost + lo, crossed + cr, cut + c, new + nw
+                    kl, kc = kl + lo, kc + cr
+                by_kind[kind] = kl / max(kc, 1)
+            w = np.array(worst)
+            out[f"{name}, tremor {tremor} mm"] = {
+                "paths": len(KINDS) * n_paths, "worst_angle_min_deg": float(w.min()),
+                "worst_angle_p10_deg": float(np.percentile(w, 10)), "worst_angle_median_deg": float(np.median(w)),
+                "paths_below_5_deg": int((w < 5).sum()),
+                "worst_angle_over_original_tet_min": float(np.min(rels)),
+                "worst_angle_over_original_tet_median": float(np.median(rels)),
+                "lost_edge_fraction": lost / max(crossed, 1), "lost_edge_fraction_by_kind": by_kind,
+                "new_tets_per_cut_tet": new / max(cut, 1)}
+    # a long steady incision
+    p, t = box_mesh((20, 4, 4))
+    cm = CutMesh(p, t, blade_length=10.0)
+    for x in np.linspace(-0.5, 20.5, 80):
+        cut_step(cm, [x, 1.37, -0.5 + 0.3 * np.sin(x)], [0.1, 0.05, -1.0])
+    out["long incision (20 x 4 x 4 bar)"] = {
+        "new_tets_per_cut_tet": sum(len(v) for v in cm.subtets.values()) / len(cm.subtets)}
+    return out
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--json", action="store_true")
+    ap.add_argument("--paths", type=int, default=20, help="paths per kind and tremor")
+    args = ap.parse_args()
+    res = run(args.paths)
+    if args.json:
+        print(json.dumps(res, indent=2))
+    else:
+        for k, r in res.items():
+            print(k, ", ".join(f"{a} {b:.3g}" if not isinstance(b, dict) else
+                               f"{a} " + " ".join(f"{c}:{d:.3f}" for c, d in b.items()) for a, b in r.items()))
+
+
+if __name__ == "__main__":
+    main()
