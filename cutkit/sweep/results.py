@@ -72,8 +72,15 @@ class ResultsTable:
         return len(self.rows)
 
     def add(self, row: dict) -> None:
-        """Record a finished run: its ``result.json`` now, the tables when due."""
+        """Record a finished run: its files and ``result.json`` now, the tables when due.
+
+        ``row["_files"]`` (name to text), when present, are written to
+        ``runs/<key>/`` and left out of the row.
+        """
         row = dict(row)
+        files = row.pop("_files", None) or {}
+        for name, text in files.items():
+            write_text_atomic(self.out_dir / "runs" / row["key"] / name, text)
         self.rows[row["key"]] = row
         for k in row:
             if k not in LEAD_COLUMNS and k not in TAIL_COLUMNS and k not in self.param_names:

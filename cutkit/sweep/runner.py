@@ -73,7 +73,7 @@ def local_cluster(n_workers: int | None = None):
     if n < 1:
         raise InputError(f"workers must be a whole number >= 1, got {n_workers}")
     return LocalCluster(n_workers=n, threads_per_worker=1, processes=True, env=dict(WORKER_ENV),
-                        dashboard_address=None, silence_logs=logging.ERROR,
+                        dashboard_address=":0", silence_logs=logging.ERROR,
                         preload=["cutkit.sweep._worker_setup"])
 
 
@@ -145,7 +145,7 @@ def run_sweep(spec: SweepSpec | str | Path, out_dir, *, scheduler: str | None = 
         else:
             try:
                 client = Client(scheduler, timeout=30)
-            except (OSError, TimeoutError) as exc:
+            except (OSError, TimeoutError, ValueError) as exc:
                 raise InputError(f"cannot reach the Dask scheduler at {scheduler}: {one_line(exc)}") from None
         own_client = True
     else:

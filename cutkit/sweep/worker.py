@@ -8,9 +8,11 @@ the run on another worker.
 
 from __future__ import annotations
 
+import contextlib
 import copy
 import math
 import sys
+import tempfile
 import threading
 import time
 from pathlib import Path
@@ -22,6 +24,9 @@ from cutkit.errors import CutkitError, InputError
 #: The measured figures of a result row, in column order (units in the names).
 FIGURES = ("peak_force_N", "mean_cut_force_N", "cut_tets", "opening_mm", "inverted_tets", "volume_change",
            "simulated_per_wall", "wall_s", "cpu_s")
+
+#: Options whose outputs a run writes straight into the sweep's folder.
+LARGE_OUTPUTS = ("frames", "png", "write_model", "movie")
 
 # Runs in one worker process take turns: numba's default thread pool is not
 # safe for parallel calls from several threads at once.  (Sweeps run one
@@ -111,7 +116,10 @@ def run_one(model, run: dict, out_root: str, before_run=None) -> dict:
         ``trajectory_data`` (a :class:`Trajectory`) or ``incision`` (the
         parameters of a generated one).
     out_root : str
-        The sweep's output folder; the run writes ``runs/<key>/``.
+        The sweep's output folder.  A run whose options ask for frames,
+        pictures or the model file writes them to ``runs/<key>/`` there
+        (a path the worker must see); any other run works in a temporary
+        folder of the worker and returns its small outputs in the row.
     before_run : callable(run), optional
         Called first (a test hook).
 
@@ -119,14 +127,22 @@ def run_one(model, run: dict, out_root: str, before_run=None) -> dict:
     -------
     row : dict
         ``key``, ``model``, ``trajectory``, the parameters, ``status``
-        (``"ok"`` or ``"failed"``), ``error`` and the :data:`FIGURES`.
+        (``"ok"`` or ``"failed"``), ``error`` and the :data:`FIGURES`;
+        ``_files`` maps ``forces.csv`` and ``summary.json`` to their text
+        when the run worked in a temporary folder.
     """
     t0, c0 = time.perf_counter(), time.process_time()
     row = {"key": run["key"], "model": run["model"], "trajectory": run["trajectory"], **run["params"],
            "status": "failed", "error": ""}
     row.update({k: None for k in FIGURES})
-    out_dir = Path(out_root) / "runs" / run["key"]
-    with _RUN_LOCK:
+    merged = {**run["options"], **{k.split(".", 1)[1]: v for k, v in run["params"].items()
+                                   if k.startswith("option.")}}
+    in_place = any(bool(merged.get(k)) for k in LARGE_OUTPUTS)
+    with _RUN_LOCK, contextlib.ExitStack() as stack:
+        if in_place:
+            out_dir = Path(out_root) / "runs" / run["key"]
+        else:  # no shared file system needed: the small outputs travel back in the row
+            out_dir = Path(stack.enter_context(tempfile.TemporaryDirectory(prefix="cutkit-run-")))
         try:
             if before_run is not None:
                 before_run(run)
@@ -134,6 +150,9 @@ def run_one(model, run: dict, out_root: str, before_run=None) -> dict:
             row["status"] = "ok"
         except Exception as exc:  # the run failed: recorded, the sweep goes on
             row["error"] = one_line(exc)
+        if not in_place:
+            row["_files"] = {name: (out_dir / name).read_text(encoding="utf-8")
+                             for name in ("forces.csv", "summary.json") if (out_dir / name).is_file()}
     row["wall_s"] = time.perf_counter() - t0
     row["cpu_s"] = time.process_time() - c0
     try:
