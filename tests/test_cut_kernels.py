@@ -140,3 +140,12 @@ def test_clamp_set_node_min_volume_match_twins():
     t[::3] = t[::3, [1, 0, 2, 3]]  # some inverted
     assert KS.min_volume(p, t) == pytest.approx(min_volume_twin(p, t), abs=1e-14)
     assert KS.min_volume(p, t[:0]) == np.inf
+
+
+def test_serial_dihedral_kernel_matches_the_mesh_core():
+    """The one-thread kernel the cut scores its candidates with is the mesh core's dihedral angle."""
+    from cutkit.mesh import _quality_kernels as Q
+    from cutkit.mesh.quality import dihedral_angles
+
+    p, t = _jittered_box(4)
+    np.testing.assert_array_equal(Q.dihedral_angles_serial(p, t), dihedral_angles(p, t))

@@ -36,7 +36,7 @@ SPLIT_ANGLE_GAIN = 2.0
 
 def min_angles_per_group(x, tets, n_groups):
     """Smallest dihedral angle (degrees) of each of ``n_groups`` equal consecutive groups of tets (k, 4)."""
-    return Q.dihedral_angles(x, tets).min(axis=1).reshape(n_groups, -1).min(axis=1)
+    return Q.dihedral_angles_serial(x, tets).min(axis=1).reshape(n_groups, -1).min(axis=1)
 
 
 def _cut_loop(cm, o, tris, vgroup):
@@ -145,8 +145,9 @@ def _best(x, cands, vol_min, n_rot):
     flat = np.array([t for _, _, c in cands for t in c], np.int64)
     sizes = np.array([len(c) for _, _, c in cands])
     starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
-    vol = np.minimum.reduceat(Q.signed_volumes(x, flat), starts)
-    ang = np.minimum.reduceat(Q.dihedral_angles(x, flat).min(axis=1), starts)
+    e = x[flat[:, 1:]] - x[flat[:, :1]]  # (k, 3, 3) edges from the first vertex
+    vol = np.minimum.reduceat(np.linalg.det(e) / 6.0, starts)
+    ang = np.minimum.reduceat(Q.dihedral_angles_serial(x, flat).min(axis=1), starts)
     score = np.where(vol >= vol_min, ang, -1.0)
     side_best = np.full((n_rot, 2), -1.0)
     side_pick = np.full((n_rot, 2), -1, np.int64)

@@ -55,25 +55,41 @@ def dihedral_angles(points, tets):
     for ch in prange(n_chunks):
         n = np.empty((4, 3), np.float64)  # one scratch array per chunk, not per tet
         for t in range(ch * _CHUNK, min(m, (ch + 1) * _CHUNK)):
-            for f in range(4):
-                a = tets[t, _FACES[f, 0]]
-                b = tets[t, _FACES[f, 1]]
-                c = tets[t, _FACES[f, 2]]
-                ux = points[b, 0] - points[a, 0]
-                uy = points[b, 1] - points[a, 1]
-                uz = points[b, 2] - points[a, 2]
-                vx = points[c, 0] - points[a, 0]
-                vy = points[c, 1] - points[a, 1]
-                vz = points[c, 2] - points[a, 2]
-                n[f, 0] = uy * vz - uz * vy
-                n[f, 1] = uz * vx - ux * vz
-                n[f, 2] = ux * vy - uy * vx
-            for k in range(6):
-                f1 = _EDGE_OPP[k, 0]
-                f2 = _EDGE_OPP[k, 1]
-                cx = n[f1, 1] * n[f2, 2] - n[f1, 2] * n[f2, 1]
-                cy = n[f1, 2] * n[f2, 0] - n[f1, 0] * n[f2, 2]
-                cz = n[f1, 0] * n[f2, 1] - n[f1, 1] * n[f2, 0]
-                dot = n[f1, 0] * n[f2, 0] + n[f1, 1] * n[f2, 1] + n[f1, 2] * n[f2, 2]
-                out[t, k] = math.degrees(math.atan2(math.sqrt(cx * cx + cy * cy + cz * cz), -dot))
+            _tet_dihedrals(points, tets, t, n, out)
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _tet_dihedrals(points, tets, t, n, out):
+    """The six dihedral angles of tet t into out[t] (n: (4, 3) scratch for the face normals)."""
+    for f in range(4):
+        a = tets[t, _FACES[f, 0]]
+        b = tets[t, _FACES[f, 1]]
+        c = tets[t, _FACES[f, 2]]
+        ux = points[b, 0] - points[a, 0]
+        uy = points[b, 1] - points[a, 1]
+        uz = points[b, 2] - points[a, 2]
+        vx = points[c, 0] - points[a, 0]
+        vy = points[c, 1] - points[a, 1]
+        vz = points[c, 2] - points[a, 2]
+        n[f, 0] = uy * vz - uz * vy
+        n[f, 1] = uz * vx - ux * vz
+        n[f, 2] = ux * vy - uy * vx
+    for k in range(6):
+        f1 = _EDGE_OPP[k, 0]
+        f2 = _EDGE_OPP[k, 1]
+        cx = n[f1, 1] * n[f2, 2] - n[f1, 2] * n[f2, 1]
+        cy = n[f1, 2] * n[f2, 0] - n[f1, 0] * n[f2, 2]
+        cz = n[f1, 0] * n[f2, 1] - n[f1, 1] * n[f2, 0]
+        dot = n[f1, 0] * n[f2, 0] + n[f1, 1] * n[f2, 1] + n[f1, 2] * n[f2, 2]
+        out[t, k] = math.degrees(math.atan2(math.sqrt(cx * cx + cy * cy + cz * cz), -dot))
+
+
+@njit(cache=True, nogil=True)
+def dihedral_angles_serial(points, tets):
+    """:func:`dihedral_angles` on one thread, for a handful of tets (no thread start-up per call)."""
+    out = np.empty((tets.shape[0], 6), np.float64)
+    n = np.empty((4, 3), np.float64)
+    for t in range(tets.shape[0]):
+        _tet_dihedrals(points, tets, t, n, out)
     return out
