@@ -66,19 +66,21 @@ def test_cli_threads_sets_numba(tmp_path, monkeypatch):
 
 
 @pytest.mark.skipif(numba.config.NUMBA_NUM_THREADS < 2, reason="numba's pool has one thread")
-def test_simulate_is_identical_with_one_and_two_threads(tmp_path):
-    from test_simulate import slab
-
+@pytest.mark.parametrize("material_model", ["springs", None])  # None: the model's own (the default)
+def test_simulate_is_identical_with_one_and_two_threads(tmp_path, material_model):
     from cutkit.cutting.trajectory import straight_incision
     from cutkit.simulate import SimulateOptions, simulate
+    from cutkit.sweep import slab_model
 
-    traj = straight_incision([6.0, 0.0, 8.3], [26.0, 0.0, 8.3], inward=[0, 1, 0], depth=5.0, approach=3.0,
-                             press_time=0.2, cut_time=0.4, rate=100)
+    traj = straight_incision([3.0, 0.0, 6.3], [13.0, 0.0, 6.3], inward=[0, 1, 0], depth=4.0, approach=2.0,
+                             press_time=0.2, cut_time=0.3, rate=100)
     out = {}
     for n in (1, 2):
         configure_threads(n)
-        s = simulate(slab(), traj, tmp_path / str(n), SimulateOptions(frames=False, write_model=False, hold_s=0.1))
+        opt = SimulateOptions(frames=False, write_model=False, hold_s=0.1, material_model=material_model)
+        s = simulate(slab_model((8, 5, 6)), traj, tmp_path / str(n), opt)
         forces = np.loadtxt(tmp_path / str(n) / "forces.csv", delimiter=",", skiprows=1, usecols=(0, 2, 3, 4))
         out[n] = (s["cut_tets"], s["new_tets"], s["cut_opening_mm"], s["inverted_tets_deformed"], forces)
+    assert out[1][0] > 0  # it cut
     assert out[1][:4] == out[2][:4]
     np.testing.assert_array_equal(out[1][4], out[2][4])
