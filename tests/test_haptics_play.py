@@ -188,3 +188,51 @@ def test_play_loops_until_ctrl_c(server):
     assert play.returncode == 0, err
     stats = json.loads(out)
     assert stats["ended"] == "stopped" and stats["poses_sent"] >= 50
+
+
+def _old_server(listener, done):
+    """A version 1 server without pose forwarding: a plain WELCOME (flags byte 0), then BYE."""
+    conn, _ = listener.accept()
+    with conn:
+        conn.settimeout(5.0)
+        data = b""
+        while len(data) < P.HEADER_SIZE + P.HELLO_PAYLOAD.size:
+            data += conn.recv(64)
+        conn.sendall(P.frame(P.WELCOME, P.WELCOME_PAYLOAD.pack(P.ROLE_SIMULATION, 1, 1000)))
+        done.wait(5.0)
+
+
+def test_a_server_without_forwarding_is_refused_in_one_line():
+    import threading
+
+    from cutkit.errors import ProtocolError
+
+    with socket.create_server(("127.0.0.1", 0)) as listener:
+        done = threading.Event()
+        thread = threading.Thread(target=_old_server, args=(listener, done), daemon=True)
+        thread.start()
+        port = listener.getsockname()[1]
+        with pytest.raises(ProtocolError, match="does not forward device poses") as info:
+            HapticsPoseSource("127.0.0.1", port)
+        done.set()
+        thread.join(5.0)
+    assert "\n" not in str(info.value)
+
+
+def test_the_source_after_the_server_is_gone():
+    from cutkit.errors import ProtocolError
+
+    with spawned_server("--priority", "normal") as (host, port, proc):
+        source = HapticsPoseSource(host, port)
+        proc.terminate()
+        proc.wait(10)
+        t_end = time.monotonic() + 10.0
+        while not source.finished and time.monotonic() < t_end:
+            assert source.poll() is None
+            time.sleep(0.01)
+        assert source.finished  # the server said BYE
+        with pytest.raises(ProtocolError, match="connection is gone"):
+            for _ in range(50):  # the first send may still reach the socket buffer
+                source.update((0, 0, 0), (0, 0, 1), contact=False)
+                time.sleep(0.01)
+        source.close()

@@ -405,8 +405,18 @@ class HapticsPoseSource:
             return None  # a degenerate device frame (zero vectors): no usable pose
 
     def update(self, entry, normal, f_ext=(0.0, 0.0, 0.0), material=None, contact: bool = True) -> int:
-        """Send a SIM_UPDATE (see :meth:`cutkit.haptics.HapticsClient.send_sim`); returns its sequence number."""
-        return self.client.send_sim(entry, normal, f_ext, material, contact)
+        """Send a SIM_UPDATE (see :meth:`cutkit.haptics.HapticsClient.send_sim`); returns its sequence number.
+
+        Raises
+        ------
+        ProtocolError
+            The connection to the service is gone.
+        """
+        try:
+            return self.client.send_sim(entry, normal, f_ext, material, contact)
+        except OSError as err:
+            self.finished = True
+            raise ProtocolError(f"the haptics server connection is gone ({err.strerror or err})") from None
 
     def close(self) -> None:
         self.finished = True
