@@ -241,11 +241,14 @@ def load_spec(path) -> SweepSpec:
                 raise InputError(f"{w}: must be a non-empty list of values, got {values!r}")
             for v in values:
                 _check_param(name, v, w)
-            names.append(name) if name not in names else None
+            if name not in names:
+                names.append(name)
         keys = list(axes)
         for m, t in itertools.product(chosen["models"], chosen["trajectories"]):
             for combo in itertools.product(*(axes[k] for k in keys)):
                 runs.append(Run(model=m, trajectory=t, params=dict(zip(keys, combo))))
+    if not isinstance(data.get("runs", []), list):
+        raise InputError(f"{where}: runs: must be a list of [[runs]] tables")
     for i, entry in enumerate(data.get("runs", [])):
         w = f"{where}: runs[{i}]"
         entry = dict(_as_table(entry, w))
@@ -259,7 +262,8 @@ def load_spec(path) -> SweepSpec:
         params = _flatten(entry, "")
         for name, v in params.items():
             _check_param(name, v, f"{w}.{name}")
-            names.append(name) if name not in names else None
+            if name not in names:
+                names.append(name)
         runs.append(Run(model=model, trajectory=traj, params=params))
     if "product" not in data and "runs" not in data:
         runs = [Run(model=m, trajectory=t, params={}) for m in spec.models for t in spec.trajectories]
@@ -270,7 +274,7 @@ def load_spec(path) -> SweepSpec:
     for name, entry in spec.trajectories.items():
         if "incision" in entry:
             for key in ("start", "end"):
-                if key not in entry["incision"] and not any(f"incision.{key}" in r.params for r in runs
+                if key not in entry["incision"] and not all(f"incision.{key}" in r.params for r in runs
                                                             if r.trajectory == name):
                     raise InputError(f"{where}: trajectories.{name}.incision.{key}: missing")
     spec.runs = runs
