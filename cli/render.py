@@ -12,7 +12,8 @@ import click
               help="Also a movie of every frame in the first view: FILE.mp4 (H.264) or FILE.gif, "
                    "relative to OUT.")
 @click.option("--no-png", is_flag=True, help="No pictures (with --movie: the movie only).")
-@click.option("--size", default="1200x900", show_default=True, metavar="WxH", help="Picture size in pixels.")
+@click.option("--size", default=None, metavar="WxH",
+              help="Size of the pictures and the movie in pixels [default: 1200x900 pictures, 960x720 movie].")
 @click.option("--fps", default=None, type=float, help="Movie frames per second [default: the run's, real time].")
 def command(out_dir, views, movie, no_png, size, fps):
     """Render OUT (a folder of `cutkit simulate` or `cutkit demo`) again: key-frame pictures
@@ -23,7 +24,7 @@ def command(out_dir, views, movie, no_png, size, fps):
     from cutkit.render import read_folder, render_output
 
     try:
-        w, h = (int(v) for v in size.lower().split("x"))
+        w, h = (int(v) for v in (size or "1200x900").lower().split("x"))
     except ValueError:
         w = h = 0
     if not (16 <= w <= 8192 and 16 <= h <= 8192):
@@ -39,8 +40,8 @@ def command(out_dir, views, movie, no_png, size, fps):
     views = tuple(views) or ("cut",)
     with progress() as bar:
         task = bar.add_task("rendering", total=None)
-        done = render_output(out_dir, pictures=not no_png, views=views, movie=movie, size=(w, h),
-                             movie_fps=fps, progress=lambda k, n: bar.update(task, completed=k, total=n))
+        sizes = {"size": (w, h)} if size is None else {"size": (w, h), "movie_size": (w, h)}
+        done = render_output(out_dir, pictures=not no_png, views=views, movie=movie, movie_fps=fps, **sizes, progress=lambda k, n: bar.update(task, completed=k, total=n))
     for p in done["pictures"]:
         console.print(f"picture: {out_dir}/{p}")
     if done["movie"]:

@@ -87,6 +87,9 @@ def camera_for(folder, view: str = "cut") -> Camera:
         c = cut_pts - focal
         _, _, vt = np.linalg.svd(c, full_matrices=False)
         normal = vt[2]
+        # up in the picture: the normal's side nearest superior (+z), else its largest component
+        k = 2 if abs(normal[2]) > 0.3 else int(np.argmax(np.abs(normal)))
+        normal = normal if normal[k] > 0 else -normal
         along = _unit(path[-1] - path[0]) if len(path) > 1 else vt[0]
         along = _unit(along - normal * float(along @ normal)) if np.linalg.norm(along) else vt[0]
         inward = _unit(np.cross(normal, along))
@@ -160,7 +163,7 @@ def render_frame(frame_path, surface_path=None, path_done=None, path_all=None, c
     legend = []
     if "texture_rgb" in surf.point_data:
         pl.add_mesh(surf, scalars="texture_rgb", rgb=True, smooth_shading=True, split_sharp_edges=True,
-                    feature_angle=35.0, specular=0.15, ambient=0.15)
+                    feature_angle=60.0, specular=0.15, ambient=0.15)
         legend.append(["tissue (texture colours)", (0.55, 0.36, 0.28)])
     elif "label" in surf.cell_data and surf.n_cells:
         labels = np.asarray(surf.cell_data["label"])
@@ -170,11 +173,11 @@ def render_frame(frame_path, surface_path=None, path_done=None, path_all=None, c
         for i, v in enumerate(values):
             part = surf.extract_cells(np.flatnonzero(labels == v)).extract_surface(algorithm="dataset_surface")
             colour = palette[i % len(palette)]
-            pl.add_mesh(part, color=colour, smooth_shading=True, split_sharp_edges=True, feature_angle=35.0,
+            pl.add_mesh(part, color=colour, smooth_shading=True, split_sharp_edges=True, feature_angle=60.0,
                         specular=0.15, ambient=0.15)
             legend.append([f"tissue label {int(v)}", tuple(0.65 * c for c in colour)])
     else:
-        pl.add_mesh(surf, color=TISSUE_COLOUR, smooth_shading=True, split_sharp_edges=True, feature_angle=35.0)
+        pl.add_mesh(surf, color=TISSUE_COLOUR, smooth_shading=True, split_sharp_edges=True, feature_angle=60.0)
         legend.append(["tissue", tuple(0.65 * c for c in TISSUE_COLOUR)])
 
     rim_later = None
@@ -221,7 +224,8 @@ def render_frame(frame_path, surface_path=None, path_done=None, path_all=None, c
         half_h = camera.distance * np.tan(np.radians(15.0))
         start = np.asarray(camera.focal, float) - 0.84 * half_h * up + 0.05 * span * right
         end = start + length * right
-        pl.add_mesh(pv.Line(start, end), color="black", line_width=max(3.0, width / 300))
+        # the focal point lies inside the tissue: the bar is drawn over the scene
+        overlay.append(pl.add_mesh(pv.Line(start, end), color="black", line_width=max(3.0, width / 300)))
         label = f"{length:g} mm"
         pl.add_point_labels(np.array([0.5 * (start + end) + 0.05 * half_h * up]), [label], font_size=max(10, height // 60),
                             text_color="black", shape=None, show_points=False, always_visible=True)
