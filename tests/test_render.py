@@ -114,3 +114,25 @@ def test_render_of_a_folder_that_is_not_an_output(tmp_path):
         read_folder(tmp_path)
     r = CliRunner().invoke(cli, ["render", str(tmp_path), "--size", "big"])
     assert r.exit_code == 2 and "--size must be WIDTHxHEIGHT" in r.output
+
+
+def test_a_cut_that_does_not_open_still_shows(folder, tmp_path):
+    """No prestress (a brain): the lips stay closed inside the tissue; the outline is drawn through it."""
+    from cutkit.render import render_frame
+    from cutkit.render.scene import Camera, RIM_COLOUR
+
+    points, _ = box_mesh((10, 6, 4), spacing=(2.0, 2.0, 2.0))
+    quad = np.array([[4.0, 6.0, 2.0], [16.0, 6.0, 2.0], [16.0, 6.0, 6.0], [4.0, 6.0, 6.0]])  # inside, y = 6
+    surface = SurfaceSeries(tmp_path)
+    path = surface.write(0.0, np.vstack([points, quad]), np.array([[len(points) + i for i in (0, 1, 2)],
+                                                                   [len(points) + i for i in (0, 2, 3)]]))
+    frame = read_folder(folder).frames[-1][1]
+    cam = Camera(focal=np.array([10.0, 6.0, 4.0]), view_dir=np.array([0.0, 0.0, -1.0]), up=np.array([0.0, 1.0, 0.0]),
+                 distance=40.0)
+    img = render_frame(frame, path, camera=cam, size=(480, 360), show_path=False)
+    rim = np.array(RIM_COLOUR) * 255
+    scene = (slice(40, 360), slice(0, 320))  # left of the legend, below the title
+    near = np.abs(img[scene].astype(float) - rim).max(axis=2) < 40
+    assert near.sum() > 100  # the outline of the hidden cut
+    hidden = render_frame(frame, None, camera=cam, size=(480, 360), show_path=False)
+    assert (np.abs(hidden[scene].astype(float) - rim).max(axis=2) < 40).sum() < 10
