@@ -34,7 +34,6 @@ from cutkit.relax.elastic import (
     material_of_tets,
     node_damping,
     prestress_of_tets,
-    static_solve,
 )
 from cutkit.simulate.tissue import TissueBase
 
@@ -47,9 +46,8 @@ STEP_RTOL = 1e-2
 STEP_MAX_ITERATIONS = 50
 #: Relative residual the settle before a cut reaches (docs/relaxation.md).
 SETTLE_RTOL = 1e-3
-#: Chebyshev spectral radius estimate of the settle's sweeps (Wang 2015);
-#: 0.95 diverged on none of the test and demo models, 0.98 did on a bar.
-SETTLE_CHEBYSHEV = 0.9
+#: Chebyshev spectral radius estimate of the steps' sweeps (Wang 2015):
+#: 0.95 converged on the test models, 0.98 diverged on a slender bar.
 STEP_CHEBYSHEV = 0.9
 
 
@@ -136,9 +134,15 @@ class ElasticTissue(TissueBase):
         return float(self.state.time)
 
     def settle(self, max_iterations: int, rtol: float = SETTLE_RTOL) -> dict:
-        """Relax to static equilibrium under prestress and boundary conditions, then rest at time 0."""
-        info = static_solve(self.em, self.state.positions, rtol=rtol, atol=DEFAULT_ATOL_N,
-                            max_iterations=max(int(max_iterations), 1), chebyshev=SETTLE_CHEBYSHEV)
+        """Relax to static equilibrium under prestress and boundary conditions, then rest at time 0.
+
+        Modified Newton with the linear stiffness (:func:`cutkit.relax.settle.settle_static`):
+        ``max_iterations`` bounds its Newton steps.
+        """
+        from cutkit.relax.settle import settle_static
+
+        info = settle_static(self.em, self.state.positions, rtol=rtol, atol=DEFAULT_ATOL_N,
+                             max_iterations=max(int(max_iterations), 1))
         self.state.velocities[:] = 0.0
         self.state.time = 0.0
         return {"iterations": info.iterations, "relative_residual": info.residual / info.initial_residual

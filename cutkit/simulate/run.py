@@ -39,9 +39,10 @@ HAPTIC_DT = 1e-3
 #: The blade has left the tissue once the hand's tip is this far outside the
 #: entry face's plane, mm (a small margin so surface noise does not flicker).
 LEAVE_MARGIN_MM = 0.5
-#: Most settle sweeps of each material model by default: the element model
-#: stops earlier at its residual (SimulateOptions.settle_rtol).
-SETTLE_MAX_SWEEPS = {"neohookean": 3000, "springs": 100}
+#: Most settle iterations of each material model by default: Newton steps of
+#: the element model, which stops earlier at its residual (SimulateOptions.settle_rtol),
+#: Gauss-Seidel sweeps of the springs.
+SETTLE_MAX_SWEEPS = {"neohookean": 50, "springs": 100}
 #: Default volume stiffness (bulk modulus of the volume term over E): see
 #: docs/simulate.md for what it does to the demo's inverted tets and opening.
 VOLUME_STIFFNESS = 0.0
