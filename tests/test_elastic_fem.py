@@ -20,11 +20,15 @@ E = E_PA * 1e-6
 TIGHT = dict(rtol=1e-8, atol=1e-16, max_iterations=200000, chebyshev=0.9)
 
 
+def solid(nu):
+    """Materials table of one solid with E = 1 MPa and Poisson ratio nu."""
+    return Materials.from_rows([dict(label=1, name="solid", E=E_PA, poisson_ratio=nu, density=1000.0, damping=0.0,
+                                     F_enter=1.0, mu_static=1e-6, mu_dynamic=1e-6, rho_dynamic=1e-8,
+                                     alpha_static=0.1, alpha_dynamic=0.1, c_edge=1.0, c_shape=1.0)])
+
+
 def element_model(points, tets, nu):
-    row = dict(label=1, name="solid", E=E_PA, poisson_ratio=nu, density=1000.0, damping=0.0, F_enter=1.0,
-               mu_static=1e-6, mu_dynamic=1e-6, rho_dynamic=1e-8, alpha_static=0.1, alpha_dynamic=0.1,
-               c_edge=1.0, c_shape=1.0)
-    return build_element_model(TetModel.from_arrays(points, tets, materials=Materials.from_rows([row])))
+    return build_element_model(TetModel.from_arrays(points, tets, materials=solid(nu)))
 
 
 def mesh(kind, L, cells):
@@ -168,3 +172,39 @@ def test_clamped_block_squeezed_by_thirty_percent_does_not_invert():
     prescribed[top, 2] = -1.2
     em, x = solve(p, t, 0.45, fixed, prescribed, np.zeros(p.shape))
     assert signed_volumes(x, t).min() > 0.0
+
+
+@pytest.mark.parametrize("kind", MESHES)
+def test_linear_stiffness_is_scikit_fem_stiffness(kind):
+    """The settle's small-strain stiffness is the P1 linear-elasticity matrix, entry for entry."""
+    import skfem
+    from skfem.models.elasticity import lame_parameters, linear_elasticity
+
+    from cutkit.relax.settle import linear_stiffness
+
+    p, t = mesh(kind, [3.0, 2.0, 2.0], (3, 2, 2))
+    em = element_model(p, t, 0.45)
+    K = linear_stiffness(em).toarray()
+    basis = skfem.Basis(skfem.MeshTet(p.T.copy(), t.T.copy()), skfem.ElementVector(skfem.ElementTetP1()))
+    ref = skfem.asm(linear_elasticity(*lame_parameters(E, 0.45)), basis).toarray()
+    order = np.stack([basis.nodal_dofs[c] for c in range(3)], axis=1).ravel()  # our dof 3 i + c
+    np.testing.assert_allclose(K, ref[np.ix_(order, order)], atol=1e-12 * np.abs(ref).max())
+
+
+def test_settle_reaches_the_block_descent_equilibrium():
+    """Newton with the linear stiffness and vertex block descent find the same prestressed equilibrium."""
+    from cutkit.model.tetmodel import Prestress
+    from cutkit.relax.settle import settle_static
+
+    p, t = kuhn_box([6.0, 3.0, 3.0], (6, 3, 3))
+    model = TetModel.from_arrays(p, t, materials=solid(0.45), prestress=Prestress(
+        label=np.array([1], np.int32), fibre_direction=np.array([[1.0, 0.0, 0.0]]), prestrain=np.array([0.08])))
+    em = build_element_model(model)
+    em.fixed[(p[:, 0] == 0) | (p[:, 0] == 6.0)] = True
+    em._classes = None
+    x_newton, x_vbd = p.copy(), p.copy()
+    info = settle_static(em, x_newton, rtol=1e-9)
+    assert info.converged and info.iterations <= 20
+    assert static_solve(em, x_vbd, **TIGHT).converged
+    assert np.abs(x_newton - x_vbd).max() < 1e-6
+    assert np.abs(x_newton - p).max() > 0.01  # the prestress did move it
