@@ -7,10 +7,11 @@
   (positions, normals and colours uploaded each frame, as in a session);
   reports frames per second (the issue asks >= 30) and the time of one
   ``show``.
-* play: ``cutkit haptics play`` streams the shipped incision (``--loop``
-  for ``--seconds``) into a spawned ``cutkit haptics serve`` while a
-  ``HapticsPoseSource`` takes the forwarded poses; reports the device's
-  achieved rate, its p99 period and the poses forwarded per second.
+* play: ``cutkit haptics play --loop`` (its own process, as a device is)
+  streams the shipped incision into a spawned ``cutkit haptics serve``
+  while a ``HapticsPoseSource`` in this process takes the forwarded poses
+  and answers with SIM_UPDATEs for ``--seconds``; reports the device's
+  achieved rate, its p50/p99 period and the poses forwarded per second.
 """
 
 from __future__ import annotations
@@ -18,7 +19,6 @@ from __future__ import annotations
 import argparse
 import json
 import platform
-import threading
 import time
 from pathlib import Path
 
@@ -59,35 +59,38 @@ def window_rate(triangles: int, frames: int) -> dict:
 
 
 def play_rate(seconds: float, priority: str) -> dict:
-    from cutkit.cutting.trajectory import read_trajectory
+    import signal
+    import subprocess
+    import sys
+
     from cutkit.haptics.client import spawned_server
-    from cutkit.haptics.play import play_trajectory
     from cutkit.live import HapticsPoseSource
 
-    traj = read_trajectory(ROOT / "sample_volumes" / "incision.csv")
+    incision = ROOT / "sample_volumes" / "incision.csv"
     with spawned_server("--priority", priority) as (host, port, _):
         source = HapticsPoseSource(host, port)
-        done = threading.Event()
-        result = {}
-
-        def run():
-            result.update(play_trajectory(traj, host, port, loop=True, max_seconds=seconds))
-            done.set()
-
-        thread = threading.Thread(target=run, daemon=True)
-        thread.start()
-        polled = 0
+        cmd = [sys.executable, "-m", "cutkit.cli.main", "haptics", "play", str(incision), "--host", host,
+               "--port", str(port), "--loop", "--json", "--priority", priority]
+        play = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        polled, first = 0, None
         t_end = time.monotonic() + seconds + 30.0
-        while not done.is_set() and time.monotonic() < t_end:
-            polled += source.poll() is not None
+        while time.monotonic() < t_end:
+            if source.poll() is not None:
+                polled += 1
+                if first is None:
+                    first = time.monotonic()
             source.update((0.0, 0.0, 0.0), (0.0, 0.0, 0.0), contact=False)
+            if first is not None and time.monotonic() - first > seconds:
+                break
             time.sleep(0.002)
-        thread.join(10)
+        play.send_signal(signal.SIGINT)
+        out, _ = play.communicate(timeout=30)
         forwarded = source.poses_received
         source.close()
-    return {"device_rate_hz": result.get("rate_hz"), "device_period_p99_ms": result.get("period_p99_ms"),
-            "device_resyncs": result.get("resyncs"), "forwarded_per_s": forwarded / seconds,
-            "session_polls_with_a_pose": polled}
+    result = json.loads(out)
+    return {"device_rate_hz": result["rate_hz"], "device_period_p50_ms": result["period_p50_ms"],
+            "device_period_p99_ms": result["period_p99_ms"], "device_resyncs": result["resyncs"],
+            "forwarded_per_s": forwarded / seconds, "session_polls_with_a_pose": polled}
 
 
 def main() -> None:
@@ -95,7 +98,7 @@ def main() -> None:
     ap.add_argument("--triangles", type=int, default=80000)
     ap.add_argument("--frames", type=int, default=120)
     ap.add_argument("--seconds", type=float, default=5.0)
-    ap.add_argument("--priority", choices=["normal", "high", "realtime"], default="normal")
+    ap.add_argument("--priority", choices=["normal", "high", "realtime"], default="realtime")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args()
     result = {"machine": platform.machine(), "python": platform.python_version(),
