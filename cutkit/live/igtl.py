@@ -397,8 +397,7 @@ class IGTLPoseSource(_Owner):
                  local_only: bool = True, clock=time.time):
         self.device_name = _check_name(device_name, "tool device name")
         self.axis, self.edge = axis, edge
-        _axis(axis), _axis(edge)
-        if _axis(axis)[0] == _axis(edge)[0]:
+        if _axis(axis)[0] == _axis(edge)[0]:  # also checks both names
             raise InputError(f"tool axis {axis!r} and edge {edge!r} must be different axes")
         self.to_model = tracker_to_model(frame, registration)
         self.clock = clock
