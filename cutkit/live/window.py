@@ -125,11 +125,14 @@ class WindowView:
     force_scale : float
         Length of the force arrow per newton, mm.
     background : str or 3 floats
+    max_fps : float, optional
+        Draw at most this many frames a second: a ``show`` sooner than that
+        after the last drawn frame returns at once (None: draw every frame).
     """
 
     def __init__(self, off_screen: bool = False, window_size=(1024, 768), title: str = "cutkit live",
                  pose_source=None, cut_rgb=CUT_RGB, tissue_rgb=TISSUE_RGB, force_scale: float = 10.0,
-                 background="white"):
+                 background="white", max_fps: float | None = None):
         self.off_screen = bool(off_screen)
         self.window_size = tuple(int(v) for v in window_size)
         self.title = title
@@ -138,6 +141,7 @@ class WindowView:
         self.tissue_rgb = np.asarray(tissue_rgb, np.uint8)
         self.force_scale = float(force_scale)
         self.background = background
+        self.min_period = 1.0 / max_fps if max_fps else 0.0
         self.cut_mode = pose_source is not None
         self.interactive = not self.off_screen  # events processed at each frame
         self.frames_shown = 0
@@ -286,6 +290,8 @@ class WindowView:
 
     def show(self, frame: LiveFrame) -> None:
         """Draw ``frame`` (building the window on the first call) and process pending window events."""
+        if self._last_render is not None and time.perf_counter() - self._last_render < self.min_period:
+            return
         frame.check()
         if self._pl is None:
             self._build(frame)
