@@ -25,6 +25,9 @@ from cutkit.sweep.worker import FIGURES, one_line
 #: Environment of the embedded cluster's workers: one numba (and BLAS) thread each.
 WORKER_ENV = {"NUMBA_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1",
               "MKL_NUM_THREADS": "1"}
+#: Dask settings of the embedded cluster's workers: the statistical profiler
+#: (a stack sample every 10 ms) is off, runs being long and CPU-bound.
+WORKER_CONFIG = {"distributed.worker.profile.enabled": False}
 
 
 @dataclass
@@ -72,9 +75,12 @@ def local_cluster(n_workers: int | None = None):
     n = available_cores() if n_workers is None else int(n_workers)
     if n < 1:
         raise InputError(f"workers must be a whole number >= 1, got {n_workers}")
-    return LocalCluster(n_workers=n, threads_per_worker=1, processes=True, env=dict(WORKER_ENV),
-                        dashboard_address=":0", silence_logs=logging.ERROR,
-                        preload=["cutkit.sweep._worker_setup"])
+    import dask
+
+    with dask.config.set(WORKER_CONFIG):  # the nannies hand their configuration to the workers
+        return LocalCluster(n_workers=n, threads_per_worker=1, processes=True, env=dict(WORKER_ENV),
+                            dashboard_address=":0", silence_logs=logging.ERROR,
+                            preload=["cutkit.sweep._worker_setup"])
 
 
 def run_sweep(spec: SweepSpec | str | Path, out_dir, *, scheduler: str | None = None, client=None,
