@@ -273,3 +273,19 @@ def test_cleanup_loss_is_reported_and_warned(tmp_path):
     text = " ".join(r.output.split())
     assert "clean-up change" in text and "-81.77 %" in text
     assert "warning: the clean-up changed the segmented volume by -" in text
+
+
+def test_immutable_folder_is_one_line(tmp_path):
+    """A real immutable folder (chattr +i), which even root cannot write; skipped where chattr is refused."""
+    import shutil
+    import subprocess
+
+    d = tmp_path / "frozen"
+    d.mkdir()
+    if shutil.which("chattr") is None or subprocess.run(["chattr", "+i", str(d)], capture_output=True).returncode:
+        pytest.skip("chattr +i is not available here")
+    try:
+        line = error_line(["segment", BLOCK, "-o", d / "x.nrrd"])
+    finally:
+        subprocess.run(["chattr", "-i", str(d)], capture_output=True)
+    assert line == f"cutkit: error: cannot write {d / 'x.nrrd'}: folder {d} is not writable"
