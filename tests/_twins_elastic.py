@@ -60,5 +60,22 @@ def vbd_sweep(x, tets, Dminv, volume, mu, lam, inertia, target, force, fixed, or
                     H[c, :] = 0.0
                     H[:, c] = 0.0
                     H[c, c] = 1.0
-            x[i] += np.linalg.solve(H, f)
+            d = np.linalg.solve(H, f)
+            x[i] += step_limit(x, i, d, tets, volume) * d
     return x
+
+
+def step_limit(x, i, d, tets, volume, keep=0.1):
+    """Largest a <= 1 keeping det Ds of every non-inverted tet of node i at >= keep of its value.
+
+    det Ds is affine in x_i, so its change along d is det(x + d) - det(x)."""
+    a = 1.0
+    for t in np.flatnonzero((tets == i).any(axis=1) & (volume > 0)):
+        p = x[tets[t]]
+        q = p.copy()
+        q[list(tets[t]).index(i)] += d
+        d0 = np.linalg.det(np.stack([p[1] - p[0], p[2] - p[0], p[3] - p[0]], axis=1))
+        d1 = np.linalg.det(np.stack([q[1] - q[0], q[2] - q[0], q[3] - q[0]], axis=1))
+        if d0 > 0 and d1 - d0 < 0:
+            a = min(a, (1 - keep) * d0 / (d0 - d1))
+    return a

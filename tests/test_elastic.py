@@ -154,6 +154,27 @@ def test_static_solve_stops_at_the_residual_it_was_asked_for():
     assert np.linalg.norm(elastic_forces(em, x)[free]) < 1e-4 * info.initial_residual
 
 
+def test_no_node_step_inverts_a_tet():
+    """A pull that would fold a tet over moves the node only as far as keeps it positive."""
+    X = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], float)
+    row = dict(label=1, name="m", E=30e3, poisson_ratio=0.45, density=1090.0, damping=0.0, F_enter=0.8,
+               mu_static=1e-6, mu_dynamic=1e-6, rho_dynamic=1e-8, alpha_static=0.1, alpha_dynamic=0.1,
+               c_edge=1.0, c_shape=1.0)
+    model = TetModel.from_arrays(X, np.array([[0, 1, 2, 3]]), materials=Materials.from_rows([row]))
+    em = build_element_model(model)
+    em.fixed[:3] = True
+    em._classes = None
+    x = X.copy()
+    force = np.zeros((4, 3))
+    force[3, 2] = -1e3  # far more than the tet can hold
+    terms = K.NodeTerms(np.zeros(4), np.zeros(4), em.fixed, x.copy(), x.copy(), force)
+    offsets, nodes = em.colour_classes()
+    for _ in range(20):
+        K.vbd_sweep(x, em.elements, em.adjacency, terms, offsets, nodes, np.zeros(4))
+        assert x[3, 2] > 0.0
+    assert x[3, 2] < 1e-3  # squashed as far as it goes, never through
+
+
 def test_inverted_tet_is_pushed_back():
     """A single tet with one vertex pushed through the opposite face recovers its orientation."""
     X = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], float)

@@ -32,6 +32,11 @@ Adjacency = namedtuple("Adjacency", ["tets", "corner", "degree"])
 #: external force (n, 3) N (gravity included)
 NodeTerms = namedtuple("NodeTerms", ["inertia", "damping", "fixed", "target", "previous", "force"])
 
+#: A node step may shrink the volume ratio J of a tet around it to at most this
+#: fraction of its value before the step: no step inverts a tet that was not
+#: inverted, and since the node's energy is a convex quadratic along the step,
+#: a shortened step still lowers it.  (A tet already inverted is not held back.)
+KEEP_J_FRACTION = 0.1
 #: A node whose 3x3 block has |det| below this times its trace cubed is left where it is
 #: (no tet and no mass: an orphan the cut left behind).
 SINGULAR_BLOCK = 1e-14
@@ -137,10 +142,51 @@ def _node_update(i, x, el, adj, nt):
     i11 = h00 * h22 - h02 * h02
     i12 = h02 * h01 - h00 * h12
     i22 = h00 * h11 - h01 * h01
-    x[i, 0] += (i00 * f0 + i01 * f1 + i02 * f2) / det
-    x[i, 1] += (i01 * f0 + i11 * f1 + i12 * f2) / det
-    x[i, 2] += (i02 * f0 + i12 * f1 + i22 * f2) / det
+    d0 = (i00 * f0 + i01 * f1 + i02 * f2) / det
+    d1 = (i01 * f0 + i11 * f1 + i12 * f2) / det
+    d2 = (i02 * f0 + i12 * f1 + i22 * f2) / det
+    a = _max_step(i, x, el, adj, d0, d1, d2)
+    x[i, 0] += a * d0
+    x[i, 1] += a * d1
+    x[i, 2] += a * d2
     return r2
+
+
+@njit(cache=True, nogil=True)
+def _max_step(i, x, el, adj, d0, d1, d2):
+    """The largest a in [0, 1] for which x_i + a d keeps every tet of node i with J > 0 at
+    J >= KEEP_J_FRACTION of its present value (J is affine in x_i: J(a) = J + a (cof F b_i) . d)."""
+    a = 1.0
+    for k in range(adj.degree[i]):
+        t = adj.tets[i, k]
+        if el.volume[t] <= 0.0:
+            continue
+        D = el.Dminv[t]
+        a0, a1, a2, a3 = el.tets[t, 0], el.tets[t, 1], el.tets[t, 2], el.tets[t, 3]
+        u0, u1, u2 = x[a1, 0] - x[a0, 0], x[a1, 1] - x[a0, 1], x[a1, 2] - x[a0, 2]
+        v0, v1, v2 = x[a2, 0] - x[a0, 0], x[a2, 1] - x[a0, 1], x[a2, 2] - x[a0, 2]
+        w0, w1, w2 = x[a3, 0] - x[a0, 0], x[a3, 1] - x[a0, 1], x[a3, 2] - x[a0, 2]
+        # J = det Ds det Dminv, and dJ/dx_i = det(Dminv) (cof Ds) (Ds-row of corner i)
+        cu0, cu1, cu2 = v1 * w2 - v2 * w1, v2 * w0 - v0 * w2, v0 * w1 - v1 * w0  # v x w
+        cv0, cv1, cv2 = w1 * u2 - w2 * u1, w2 * u0 - w0 * u2, w0 * u1 - w1 * u0  # w x u
+        cw0, cw1, cw2 = u1 * v2 - u2 * v1, u2 * v0 - u0 * v2, u0 * v1 - u1 * v0  # u x v
+        det_ds = u0 * cu0 + u1 * cu1 + u2 * cu2
+        if det_ds <= 0.0:
+            continue
+        c = adj.corner[i, k]
+        if c == 1:
+            slope = cu0 * d0 + cu1 * d1 + cu2 * d2
+        elif c == 2:
+            slope = cv0 * d0 + cv1 * d1 + cv2 * d2
+        elif c == 3:
+            slope = cw0 * d0 + cw1 * d1 + cw2 * d2
+        else:
+            slope = -((cu0 + cv0 + cw0) * d0 + (cu1 + cv1 + cw1) * d1 + (cu2 + cv2 + cw2) * d2)
+        if slope < 0.0:
+            limit = (1.0 - KEEP_J_FRACTION) * det_ds / -slope
+            if limit < a:
+                a = limit
+    return a
 
 
 @njit(cache=True, parallel=True, nogil=True)

@@ -293,12 +293,13 @@ class ElementState:
 
 @dataclass
 class SolveInfo:
-    """How a solve ended: sweeps made, residual before the first and after the last (N)."""
+    """How a solve ended: sweeps made, residual before the first and after the last (N), node updates."""
 
     iterations: int
     initial_residual: float
     residual: float
     converged: bool
+    node_updates: int = 0
 
 
 def build_element_model(model, *, poisson_ratio=None) -> ElementModel:
@@ -502,8 +503,10 @@ def local_step(em: ElementModel, state: ElementState, h: float, f_ext, r2, seeds
     it = 0
     prev2 = prev = None
     omega = 1.0
+    updates = 0
     while it < max_iterations and awake.size:
         offsets, nodes = K.colour_classes_of(em.colour, awake, n_colours)
+        updates += nodes.size
         if chebyshev is not None:
             prev2, prev = prev, x.copy()
         K.vbd_sweep(x, em.elements, em.adjacency, terms, offsets, nodes, r2)
@@ -520,7 +523,7 @@ def local_step(em: ElementModel, state: ElementState, h: float, f_ext, r2, seeds
         awake = K.awake_after_sweep(em.adjacency, em.tets, movable, r2, tau2, awake, mark)
     v[:] = np.where(em.fixed, 0.0, (x - x0) / h)
     state.time += h
-    return SolveInfo(it, r0, res, res <= atol)
+    return SolveInfo(it, r0, res, res <= atol, updates)
 
 
 def static_solve(em: ElementModel, positions, f_ext=None, gravity=None, **tolerances) -> SolveInfo:

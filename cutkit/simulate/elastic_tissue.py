@@ -90,7 +90,7 @@ class ElasticTissue(TissueBase):
         em.fixed[:] = self.bc_fixed[:, None]
         em.recolour()
         self.state: ElementState = initial_element_state(model)
-        self.counts = {"steps": 0, "sweeps": 0, "steps_not_converged": 0}
+        self.counts = {"steps": 0, "sweeps": 0, "node_updates": 0, "steps_not_converged": 0}
         self.force_scale = self._force_scale()
         # last squared residual of every node and the nodes a cut or a load wakes (elastic.local_step)
         self.r2 = np.zeros(em.n_nodes)
@@ -162,6 +162,7 @@ class ElasticTissue(TissueBase):
             sweeps += info.iterations
             self.counts["steps"] += 1
             self.counts["sweeps"] += info.iterations
+            self.counts["node_updates"] += info.node_updates
             self.counts["steps_not_converged"] += int(not info.converged)
         return sweeps
 
