@@ -13,9 +13,11 @@ from __future__ import annotations
 import numpy as np
 
 from cutkit.scalpel import (
+    CUTTING,
     FREE,
     N_OUT,
     O_A,
+    O_CUT,
     O_FORCE,
     O_N,
     ScalpelParams,
@@ -96,6 +98,7 @@ class ServiceScalpel:
         self._code = FREE
         self._entry = np.zeros(3)
         self._normal = np.zeros(3)
+        self._contact = False
         self._last = None
 
     @property
@@ -112,15 +115,20 @@ class ServiceScalpel:
         self._entry[:] = entry
         self._normal[:] = normal
         self.sim.send_sim(entry, normal, material=[material[k] for k in CUT_FIELDS], contact=True)
+        self._contact = True
 
     def leave(self) -> None:
         self.sim.send_sim(self._entry, self._normal, contact=False)
+        self._contact = False
         self._code = FREE
 
     def tick(self, tip, a_traj, n_traj) -> np.ndarray:
         from cutkit.errors import ProtocolError
 
         self.device.send_pose(tip, n_traj, a_traj)
+        # one SIM_UPDATE a tick, in contact or not: the service's watchdog ramps the
+        # force to zero 0.1 s after the last one (docs/haptics-protocol.md)
+        self.sim.send_sim(self._entry, self._normal, contact=self._contact)
         # newest state wins: take what the service has sent so far without
         # waiting for its next tick (wait only for the very first frame)
         frame = None
@@ -136,6 +144,9 @@ class ServiceScalpel:
         self._proxy[:] = frame.proxy
         self.out[:] = 0.0
         self.out[O_FORCE:O_FORCE + 3] = frame.force
+        # the service sends no cut force: the force on the blade stands in for it, so the
+        # tissue feels the blade's reaction as offline
+        self.out[O_CUT:O_CUT + 3] = frame.force if self._code == CUTTING else 0.0
         self.out[O_A:O_A + 3] = frame.a
         self.out[O_N:O_N + 3] = frame.n
         return self.out

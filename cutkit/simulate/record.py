@@ -1,0 +1,234 @@
+"""Recording a session: frames and cut surface, forces, the poses acted on, the summary, the cut model.
+
+Each recorder is a view of the :class:`~cutkit.simulate.session.Session`:
+it reads the one mesh store and writes files, atomically (every file goes
+to a temporary name and is renamed; the ``.pvd`` collections are valid
+after every frame), so a session stopped at any point leaves a valid
+recording.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import asdict
+from pathlib import Path
+
+import numpy as np
+
+
+class FrameRecorder:
+    """``frames/NNNN.vtu`` + ``cut.pvd`` and ``surface/NNNN.vtp`` + ``cut_surface.pvd``."""
+
+    def __init__(self, session, out_dir):
+        from cutkit.io.series import SeriesWriter
+        from cutkit.simulate.outputs import SurfaceSeries
+
+        self.session = session
+        self.series = SeriesWriter(Path(out_dir), "cut")
+        self.surface = SurfaceSeries(out_dir)
+        self.colours = NodeColours(session.model, session.tis.cm)
+
+    @property
+    def n_frames(self) -> int:
+        return self.series.n_frames
+
+    def show(self, t: float) -> None:
+        """Write the tissue and its cut surface at time ``t``."""
+        from cutkit.cutting import compact_nodes, cut_surface_faces
+
+        s = self.session
+        t1 = time.perf_counter()
+        tis, cm = s.tis, s.tis.cm
+        with s.lock:
+            tets, ids = tis.alive_tets()
+            n = tis.n_nodes
+            rgb = self.colours.get(n)
+            pd = {"displacement": tis.displacement.copy(), "velocity": tis.velocities.copy(),
+                  "fixed": tis.fixed.astype(np.uint8), **tis.point_data()}
+            positions = tis.positions.copy()
+            labels = cm.labels[cm._tet_orig[ids]].astype(np.int32)
+            surf_faces = cut_surface_faces(cm)
+        if rgb is not None:
+            pd["texture_rgb"] = rgb
+        cd = {"label": labels, "new_tet": (ids >= tis.n_orig_tets).astype(np.uint8)}
+        kept, new_index = compact_nodes(tets, n)  # no orphan node in a frame
+        self.series.write(t, positions[kept], new_index[tets], point_data={k: v[kept] for k, v in pd.items()},
+                          cell_data=cd)
+        spd = {"displacement": pd["displacement"]}
+        if rgb is not None:
+            spd["texture_rgb"] = rgb
+        self.surface.write(t, positions, surf_faces, spd)
+        s.task_s["output"] += time.perf_counter() - t1
+
+    def close(self) -> None:
+        self.series.close()
+        self.surface.close()
+
+
+class NodeColours:
+    """Texture colours per node, extended as cuts add nodes (None for an untextured model)."""
+
+    def __init__(self, model, cm):
+        self.cm = cm
+        tex = model.texture if (model.texture is not None and model.texcoords is not None) else None
+        self.texture = tex
+        n0 = cm.n_orig_points
+        self.rgb = np.asarray(tex.sample_rgb(cm.texcoords[:n0])) if tex is not None else None
+
+    def get(self, n: int):
+        if self.rgb is not None and self.rgb.shape[0] < n:
+            extra = np.asarray(self.texture.sample_rgb(self.cm.texcoords[self.rgb.shape[0]:n]))
+            self.rgb = np.concatenate([self.rgb, extra])
+        return None if self.rgb is None else self.rgb[:n]
+
+
+class ForceRecorder:
+    """One row of ``forces.csv`` per haptic tick (:data:`cutkit.simulate.outputs.FORCE_COLUMNS`)."""
+
+    def __init__(self, capacity: int = 1024):
+        from cutkit.simulate.outputs import ForceLog
+
+        self.log = ForceLog(capacity)
+
+    def add(self, t, code, out, tip, proxy) -> None:
+        from cutkit.scalpel import O_A, O_CUT, O_D_A, O_FORCE, O_N
+
+        fa, fn, cut = out[O_A:O_A + 3], out[O_N:O_N + 3], out[O_CUT:O_CUT + 3]
+        self.log.add(t, code, -out[O_FORCE:O_FORCE + 3], float(cut @ fa), float(cut @ fn), out[O_D_A], tip, proxy)
+
+    def max_force(self) -> float:
+        return float(np.linalg.norm(self.log.rows[:, 2:5], axis=1).max(initial=0.0))
+
+    def write(self, path) -> None:
+        self.log.write(path)
+
+
+class PoseRecorder:
+    """The poses a session acted on, as a trajectory file (docs/trajectory-format.md).
+
+    Times are session seconds from the first pose; a pose at the same time
+    as the previous one replaces it (trajectory times strictly increase).
+    """
+
+    def __init__(self, blade_length: float, blade_breadth: float):
+        self.blade_length, self.blade_breadth = float(blade_length), float(blade_breadth)
+        self.rows: list[np.ndarray] = []
+        self.t0 = None
+
+    def add(self, t: float, tip, a, n) -> None:
+        if self.t0 is None:
+            self.t0 = float(t)
+        row = np.concatenate([[float(t) - self.t0], tip, a, n])
+        if self.rows and row[0] <= self.rows[-1][0] + 1e-6:
+            row[0] = self.rows[-1][0]  # the newer pose at the earlier time
+            self.rows[-1] = row
+            return
+        self.rows.append(row)
+
+    def trajectory(self):
+        from cutkit.cutting.trajectory import Trajectory
+
+        r = np.array(self.rows) if self.rows else np.zeros((0, 10))
+        return Trajectory(t=r[:, 0], tip=r[:, 1:4], a=r[:, 4:7], n=r[:, 7:10], blade_length=self.blade_length,
+                          blade_breadth=self.blade_breadth)
+
+    def write(self, path) -> bool:
+        """Write ``trajectory.csv`` (atomically); False when fewer than two poses came."""
+        from cutkit.cutting.trajectory import write_trajectory
+
+        if len(self.rows) < 2:
+            return False
+        write_trajectory(path, self.trajectory())
+        return True
+
+
+def summary(session, *, model_path, loop_wall: float, t_traj_end, opening_at_traj_end, frames: int,
+            forces: ForceRecorder, interrupted: bool, rates: bool) -> dict:
+    """What ``summary.json`` holds (docs/simulate.md)."""
+    tis, counts, task_s, opt = session.tis, session.counts, session.task_s, session.opt
+    cm = tis.cm
+    simulated = tis.time
+    n_cut = len(cm.subtets)
+    new_tets = int(sum(len(v) for v in cm.subtets.values()))
+    opening = session.opening()
+    loop_wall = max(loop_wall, 1e-12)
+    work = task_s["haptics"] + task_s["collision_and_cut"] + task_s["relaxation"]
+    out = {
+        "model": model_path,
+        "tets_initial": int(tis.n_orig_tets),
+        "nodes_initial": int(cm.n_orig_points),
+        "tets_final": int(cm._alive[:cm.n_tets_total].sum()),
+        "nodes_final": tis.n_nodes,
+        "material_model": session.material_model,
+        "settle": session.settle_info,
+        "cut_tets": n_cut,
+        "new_tets": new_tets,
+        "new_tets_per_cut_tet": (new_tets / n_cut) if n_cut else 0.0,
+        "states": list(session.states_seen),
+        "frames": int(frames),
+        "pictures": [],
+        "simulated_s": simulated,
+        "wall_s": loop_wall,
+        "simulated_per_wall": simulated / loop_wall,
+        "simulated_per_wall_without_output": simulated / max(work, 1e-12),
+        "time_per_task_s": dict(task_s),
+        "counts": dict(counts),
+        "cut_opening_mm": {
+            "at_trajectory_end": opening_at_traj_end,
+            "final_mean": float(opening.mean()) if opening.size else 0.0,
+            "final_max": float(opening.max()) if opening.size else 0.0,
+        },
+        "inverted_tets_deformed": count_inverted(tis.positions, cm.tets),
+        "max_displacement_mm": float(np.linalg.norm(tis.displacement, axis=1).max(initial=0.0)),
+        "max_F_ext_N": forces.max_force(),
+        "interrupted": bool(interrupted),
+        "options": asdict(opt),
+        "warnings": list(session.warnings),
+    }
+    if rates:
+        out["rates_hz"] = {
+            "haptics": counts["haptic_ticks"] / loop_wall,
+            "geometry_updates": counts["geometry_updates"] / loop_wall,
+            "cut_steps": counts["cut_steps"] / loop_wall,
+            "relaxation_list_passes": counts["relax_passes"] / loop_wall,
+            "frames": frames / loop_wall,
+        }
+    return out
+
+
+def closing_warnings(session) -> None:
+    """The warnings a finished session adds: no touch, or a touch without a cut."""
+    if session.counts["entries"] == 0:
+        session.warnings.append("the trajectory never touches the tissue: no cut")
+    elif not session.tis.cm.subtets:
+        session.warnings.append("the blade touched the tissue but never cut it (F_enter not reached)")
+
+
+def write_cut_model(session, out_dir, summary_: dict) -> None:
+    """``model.h5``: the cut model in its rest configuration with its displacement."""
+    from cutkit.io.model_h5 import write_model
+    from cutkit.simulate.run import cut_model
+
+    t1 = time.perf_counter()
+    with session.lock:
+        m = cut_model(session.tis, session.model, summary_)
+    write_model(Path(out_dir) / "model.h5", m)
+    session.task_s["output"] += time.perf_counter() - t1
+
+
+def count_inverted(points, tets) -> int:
+    """Tets with non-positive volume in the deformed configuration (a mass-spring model does not forbid them)."""
+    from cutkit.mesh.quality import signed_volumes
+
+    return int((signed_volumes(points, tets) <= 0).sum()) if len(tets) else 0
+
+
+def write_json(path, obj) -> None:
+    from cutkit.io.atomic import write_text_atomic
+
+    write_text_atomic(path, json.dumps(obj, indent=2, default=float) + "\n")
+
+
+__all__ = ["FrameRecorder", "ForceRecorder", "PoseRecorder", "NodeColours", "summary", "write_cut_model",
+           "closing_warnings", "count_inverted", "write_json"]

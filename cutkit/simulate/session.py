@@ -1,0 +1,363 @@
+"""A cutting session: the tissue and the tasks of the paper's Fig. 1 as small objects.
+
+:class:`Session` owns the one mesh store of a run (the tissue: cut mesh,
+positions, rest positions, fixed flags, materials, on one node numbering)
+and the tasks that work on it:
+
+* :class:`ContactTask` (surface collision, section 4.1): the blade entering
+  the tissue (the whole blade against the boundary hierarchy) and leaving it;
+* the scalpel force model (section 6), in process or in the haptics service
+  (:mod:`cutkit.simulate.blade`);
+* :class:`CutTask` (volume collision and subdivision, sections 3 and 4.2):
+  the blade at the proxy cuts the rest configuration, the topology change
+  goes over to the tissue in one batch;
+* :class:`RelaxTask` (section 5): the tissue relaxes to a given time.
+
+Topology changes and relaxation steps exclude each other through
+:attr:`Session.lock`: a relaxation thread holds it for one step, the cut
+task for one ``apply_cut``, so a thread never sees half a cut.  Offline
+(:func:`cutkit.simulate.simulate`) one thread calls the tasks in a fixed
+order on the simulated clock; live (:mod:`cutkit.simulate.live`) the
+relaxation runs in its own thread on the wall clock.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from cutkit.scalpel import CUTTING, FREE, O_CUT, O_N, STATE_NAMES
+
+#: The blade has left the tissue once the hand's tip is this far outside the
+#: entry face's plane, mm (a small margin so surface noise does not flicker).
+LEAVE_MARGIN_MM = 0.5
+
+
+class HandoverLock:
+    """A lock a waiting topology change gets before the next relaxation step.
+
+    Plain locks are not fair: a relaxation thread that releases the lock and
+    takes it again at once could keep a cut waiting for many steps.  ``with
+    lock.urgent():`` (the cut task, frames) makes ordinary acquirers (``with
+    lock:``, the relaxation) wait until it has had its turn.
+    """
+
+    def __init__(self):
+        self._lock = threading.Lock()
+        self._cond = threading.Condition()
+        self._urgent = 0
+
+    def __enter__(self):
+        with self._cond:
+            self._cond.wait_for(lambda: self._urgent == 0, timeout=1.0)
+        self._lock.acquire()
+        return self
+
+    def __exit__(self, *exc):
+        self._lock.release()
+
+    @contextmanager
+    def urgent(self):
+        with self._cond:
+            self._urgent += 1
+        try:
+            with self._lock:
+                yield self
+        finally:
+            with self._cond:
+                self._urgent -= 1
+                self._cond.notify_all()
+
+
+@dataclass
+class Contact:
+    """Where the blade entered: the entry point, the face's inward normal and nodes, the blade plane."""
+
+    entry: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    inward: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    face_nodes: np.ndarray = field(default_factory=lambda: np.zeros(3, np.int64))
+    normal: np.ndarray = field(default_factory=lambda: np.zeros(3))
+
+
+class ContactTask:
+    """Surface collision: the blade's entry into the tissue and its leaving (section 4.1).
+
+    Parameters
+    ----------
+    tissue : TissueBase
+    model : TetModel
+        For the materials of the entry face's tissue.
+    blade_length : float
+        mm.
+    """
+
+    def __init__(self, tissue, model, blade_length: float):
+        from cutkit.collision import SurfaceBVH
+        from cutkit.mesh.topology import boundary_faces
+
+        self.tis = tissue
+        self.n0 = tissue.cm.n_orig_points
+        self.faces, self.face_tet = boundary_faces(tissue.cm.orig_tets)
+        self.bvh = SurfaceBVH.build(tissue.positions[:self.n0].copy(), self.faces)
+        self.rows = model.materials.rows()
+        self.row_of_tet = model.materials.row_of(tissue.cm.labels)
+        self.blade_length = float(blade_length)
+        self.contact = Contact()
+        self.first_plane = None
+        self.prev = None  # previous (tip, a)
+
+    def entry(self, tip, a, n):
+        """Test the blade's motion since the previous pose; returns (Contact, material) on entry, else None.
+
+        The whole blade against the current surface: the tip's path, the
+        blade now (the surface may have moved past it), the quad it swept.
+        """
+        from cutkit.collision import blade_entry
+
+        prev, self.prev = self.prev, (np.array(tip, np.float64), np.array(a, np.float64))
+        if prev is None:
+            return None
+        prev_tip, prev_a = prev
+        L = self.blade_length
+        hit = blade_entry(self.bvh, self.tis.positions[:self.n0], prev_tip, prev_tip - L * prev_a, tip, tip - L * a)
+        if hit is None:
+            return None
+        fv = self.bvh.faces[hit.face]
+        x = self.tis.positions[fv]
+        normal = np.cross(x[1] - x[0], x[2] - x[0])
+        b = np.cross(n, a)
+        c = self.contact
+        c.entry = hit.point.copy()
+        c.inward = -normal / np.linalg.norm(normal)
+        c.face_nodes = np.asarray(fv, np.int64).copy()
+        c.normal = b / np.linalg.norm(b)
+        if self.first_plane is None:
+            self.first_plane = {"entry": c.entry.copy(), "a": np.array(a), "b": c.normal.copy(), "n": np.array(n)}
+        return c, self.rows[int(self.row_of_tet[self.face_tet[hit.face]])]
+
+    def left(self, tip) -> bool:
+        """True once the hand's tip is more than :data:`LEAVE_MARGIN_MM` outside the entry face's plane."""
+        return bool(np.dot(np.asarray(tip) - self.contact.entry, self.contact.inward) < -LEAVE_MARGIN_MM)
+
+    def refit(self) -> None:
+        """Refit the hierarchy to the relaxed surface (it serves the entry test)."""
+        self.bvh.update(self.tis.positions[:self.n0])
+
+
+class CutTask:
+    """Volume collision and subdivision (sections 3, 4.2) at the geometry rate.
+
+    :meth:`step` cuts when the scalpel was cutting since the last step and
+    returns the forces the blade puts on the tissue; the topology change is
+    applied under ``lock``.
+    """
+
+    def __init__(self, tissue, lock, counts: dict):
+        self.tis = tissue
+        self.lock = lock
+        self.counts = counts
+        self.pending = False
+
+    def note(self, code: int) -> None:
+        """Record one haptic tick's scalpel state."""
+        self.pending |= code == CUTTING
+
+    def step(self, proxy, out, code: int, contact: Contact) -> np.ndarray:
+        """One geometry update; returns the (n, 3) forces on the tissue's nodes, N."""
+        from cutkit.cutting import cut_step
+
+        cm = self.tis.cm
+        axis = out[O_N:O_N + 3].copy()
+        near = np.unique(cm.orig_tets[cm.active_tets]) if cm.active_tets.size else contact.face_nodes
+        blade_tip = self.tis.blade_to_rest(proxy, near)
+        if self.pending:
+            res = cut_step(cm, blade_tip, axis)
+            with self.lock.urgent():
+                added = self.tis.apply_cut(res)
+            for key, value in added.items():
+                self.counts[key] = self.counts.get(key, 0) + value
+            self.counts["cut_steps"] += 1
+            self.pending = False
+        elif code != FREE:
+            # in tissue but not cutting: the blade rests or backs out, the sweep restarts here
+            cm.prev_pose = (blade_tip, blade_tip - cm.blade_length * axis)
+        f_ext = np.zeros((self.tis.n_nodes, 3))
+        if code == CUTTING and cm.active_tets.size:
+            # the tissue along the blade feels the reaction of the cut force (eqs. 16-18);
+            # before the blade enters the surface is not indented (docs/simulate.md)
+            nodes = np.unique(cm.orig_tets[cm.active_tets])
+            f_ext[nodes] -= out[O_CUT:O_CUT + 3] / len(nodes)
+        return f_ext
+
+    def leave(self) -> None:
+        """The blade left the tissue: the cut's sweep restarts at the next entry."""
+        cm = self.tis.cm
+        cm.prev_pose = None
+        cm.tip_tet = -1
+        cm.active_tets = np.zeros(0, np.int64)
+
+
+class RelaxTask:
+    """Relaxation (section 5): bring the whole tissue to a time, one step at a time under the lock."""
+
+    def __init__(self, tissue, lock, counts: dict):
+        self.tis = tissue
+        self.lock = lock
+        self.counts = counts
+        self.wall_s = 0.0
+
+    def advance(self, f_ext, until: float) -> int:
+        t0 = time.perf_counter()
+        with self.lock:
+            if f_ext.shape[0] != self.tis.n_nodes:  # a cut added nodes since the forces were made
+                f_ext = np.concatenate([f_ext, np.zeros((self.tis.n_nodes - f_ext.shape[0], 3))])
+            passes = self.tis.advance(f_ext, until)
+        self.counts["relax_passes"] += passes
+        self.wall_s += time.perf_counter() - t0
+        return passes
+
+
+def settle(tis, material_model: str, opt, warnings: list) -> dict:
+    """Settle the tissue under its prestress and boundary conditions; the settled state is the start."""
+    from cutkit.simulate.run import SETTLE_MAX_SWEEPS
+
+    sweeps = SETTLE_MAX_SWEEPS[material_model] if opt.settle_iterations is None else opt.settle_iterations
+    if sweeps <= 0:
+        return {"iterations": 0}
+    if material_model == "springs":
+        return tis.settle(sweeps, opt.settle_step_s)
+    info = tis.settle(sweeps, opt.settle_rtol)
+    if not info["converged"]:
+        warnings.append(f"the settle stopped after {info['iterations']} sweeps at relative "
+                        f"residual {info['relative_residual']:.1e} (asked: {opt.settle_rtol:.0e})")
+    return info
+
+
+class Session:
+    """The tissue and the Fig. 1 tasks of one cutting session.
+
+    Parameters
+    ----------
+    model : TetModel
+    opt : SimulateOptions
+    blade_length, blade_breadth : float
+        mm.
+    scalpel : InProcessScalpel or ServiceScalpel or None
+        The force model; None: one in process.
+
+    Attributes
+    ----------
+    tis : TissueBase
+        The one mesh store.
+    lock : HandoverLock
+        Held for each relaxation step and each topology change.
+    counts, task_s : dict
+        Counters and seconds per task (``setup``, ``settle``, ``haptics``,
+        ``collision_and_cut``, ``relaxation``, ``output``).
+    """
+
+    def __init__(self, model, opt, blade_length: float, blade_breadth: float, scalpel=None):
+        from cutkit.simulate.blade import InProcessScalpel
+        from cutkit.simulate.run import make_tissue
+
+        wall0 = time.perf_counter()
+        self.model, self.opt = model, opt
+        self.blade_length, self.blade_breadth = float(blade_length), float(blade_breadth)
+        self.warnings: list[str] = []
+        self.task_s = dict.fromkeys(("setup", "settle", "haptics", "collision_and_cut", "relaxation", "output"), 0.0)
+        self.counts = {"cut_steps": 0, "geometry_updates": 0, "haptic_ticks": 0, "relax_passes": 0,
+                       "nodes_added": 0, "entries": 0}
+        self.material_model = opt.material_model or model.materials.material_model
+        self.tis = make_tissue(model, self.material_model, opt, blade_length)
+        if not self.tis.fixed.any():
+            self.warnings.append("the model has no fixed node: nothing holds it, it may drift (add [boundary] "
+                                 "fixed_labels or fixed_regions to its recipe and run `cutkit assign`)")
+        self.lock = HandoverLock()
+        self.contact = ContactTask(self.tis, model, blade_length)
+        self.cut = CutTask(self.tis, self.lock, self.counts)
+        self.relax = RelaxTask(self.tis, self.lock, self.counts)
+        self.scalpel = scalpel if scalpel is not None else InProcessScalpel(blade_breadth=self.blade_breadth)
+        self.states_seen: list[str] = []
+        self.out = self.scalpel.out
+        self.task_s["setup"] = time.perf_counter() - wall0
+        t1 = time.perf_counter()
+        self.settle_info = settle(self.tis, self.material_model, opt, self.warnings)
+        self.contact.refit()
+        self.task_s["settle"] = time.perf_counter() - t1
+
+    @property
+    def code(self) -> int:
+        return self.scalpel.code
+
+    def haptic_tick(self, tip, a, n) -> np.ndarray:
+        """One 1 kHz tick for the hand's pose: entry test, force model, leave test; returns ``out``."""
+        th = time.perf_counter()
+        sc = self.scalpel
+        if sc.code == FREE:
+            hit = self.contact.entry(tip, a, n)
+            if hit is not None:
+                sc.enter(hit[0].entry, hit[0].normal, tip, hit[1])
+                self.counts["entries"] += 1
+        else:
+            self.contact.prev = (np.array(tip, np.float64), np.array(a, np.float64))
+        self.out = sc.tick(tip, a, n)
+        if sc.code != FREE and self.contact.left(tip):
+            sc.leave()
+            self.cut.leave()
+        self.note_state(sc.code)
+        self.cut.note(sc.code)
+        self.counts["haptic_ticks"] += 1
+        self.task_s["haptics"] += time.perf_counter() - th
+        return self.out
+
+    def note_state(self, code: int) -> None:
+        name = STATE_NAMES[code]
+        if not self.states_seen or self.states_seen[-1] != name:
+            self.states_seen.append(name)
+
+    def geometry_update(self) -> np.ndarray:
+        """Collision and cut at the proxy; returns the forces on the tissue for the relaxation."""
+        tg = time.perf_counter()
+        f_ext = self.cut.step(self.scalpel.proxy, self.out, self.scalpel.code, self.contact.contact)
+        self.counts["geometry_updates"] += 1
+        self.task_s["collision_and_cut"] += time.perf_counter() - tg
+        return f_ext
+
+    def relax_to(self, f_ext, until: float) -> int:
+        """Relax to ``until`` (tissue time, s), then refit the surface hierarchy while the blade is out."""
+        tr = time.perf_counter()
+        passes = self.relax.advance(f_ext, until)
+        self.task_s["relaxation"] += time.perf_counter() - tr
+        if self.scalpel.code == FREE:
+            self.refit()
+        return passes
+
+    def refit(self) -> None:
+        tg = time.perf_counter()
+        with self.lock.urgent():
+            self.contact.refit()
+        self.task_s["collision_and_cut"] += time.perf_counter() - tg
+
+    def opening(self) -> np.ndarray:
+        """(p,) distances between the two copies of every duplicated cut node, mm."""
+        return cut_opening(self.tis.cm, self.tis.positions)
+
+    @property
+    def tets_cut(self) -> int:
+        return len(self.tis.cm.subtets)
+
+
+def cut_opening(cm, positions) -> np.ndarray:
+    """(p,) distances between the two copies of every duplicated cut node, mm."""
+    pairs = [cm.edge_node[np.all(cm.edge_node >= 0, axis=1)], cm.face_node[np.all(cm.face_node >= 0, axis=1)]]
+    pairs = np.concatenate(pairs)
+    if pairs.size == 0:
+        return np.zeros(0)
+    return np.linalg.norm(positions[pairs[:, 0]] - positions[pairs[:, 1]], axis=1)
+
+
+__all__ = ["Session", "HandoverLock", "ContactTask", "CutTask", "RelaxTask", "Contact", "cut_opening", "settle", "LEAVE_MARGIN_MM"]
