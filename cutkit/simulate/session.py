@@ -50,6 +50,7 @@ class HandoverLock:
         self._lock = threading.Lock()
         self._cond = threading.Condition()
         self._urgent = 0
+        self._wanted = False
 
     def __enter__(self):
         with self._cond:
@@ -58,6 +59,23 @@ class HandoverLock:
         return self
 
     def __exit__(self, *exc):
+        self._lock.release()
+
+    def try_urgent(self) -> bool:
+        """Take the lock if it is free now, else ask for the next turn; True when taken (release with :meth:`release`)."""
+        with self._cond:
+            if not self._wanted:
+                self._wanted = True
+                self._urgent += 1
+        if not self._lock.acquire(blocking=False):
+            return False
+        with self._cond:
+            self._wanted = False
+            self._urgent -= 1
+            self._cond.notify_all()
+        return True
+
+    def release(self) -> None:
         self._lock.release()
 
     @contextmanager
@@ -153,14 +171,37 @@ class CutTask:
 
     :meth:`step` cuts when the scalpel was cutting since the last step and
     returns the forces the blade puts on the tissue; the topology change is
-    applied under ``lock``.
+    applied under ``lock``.  With ``blocking`` False (a live session) a
+    change that finds a relaxation step in flight waits for the next
+    geometry update instead of stopping the loop; no new cut is computed
+    before it is applied.
     """
 
-    def __init__(self, tissue, lock, counts: dict):
+    def __init__(self, tissue, lock, counts: dict, blocking: bool = True):
         self.tis = tissue
         self.lock = lock
         self.counts = counts
+        self.blocking = blocking
         self.pending = False
+        self.result = None
+
+    def _apply(self) -> bool:
+        """Hand the pending cut over to the tissue; False when the lock was busy (non-blocking)."""
+        if self.blocking:
+            with self.lock.urgent():
+                added = self.tis.apply_cut(self.result)
+        elif self.lock.try_urgent():
+            try:
+                added = self.tis.apply_cut(self.result)
+            finally:
+                self.lock.release()
+        else:
+            return False
+        self.result = None
+        for key, value in added.items():
+            self.counts[key] = self.counts.get(key, 0) + value
+        self.counts["cut_steps"] += 1
+        return True
 
     def note(self, code: int) -> None:
         """Record one haptic tick's scalpel state."""
@@ -174,14 +215,12 @@ class CutTask:
         axis = out[O_N:O_N + 3].copy()
         near = np.unique(cm.orig_tets[cm.active_tets]) if cm.active_tets.size else contact.face_nodes
         blade_tip = self.tis.blade_to_rest(proxy, near)
-        if self.pending:
-            res = cut_step(cm, blade_tip, axis)
-            with self.lock.urgent():
-                added = self.tis.apply_cut(res)
-            for key, value in added.items():
-                self.counts[key] = self.counts.get(key, 0) + value
-            self.counts["cut_steps"] += 1
+        if self.result is not None:
+            self._apply()
+        elif self.pending:
+            self.result = cut_step(cm, blade_tip, axis)
             self.pending = False
+            self._apply()
         elif code != FREE:
             # in tissue but not cutting: the blade rests or backs out, the sweep restarts here
             cm.prev_pose = (blade_tip, blade_tip - cm.blade_length * axis)

@@ -1,0 +1,212 @@
+"""A live session: a :class:`~cutkit.simulate.session.Session` on the wall clock.
+
+Three activities, as in the paper's Fig. 1 (section 2):
+
+* the **force model** at 1 kHz: in ``cutkit haptics serve`` for a
+  :class:`~cutkit.live.HapticsPoseSource` (the session sends a SIM_UPDATE
+  every loop and reads the service's state back), in this process for the
+  other sources (every elapsed millisecond is one tick with the newest pose);
+* **relaxation** in its own thread (:class:`RelaxThread`), continuously:
+  the element kernels release the GIL, so it runs beside the main loop;
+  it holds the session's lock for one step at a time;
+* the **main loop**: poses, the entry and leave tests, the cut at the
+  geometry rate (the topology goes over under the lock), frames to the
+  views, recording.
+
+Every session records the poses it acted on (``trajectory.csv``),
+``forces.csv``, ``summary.json`` and the cut ``model.h5``; ``cutkit
+simulate model.h5 --trajectory OUT/trajectory.csv`` replays it.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+
+from cutkit.scalpel import FREE, N_OUT, O_A, O_CUT, O_FORCE, O_N, STATIC
+
+#: Most in-process force-model ticks run back to back when the loop falls behind.
+MAX_CATCH_UP_TICKS = 50
+
+
+class ServiceForceModel:
+    """The force model in ``cutkit haptics serve``, seen through a :class:`~cutkit.live.HapticsPoseSource`.
+
+    It has the scalpel interface of :mod:`cutkit.simulate.blade` (``code``,
+    ``proxy``, ``enter``, ``leave``, ``tick``), so the session's tasks do not
+    know where the force model runs.  The device sends its own poses to the
+    service; :meth:`tick` only reads the newest state.
+    """
+
+    def __init__(self, source):
+        self.source = source
+        self.out = np.zeros(N_OUT)
+        self.contact = False
+        self.entry = np.zeros(3)
+        self.normal = np.zeros(3)
+        self._proxy = np.zeros(3)
+
+    @property
+    def code(self) -> int:
+        if not self.contact:
+            return FREE
+        st = self.source.state
+        code = FREE if st is None else int(st.state)
+        return STATIC if code == FREE else code  # entered, the service has not answered yet
+
+    @property
+    def proxy(self) -> np.ndarray:
+        st = self.source.state
+        if st is not None and self.contact:
+            self._proxy[:] = st.proxy
+        return self._proxy
+
+    def enter(self, entry, normal, tip, material: dict) -> None:
+        from cutkit.scalpel import CUT_FIELDS
+
+        self.entry[:], self.normal[:] = entry, normal
+        self.contact = True
+        self.source.update(self.entry, self.normal, material=[material[k] for k in CUT_FIELDS], contact=True)
+
+    def leave(self) -> None:
+        self.contact = False
+        self.source.update(self.entry, self.normal, contact=False)
+
+    def keep_alive(self) -> None:
+        """One SIM_UPDATE: the service ramps the force to zero 0.1 s after the last one."""
+        self.source.update(self.entry, self.normal, contact=self.contact)
+
+    def tick(self, tip, a, n) -> np.ndarray:
+        st = self.source.state
+        self.out[:] = 0.0
+        if st is not None:
+            self.out[O_FORCE:O_FORCE + 3] = st.force
+            self.out[O_A:O_A + 3] = st.a
+            self.out[O_N:O_N + 3] = st.n
+            if self.code != FREE:
+                self.out[O_CUT:O_CUT + 3] = st.force
+        if not np.any(self.out[O_N:O_N + 3]):
+            self.out[O_A:O_A + 3], self.out[O_N:O_N + 3] = n, a
+        return self.out
+
+    def close(self) -> None:
+        pass
+
+
+class TickMeter:
+    """The service's haptic ticks as the forwarded device poses report them: rate and periods.
+
+    Wraps the source's ``client.drain`` to see every DEVICE_POSE frame, not
+    only the newest (each carries the server's clock at the tick that used it).
+    """
+
+    def __init__(self, source, capacity: int = 1 << 20):
+        from cutkit.haptics import protocol as P
+
+        self.ns = np.zeros(capacity, np.int64)
+        self.n = 0
+        drain = source.client.drain
+        kind = P.DEVICE_POSE
+
+        def counting_drain():
+            frames = drain()
+            for ftype, _seq, ts, _payload in frames:
+                if ftype == kind and self.n < capacity:
+                    self.ns[self.n] = ts
+                    self.n += 1
+            return frames
+
+        source.client.drain = counting_drain
+
+    def stats(self) -> dict:
+        ns = np.unique(self.ns[:self.n])
+        if ns.size < 3:
+            return {"haptic_hz": 0.0, "period_p99_ms": None, "periods_over_2ms": None, "haptic_ticks_seen": int(ns.size)}
+        d = np.diff(ns) / 1e6
+        return {"haptic_hz": float((ns.size - 1) / ((ns[-1] - ns[0]) / 1e9)),
+                "period_p50_ms": float(np.percentile(d, 50)), "period_p99_ms": float(np.percentile(d, 99)),
+                "periods_over_2ms": float(np.mean(d > 2.0)), "haptic_ticks_seen": int(ns.size)}
+
+
+class RelaxThread(threading.Thread):
+    """Relaxation on the wall clock in its own thread, one step per hold of the session's lock.
+
+    Parameters
+    ----------
+    session : Session
+    clock : callable
+        Session seconds now.
+    chunk_s : float
+        Most tissue time one hold of the lock advances.
+    """
+
+    def __init__(self, session, clock, chunk_s: float):
+        super().__init__(name="cutkit-relaxation", daemon=True)
+        self.session, self.clock, self.chunk_s = session, clock, float(chunk_s)
+        self.f_ext = np.zeros((session.tis.n_nodes, 3))
+        self.stop = threading.Event()
+        self.steps = 0
+        self.step_s: list[float] = []
+        self.error: BaseException | None = None
+
+    def run(self) -> None:
+        s = self.session
+        try:
+            while not self.stop.is_set():
+                before = s.tis.time
+                until = min(self.clock(), before + self.chunk_s)
+                t1 = time.perf_counter()
+                s.relax.advance(self.f_ext, until)
+                if s.tis.time == before:
+                    self.stop.wait(0.001)
+                    continue
+                self.steps += 1
+                self.step_s.append(time.perf_counter() - t1)
+        except BaseException as err:  # handed to the main loop, which raises it
+            self.error = err
+
+    def halt(self) -> None:
+        self.stop.set()
+        self.join(timeout=30.0)
+
+
+__all__ = ["ServiceForceModel", "TickMeter", "RelaxThread", "MAX_CATCH_UP_TICKS", "run_live"]
+
+
+def run_live(model, source, views, out_dir, opt=None, *, max_seconds: float | None = None, fps: float = 30.0,
+             idle_end_s: float = 0.5, stop: threading.Event | None = None, model_path: str | None = None,
+             on_frame=None) -> dict:
+    """Cut ``model`` live with the poses of ``source``; show it in ``views``; record into ``out_dir``.
+
+    Parameters
+    ----------
+    model : TetModel
+    source : PoseSource
+    views : list of View
+    out_dir : path-like
+        ``trajectory.csv``, ``forces.csv``, ``summary.json``, ``model.h5``.
+    opt : SimulateOptions
+        Material model, geometry rate, blade length ... (``fps``, ``hold_s`` unused).
+    max_seconds : float, optional
+        End after this many seconds.
+    fps : float
+        Frames per second to the views.
+    idle_end_s : float
+        Once the source is finished the tissue goes on relaxing for this long.
+    stop : threading.Event, optional
+        Set it to end the session.
+    on_frame : callable(LiveFrame), optional
+        Called after each frame went to the views.
+
+    Returns
+    -------
+    summary : dict
+        What ``summary.json`` holds: the simulate keys and ``live`` (rates, latency).
+    """
+    from cutkit.simulate.live_loop import LiveLoop
+
+    loop = LiveLoop(model, source, views, Path(out_dir), opt, fps=fps, model_path=model_path)
+    return loop.run(max_seconds=max_seconds, idle_end_s=idle_end_s, stop=stop, on_frame=on_frame)

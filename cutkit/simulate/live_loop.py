@@ -1,0 +1,268 @@
+"""The main loop of a live session (:func:`cutkit.simulate.live.run_live`)."""
+
+from __future__ import annotations
+
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+
+from cutkit.scalpel import FREE
+from cutkit.simulate.live import MAX_CATCH_UP_TICKS, RelaxThread, ServiceForceModel, TickMeter
+from cutkit.simulate.run import HAPTIC_DT, RATE_WARN_FRACTION, SimulateOptions
+
+
+class OuterBoundary:
+    """The tissue's outer boundary triangles (without the cut surface), recomputed only after a cut.
+
+    Uncut original tets keep their boundary faces; among the sub-tets of cut
+    tets a boundary face is outer when it has an original and a cut node (a
+    piece of a subdivided face) or is an intact original boundary face.
+    """
+
+    def __init__(self, cm, faces, face_tet):
+        self.cm, self.faces, self.face_tet = cm, faces, face_tet
+        self.n0 = cm.n_orig_points
+        self.keys = np.sort(self._key(faces))
+        self.version = -1
+        self.value = faces
+
+    def _key(self, f):
+        s = np.sort(f, axis=1)
+        n = np.int64(self.n0)
+        return (s[:, 0] * n + s[:, 1]) * n + s[:, 2]
+
+    def get(self, version: int):
+        if version == self.version:
+            return self.value
+        from cutkit.mesh.topology import boundary_faces
+
+        cm = self.cm
+        cut = np.fromiter(cm.subtets.keys(), np.int64, len(cm.subtets))
+        keep = ~np.isin(self.face_tet, cut)
+        m0, total = cm.orig_tets.shape[0], cm.n_tets_total
+        sub = cm._tets[m0:total][cm._alive[m0:total]]
+        parts = [self.faces[keep]]
+        if sub.shape[0]:
+            f, _ = boundary_faces(sub)
+            is_orig = f < self.n0
+            mixed = is_orig.any(axis=1) & ~is_orig.all(axis=1)
+            whole = is_orig.all(axis=1)
+            whole_outer = whole.copy()
+            whole_outer[whole] = np.isin(self._key(f[whole]), self.keys)
+            parts.append(f[mixed | whole_outer])
+        self.value = np.ascontiguousarray(np.concatenate(parts), np.int64)
+        self.version = version
+        return self.value
+
+
+class LiveLoop:
+    """One live session: the session, its threads, its views and its recording."""
+
+    def __init__(self, model, source, views, out_dir: Path, opt: SimulateOptions | None, fps: float = 30.0,
+                 model_path: str | None = None):
+        from cutkit.cutting.trajectory import DEFAULT_BLADE_BREADTH, DEFAULT_BLADE_LENGTH
+        from cutkit.live.sources import HapticsPoseSource
+        from cutkit.simulate.record import ForceRecorder, NodeColours, PoseRecorder
+        from cutkit.simulate.session import Session
+
+        self.opt = opt or SimulateOptions(frames=False)
+        self.opt.check()
+        out_dir.mkdir(parents=True, exist_ok=True)
+        self.out_dir, self.source, self.views, self.model_path = out_dir, source, list(views), model_path
+        blade_length = self.opt.blade_length or DEFAULT_BLADE_LENGTH
+        self.session = s = Session(model, self.opt, blade_length, DEFAULT_BLADE_BREADTH)
+        s.cut.blocking = False  # the loop goes on while a relaxation step is in flight
+        self.service = isinstance(source, HapticsPoseSource)
+        self.meter = TickMeter(source) if self.service else None
+        if self.service:
+            s.scalpel = ServiceForceModel(source)
+            s.out = s.scalpel.out
+        self.poses = PoseRecorder(blade_length, DEFAULT_BLADE_BREADTH)
+        self.forces = ForceRecorder(1 << 14)
+        self.colours = NodeColours(model, s.tis.cm)
+        self.boundary = OuterBoundary(s.tis.cm, s.contact.faces, s.contact.face_tet)
+        self.frame_period = 1.0 / float(fps)
+        self.geo_period = 1.0 / self.opt.geometry_rate_hz
+        self.pose = None  # newest (tip, a, n, arrival)
+        self.latency: list[float] = []
+        self.pending_cut: list[float] = []  # arrival times of poses whose cut is not drawn yet
+        self.frames = 0
+        self.frame_s: list[float] = []
+        self.faces = np.zeros((0, 3), np.int64), self.boundary.get(0)
+
+    def run(self, max_seconds=None, idle_end_s: float = 0.5, stop=None, on_frame=None) -> dict:
+        s = self.session
+        chunk = getattr(s.tis, "step_s", 4 * self.opt.dt0)
+        # one step before the clock starts: kernels not yet compiled compile here, not in the session
+        s.relax.advance(np.zeros((s.tis.n_nodes, 3)), s.tis.time + chunk)
+        self.t0 = time.perf_counter() - s.tis.time
+        clock = self.now
+        self.relax = RelaxThread(s, clock, chunk)
+        self.relax.start()
+        self.interrupted = False
+        try:
+            self._loop(max_seconds, idle_end_s, stop or threading.Event(), on_frame)
+        except KeyboardInterrupt:
+            self.interrupted = True
+        finally:
+            self.relax.halt()
+            self.loop_wall = self.now()
+            summary = self._record()
+        if self.relax.error is not None:
+            raise self.relax.error
+        if self.interrupted:
+            raise KeyboardInterrupt
+        return summary
+
+    def now(self) -> float:
+        return time.perf_counter() - self.t0
+
+    def _loop(self, max_seconds, idle_end_s, stop, on_frame) -> None:
+        next_geo = next_frame = next_tick = 0.0
+        finished_at = None
+        while not stop.is_set():
+            now = self.now()
+            if max_seconds is not None and now >= max_seconds:
+                break
+            if self.relax.error is not None or any(getattr(v, "closed", False) for v in self.views):
+                break
+            pose = self.source.poll()
+            if pose is not None:
+                self._on_pose(pose)
+            if self.service:
+                self.session.scalpel.keep_alive()
+            elif self.pose is not None:
+                next_tick = self._ticks(now, next_tick)
+            if now >= next_geo:
+                self._geometry()
+                next_geo = max(next_geo + self.geo_period, now)
+            if now >= next_frame:
+                self._frame(on_frame)
+                next_frame = max(next_frame + self.frame_period, self.now())
+            if self.source.finished:
+                finished_at = now if finished_at is None else finished_at
+                if now - finished_at >= idle_end_s:
+                    break
+            time.sleep(0.0002)
+
+    def _on_pose(self, pose) -> None:
+        s = self.session
+        arrival = self.now()
+        self.pose = (pose.tip, pose.a, pose.n, arrival)
+        self.poses.add(arrival, pose.tip, pose.a, pose.n)
+        if self.service:  # the service ticks; each new pose is one tick of the session's tasks
+            out = s.haptic_tick(pose.tip, pose.a, pose.n)
+            self.forces.add(arrival, s.code, out, pose.tip, s.scalpel.proxy)
+
+    def _ticks(self, now: float, next_tick: float) -> float:
+        """In-process force model: one tick per elapsed millisecond with the newest pose."""
+        s = self.session
+        tip, a, n, _ = self.pose
+        k = 0
+        while next_tick <= now and k < MAX_CATCH_UP_TICKS:
+            out = s.haptic_tick(tip, a, n)
+            self.forces.add(next_tick, s.code, out, tip, s.scalpel.proxy)
+            next_tick += HAPTIC_DT
+            k += 1
+        return max(next_tick, now - HAPTIC_DT) if k == MAX_CATCH_UP_TICKS else next_tick
+
+    def _geometry(self) -> None:
+        s = self.session
+        before = len(s.tis.cm.subtets), s.tis.n_nodes
+        self.relax.f_ext = s.geometry_update()
+        if (len(s.tis.cm.subtets), s.tis.n_nodes) != before and self.pose is not None:
+            self.pending_cut.append(self.pose[3])
+        if s.scalpel.code == FREE:  # the hierarchy serves the entry test: refit to the relaxed surface
+            s.refit()
+
+    def _frame(self, on_frame) -> None:
+        from cutkit.cutting import cut_surface_faces
+        from cutkit.live import LiveFrame
+
+        s = self.session
+        t1 = time.perf_counter()
+        # topology changes only in this thread; the relaxation thread moves positions in place,
+        # and a frame may show them half a step old
+        points = np.array(s.tis.positions, np.float64)
+        if s.cut.result is None:  # the cut mesh and the tissue agree (no cut waiting for its turn)
+            self.faces = cut_surface_faces(s.tis.cm), self.boundary.get(s.counts["cut_steps"])
+        cut_faces, outer = self.faces
+        rgb = self.colours.get(points.shape[0])
+        tip, a, n = self.pose[:3] if self.pose is not None else (None, None, None)
+        frame = LiveFrame(points=points, boundary_faces=outer, cut_faces=cut_faces, rgb=rgb, tip=tip, a=a, n=n,
+                          blade_length=s.blade_length, blade_breadth=s.blade_breadth,
+                          force=self._hand_force(), rates=self.rates(),
+                          tets_cut=s.tets_cut, t=self.now())
+        for view in self.views:
+            view.show(frame)
+        drawn = self.now()
+        self.latency.extend(drawn - t for t in self.pending_cut)
+        self.pending_cut.clear()
+        self.frames += 1
+        self.frame_s.append(drawn)
+        s.task_s["output"] += time.perf_counter() - t1
+        if on_frame is not None:
+            on_frame(frame)
+
+    def _hand_force(self) -> np.ndarray:
+        from cutkit.scalpel import O_FORCE
+
+        return -np.asarray(self.session.out[O_FORCE:O_FORCE + 3], np.float64)
+
+    def rates(self) -> dict:
+        wall = max(self.now(), 1e-9)
+        recent = [t for t in self.frame_s[-31:]]
+        fps = (len(recent) - 1) / (recent[-1] - recent[0]) if len(recent) > 1 and recent[-1] > recent[0] else 0.0
+        haptic = (self.meter.stats()["haptic_hz"] if self.meter is not None
+                  else self.session.counts["haptic_ticks"] / wall)
+        return {"haptic_hz": haptic, "relax_passes_per_s": self.session.counts["relax_passes"] / wall, "fps": fps}
+
+    def _record(self) -> dict:
+        from cutkit.simulate.record import closing_warnings, summary, write_cut_model, write_json
+
+        s, out_dir = self.session, self.out_dir
+        if s.cut.result is not None:  # the last cut, waiting for its turn
+            s.cut.blocking = True
+            s.cut._apply()
+        self.forces.write(out_dir / "forces.csv")
+        recorded = self.poses.write(out_dir / "trajectory.csv")
+        out = summary(s, model_path=self.model_path, loop_wall=self.loop_wall, t_traj_end=None,
+                      opening_at_traj_end=None, frames=self.frames, forces=self.forces,
+                      interrupted=self.interrupted, rates=True)
+        out["live"] = self._live_stats(recorded)
+        closing_warnings(s)
+        rate = out["live"]["haptic_hz"]
+        if rate < RATE_WARN_FRACTION / HAPTIC_DT:
+            s.warnings.append(f"the haptic loop reached {rate:.0f} Hz, below "
+                              f"{RATE_WARN_FRACTION:.0%} of {1.0 / HAPTIC_DT:.0f} Hz")
+        out["warnings"] = list(s.warnings)
+        if self.opt.write_model:
+            write_cut_model(s, out_dir, out)
+        out["time_per_task_s"] = dict(s.task_s)
+        write_json(out_dir / "summary.json", out)
+        return out
+
+    def _live_stats(self, recorded: bool) -> dict:
+        wall = max(self.loop_wall, 1e-9)
+        lat = np.array(self.latency) * 1e3
+        f = np.diff(np.array(self.frame_s))
+        stats = {"source": type(self.source).__name__, "wall_s": self.loop_wall, "poses": len(self.poses.rows),
+                 "trajectory_recorded": recorded, "frames": self.frames,
+                 "fps": float(1.0 / f.mean()) if f.size else 0.0,
+                 "relax_passes_per_s": self.session.counts["relax_passes"] / wall,
+                 "relax_steps_per_s": self.relax.steps / wall,
+                 "relax_step_ms_p50_p95_max": ([float(np.percentile(self.relax.step_s, q)) * 1e3 for q in (50, 95, 100)]
+                                               if self.relax.step_s else None),
+                 "tissue_time_s": self.session.tis.time,
+                 "latency_ms": ({"p50": float(np.percentile(lat, 50)), "p95": float(np.percentile(lat, 95)),
+                                 "n": int(lat.size)} if lat.size else None)}
+        if self.meter is not None:
+            stats.update(self.meter.stats())
+        else:
+            stats["haptic_hz"] = self.session.counts["haptic_ticks"] / wall
+        return stats
+
+
+__all__ = ["LiveLoop", "OuterBoundary"]
