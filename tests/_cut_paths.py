@@ -12,7 +12,7 @@ from cutkit.mesh.generate import box_mesh
 from cutkit.mesh.quality import signed_volumes
 
 KINDS = ("straight", "curved", "tremor", "reversal", "reentry", "crossing", "vertex", "edge", "face",
-         "guillotine")
+         "guillotine", "press")
 
 
 def jittered_block(shape=(5, 3, 3), jitter=0.2, seed=0):
@@ -85,6 +85,15 @@ def make_path(kind, rng, L, tremor=0.0):
     elif kind == "face":  # the blade in a grid plane
         y = float(rng.integers(1, int(L[1])))
         poses = line(xs, y, -0.5, _unit([0, 0, -1.0]))
+    elif kind == "press":  # pushed in along its own axis (flat swept quads), drawn sideways, pulled out
+        a = _unit([rng.uniform(-0.2, 0.2), rng.uniform(-0.2, 0.2), -1.0])
+        start = np.array([rng.uniform(0.5, 0.4 * L[0]), y0, L[2] + 1.0])
+        depth = rng.uniform(0.5, L[2] + 0.5)
+        down = [(start + s * a, a) for s in np.linspace(0.0, depth + 1.0, n // 2 + 2)]
+        tip = down[-1][0]
+        side = [(tip + [dx, 0.0, 0.0], a) for dx in np.linspace(0.0, rng.uniform(0.5, 0.5 * L[0]), n // 2 + 2)[1:]]
+        tip = side[-1][0]
+        poses = down + side + [(tip - s * a, a) for s in np.linspace(0.0, depth + 1.0, 4)[1:]]
     else:  # guillotine: one step from above to below, the blade longer than the mesh
         x = rng.uniform(0.3, L[0] - 0.3)
         a = _unit([0, -1.0, rng.uniform(-0.3, 0.3)])

@@ -126,6 +126,8 @@ def segment_triangle(p0, p1, v0, v1, v2, out):
     py = dz * e2x - dx * e2z
     pz = dx * e2y - dy * e2x
     det = e1x * px + e1y * py + e1z * pz
+    if det == 0.0:
+        return -1  # a nearly flat triangle: d.n passed the parallel test, rounding made det 0
     inv = 1.0 / det
     u = (sx * px + sy * py + sz * pz) * inv
     qx = sy * e1z - sz * e1y

@@ -22,6 +22,10 @@ from cutkit.collision.bvh import SurfaceBVH
 
 #: First guess of the number of faces one swept triangle meets.
 _HIT_ROOM = 64
+#: A swept triangle whose |sin| of the angle between its sides is below this is
+#: flat (the blade pushed along its own axis sweeps no area); the blade
+#: segment query covers it.
+FLAT_TRIANGLE_EPS = 1e-12
 
 
 @dataclass
@@ -58,7 +62,8 @@ def swept_faces(bvh: SurfaceBVH, points, p0, q0, p1, q1):
     p0, q0, p1, q1 = (np.asarray(v, np.float64) for v in (p0, q0, p1, q1))
     fs, ps = [], []
     for tri in ((p0, q0, q1), (p0, q1, p1)):
-        if np.linalg.norm(np.cross(tri[1] - tri[0], tri[2] - tri[0])) > 0.0:
+        u, v = tri[1] - tri[0], tri[2] - tri[0]
+        if np.linalg.norm(np.cross(u, v)) > FLAT_TRIANGLE_EPS * np.linalg.norm(u) * np.linalg.norm(v):
             f, p = query_triangle(bvh, points, np.array(tri))
             fs.append(f)
             ps.append(p)

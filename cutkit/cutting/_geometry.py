@@ -85,8 +85,8 @@ def edge_crosses_triangle(p, q, tri, end_eps=1e-9, bary_eps=1e-12):
     """
     tri = np.asarray(tri, float)
     n = np.cross(tri[1] - tri[0], tri[2] - tri[0])
-    if not np.any(n):
-        return -1.0
+    if np.linalg.norm(n) <= SEG_TRI_EPS * np.linalg.norm(tri[1] - tri[0]) * np.linalg.norm(tri[2] - tri[0]):
+        return -1.0  # flat triangle
     n = n / np.linalg.norm(n)
     dp, dq = float(n @ (p - tri[0])), float(n @ (q - tri[0]))
     tol = end_eps * float(np.linalg.norm(q - p))

@@ -59,8 +59,8 @@ def edge_cross(p, q, tri):
     vx, vy, vz = tri[2, 0] - tri[0, 0], tri[2, 1] - tri[0, 1], tri[2, 2] - tri[0, 2]
     nx, ny, nz = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
     nn = np.sqrt(nx * nx + ny * ny + nz * nz)
-    if nn == 0.0:
-        return -1.0
+    if nn <= SEG_TRI_EPS * np.sqrt((ux * ux + uy * uy + uz * uz) * (vx * vx + vy * vy + vz * vz)):
+        return -1.0  # a flat triangle (e.g. the blade pushed along its own axis) sweeps nothing
     dp = (nx * (p[0] - tri[0, 0]) + ny * (p[1] - tri[0, 1]) + nz * (p[2] - tri[0, 2])) / nn
     dq = (nx * (q[0] - tri[0, 0]) + ny * (q[1] - tri[0, 1]) + nz * (q[2] - tri[0, 2])) / nn
     tol = EDGE_END_EPS * np.sqrt((q[0] - p[0]) ** 2 + (q[1] - p[1]) ** 2 + (q[2] - p[2]) ** 2)
@@ -78,6 +78,8 @@ def edge_cross(p, q, tri):
     g11, g12, g22 = ux * ux + uy * uy + uz * uz, ux * vx + uy * vy + uz * vz, vx * vx + vy * vy + vz * vz
     r1, r2 = ux * wx + uy * wy + uz * wz, vx * wx + vy * wy + vz * wz
     det = g11 * g22 - g12 * g12
+    if not det > 0.0:
+        return -1.0
     b1 = (g22 * r1 - g12 * r2) / det
     b2 = (g11 * r2 - g12 * r1) / det
     if b1 < -EDGE_BARY_EPS or b2 < -EDGE_BARY_EPS or b1 + b2 > 1.0 + EDGE_BARY_EPS:
