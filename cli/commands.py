@@ -24,6 +24,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "simulate": ("cutkit.cli.simulate", "Cut and relax a model along a trajectory with the scalpel force model."),
     "trajectory": ("cutkit.cli.trajectory", "Write the trajectory of a straight or arc incision."),
     "sweep": ("cutkit.cli.sweep", "Run a parameter study of many simulations on Dask (local or an existing cluster)."),
+    "live": ("cutkit.cli.live", "Cut a model live (haptic device, mouse, 3D Slicer) and record the session."),
     "haptics": ("cutkit.cli.haptics", "The 1 kHz haptic scalpel service and its benchmark client."),
     "demo": ("cutkit.cli.demo", "Build the knee phantom and cut it along the shipped incision."),
     "render": ("cutkit.cli.render", "Render an output folder again: pictures in other views, a movie of the cut."),

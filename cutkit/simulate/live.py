@@ -28,6 +28,8 @@ import numpy as np
 
 from cutkit.scalpel import FREE, N_OUT, O_A, O_CUT, O_FORCE, O_N, STATIC
 
+CUT_FORCE_FROM_SERVICE = False
+
 #: Most in-process force-model ticks run back to back when the loop falls behind.
 MAX_CATCH_UP_TICKS = 50
 
@@ -86,7 +88,7 @@ class ServiceForceModel:
             self.out[O_FORCE:O_FORCE + 3] = st.force
             self.out[O_A:O_A + 3] = st.a
             self.out[O_N:O_N + 3] = st.n
-            if self.code != FREE:
+            if self.code != FREE and CUT_FORCE_FROM_SERVICE:
                 self.out[O_CUT:O_CUT + 3] = st.force
         if not np.any(self.out[O_N:O_N + 3]):
             self.out[O_A:O_A + 3], self.out[O_N:O_N + 3] = n, a
@@ -97,38 +99,51 @@ class ServiceForceModel:
 
 
 class TickMeter:
-    """The service's haptic ticks as the forwarded device poses report them: rate and periods.
+    """The service's haptic loop as the forwarded device poses report it: rate and periods.
 
     Wraps the source's ``client.drain`` to see every DEVICE_POSE frame, not
-    only the newest (each carries the server's clock at the tick that used it).
+    only the newest, and hands each pose to ``poses`` (a
+    :class:`~cutkit.simulate.record.PoseRecorder`).  Each names the server tick that used it and the
+    server's clock at that tick, so the loop's rate is ticks over server
+    time, whatever frames this process missed; consecutive ticks give the
+    periods.
     """
 
-    def __init__(self, source, capacity: int = 1 << 20):
+    def __init__(self, source, capacity: int = 1 << 20, poses=None):
         from cutkit.haptics import protocol as P
+        from cutkit.haptics.client import decode_device_pose
 
-        self.ns = np.zeros(capacity, np.int64)
+        self.ticks = np.zeros((capacity, 2), np.int64)  # tick, server ns
         self.n = 0
         drain = source.client.drain
         kind = P.DEVICE_POSE
 
         def counting_drain():
             frames = drain()
-            for ftype, _seq, ts, _payload in frames:
+            for ftype, _seq, ts, payload in frames:
                 if ftype == kind and self.n < capacity:
-                    self.ns[self.n] = ts
+                    d = decode_device_pose(ts, payload, 0)
+                    self.ticks[self.n] = d.tick, ts
                     self.n += 1
+                    if poses is not None and any(d.n) and any(d.a):
+                        # every pose the service's force model acted on, at its tick's time;
+                        # the device frame's a is the trajectory's n and the other way round
+                        poses.add(ts / 1e9, d.tip, d.n, d.a)
             return frames
 
         source.client.drain = counting_drain
 
     def stats(self) -> dict:
-        ns = np.unique(self.ns[:self.n])
-        if ns.size < 3:
-            return {"haptic_hz": 0.0, "period_p99_ms": None, "periods_over_2ms": None, "haptic_ticks_seen": int(ns.size)}
-        d = np.diff(ns) / 1e6
-        return {"haptic_hz": float((ns.size - 1) / ((ns[-1] - ns[0]) / 1e9)),
-                "period_p50_ms": float(np.percentile(d, 50)), "period_p99_ms": float(np.percentile(d, 99)),
-                "periods_over_2ms": float(np.mean(d > 2.0)), "haptic_ticks_seen": int(ns.size)}
+        t = self.ticks[:self.n]
+        if self.n < 3 or t[-1, 1] <= t[0, 1]:
+            return {"haptic_hz": 0.0, "period_p99_ms": None, "periods_over_2ms": None, "haptic_ticks_seen": self.n}
+        dtick, dns = np.diff(t[:, 0]), np.diff(t[:, 1]) / 1e6
+        single = dns[dtick == 1]
+        return {"haptic_hz": float((t[-1, 0] - t[0, 0]) / ((t[-1, 1] - t[0, 1]) / 1e9)),
+                "period_p50_ms": float(np.percentile(single, 50)) if single.size else None,
+                "period_p99_ms": float(np.percentile(single, 99)) if single.size else None,
+                "periods_over_2ms": float(np.mean(single > 2.0)) if single.size else None,
+                "haptic_ticks_seen": int(self.n)}
 
 
 class RelaxThread(threading.Thread):
@@ -178,7 +193,7 @@ __all__ = ["ServiceForceModel", "TickMeter", "RelaxThread", "MAX_CATCH_UP_TICKS"
 
 def run_live(model, source, views, out_dir, opt=None, *, max_seconds: float | None = None, fps: float = 30.0,
              idle_end_s: float = 0.5, stop: threading.Event | None = None, model_path: str | None = None,
-             on_frame=None) -> dict:
+             on_frame=None, until_idle_s: float | None = None, on_start=None) -> dict:
     """Cut ``model`` live with the poses of ``source``; show it in ``views``; record into ``out_dir``.
 
     Parameters
@@ -196,10 +211,14 @@ def run_live(model, source, views, out_dir, opt=None, *, max_seconds: float | No
         Frames per second to the views.
     idle_end_s : float
         Once the source is finished the tissue goes on relaxing for this long.
+    until_idle_s : float, optional
+        The source counts as finished when no pose came for this long (after the first).
     stop : threading.Event, optional
         Set it to end the session.
     on_frame : callable(LiveFrame), optional
         Called after each frame went to the views.
+    on_start : callable(), optional
+        Called once the model has settled and the loop starts.
 
     Returns
     -------
@@ -209,4 +228,5 @@ def run_live(model, source, views, out_dir, opt=None, *, max_seconds: float | No
     from cutkit.simulate.live_loop import LiveLoop
 
     loop = LiveLoop(model, source, views, Path(out_dir), opt, fps=fps, model_path=model_path)
-    return loop.run(max_seconds=max_seconds, idle_end_s=idle_end_s, stop=stop, on_frame=on_frame)
+    return loop.run(max_seconds=max_seconds, idle_end_s=idle_end_s, stop=stop, on_frame=on_frame,
+                    until_idle_s=until_idle_s, on_start=on_start)

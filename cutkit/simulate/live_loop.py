@@ -75,11 +75,11 @@ class LiveLoop:
         self.session = s = Session(model, self.opt, blade_length, DEFAULT_BLADE_BREADTH)
         s.cut.blocking = False  # the loop goes on while a relaxation step is in flight
         self.service = isinstance(source, HapticsPoseSource)
-        self.meter = TickMeter(source) if self.service else None
+        self.poses = PoseRecorder(blade_length, DEFAULT_BLADE_BREADTH)
+        self.meter = TickMeter(source, poses=self.poses) if self.service else None
         if self.service:
             s.scalpel = ServiceForceModel(source)
             s.out = s.scalpel.out
-        self.poses = PoseRecorder(blade_length, DEFAULT_BLADE_BREADTH)
         self.forces = ForceRecorder(1 << 14)
         self.colours = NodeColours(model, s.tis.cm)
         self.boundary = OuterBoundary(s.tis.cm, s.contact.faces, s.contact.face_tet)
@@ -92,7 +92,8 @@ class LiveLoop:
         self.frame_s: list[float] = []
         self.faces = np.zeros((0, 3), np.int64), self.boundary.get(0)
 
-    def run(self, max_seconds=None, idle_end_s: float = 0.5, stop=None, on_frame=None) -> dict:
+    def run(self, max_seconds=None, idle_end_s: float = 0.5, stop=None, on_frame=None,
+            until_idle_s: float | None = None, on_start=None) -> dict:
         s = self.session
         chunk = getattr(s.tis, "step_s", 4 * self.opt.dt0)
         # one step before the clock starts: kernels not yet compiled compile here, not in the session
@@ -103,7 +104,9 @@ class LiveLoop:
         self.relax.start()
         self.interrupted = False
         try:
-            self._loop(max_seconds, idle_end_s, stop or threading.Event(), on_frame)
+            if on_start is not None:
+                on_start()
+            self._loop(max_seconds, idle_end_s, stop or threading.Event(), on_frame, until_idle_s)
         except KeyboardInterrupt:
             self.interrupted = True
         finally:
@@ -119,7 +122,7 @@ class LiveLoop:
     def now(self) -> float:
         return time.perf_counter() - self.t0
 
-    def _loop(self, max_seconds, idle_end_s, stop, on_frame) -> None:
+    def _loop(self, max_seconds, idle_end_s, stop, on_frame, until_idle_s) -> None:
         next_geo = next_frame = next_tick = 0.0
         finished_at = None
         while not stop.is_set():
@@ -141,7 +144,8 @@ class LiveLoop:
             if now >= next_frame:
                 self._frame(on_frame)
                 next_frame = max(next_frame + self.frame_period, self.now())
-            if self.source.finished:
+            idle = until_idle_s is not None and self.pose is not None and now - self.pose[3] > until_idle_s
+            if self.source.finished or idle:
                 finished_at = now if finished_at is None else finished_at
                 if now - finished_at >= idle_end_s:
                     break
@@ -151,8 +155,9 @@ class LiveLoop:
         s = self.session
         arrival = self.now()
         self.pose = (pose.tip, pose.a, pose.n, arrival)
-        self.poses.add(arrival, pose.tip, pose.a, pose.n)
-        if self.service:  # the service ticks; each new pose is one tick of the session's tasks
+        if not self.service:  # the service's poses are recorded as they come (TickMeter)
+            self.poses.add(arrival, pose.tip, pose.a, pose.n)
+        else:  # the service ticks; each new pose is one tick of the session's tasks
             out = s.haptic_tick(pose.tip, pose.a, pose.n)
             self.forces.add(arrival, s.code, out, pose.tip, s.scalpel.proxy)
 

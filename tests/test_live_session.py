@@ -1,0 +1,180 @@
+"""Live sessions (cutkit.simulate.live): a Session on the wall clock with sources, views and its recording."""
+
+import json
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cutkit.cutting.trajectory import read_trajectory, straight_incision
+from cutkit.live import TrajectoryPoseSource
+from cutkit.simulate import SimulateOptions, simulate
+from cutkit.simulate.live import run_live
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from test_simulate import slab  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _incision(rate=100):
+    return straight_incision([6.0, 0.0, 8.3], [26.0, 0.0, 8.3], inward=[0, 1, 0], depth=5.0, approach=3.0,
+                             press_time=0.3, cut_time=0.6, rate=rate)
+
+
+@pytest.fixture(scope="module")
+def model():
+    return slab()
+
+
+def test_a_trajectory_session_cuts_records_and_replays(model, tmp_path):
+    out = tmp_path / "live"
+    s = run_live(model, TrajectoryPoseSource(_incision()), [], out, max_seconds=60, idle_end_s=0.5)
+    assert s["cut_tets"] > 0 and s["new_tets"] > s["cut_tets"]
+    assert s["live"]["frames"] > 0 and s["live"]["relax_steps_per_s"] > 0
+    for name in ("trajectory.csv", "forces.csv", "summary.json", "model.h5"):
+        assert (out / name).is_file(), name
+    assert json.loads((out / "summary.json").read_text())["cut_tets"] == s["cut_tets"]
+    traj = read_trajectory(out / "trajectory.csv")
+    assert len(traj) > 10 and np.all(np.diff(traj.t) > 0)
+    # the recorded poses replay offline and cut about as much (the live cut is sampled on the wall clock)
+    r = simulate(model, traj, tmp_path / "replay", SimulateOptions(frames=False, hold_s=0.3))
+    assert abs(r["cut_tets"] - s["cut_tets"]) <= 0.15 * s["cut_tets"]
+
+
+def test_ctrl_c_ends_the_session_with_a_valid_recording(model, tmp_path):
+    out = tmp_path / "live"
+    frames = []
+
+    def interrupt(frame):
+        frames.append(frame)
+        if frame.tets_cut > 0:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        run_live(model, TrajectoryPoseSource(_incision(), loop=True), [], out, max_seconds=60, on_frame=interrupt)
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["interrupted"] is True and summary["cut_tets"] > 0
+    assert len(read_trajectory(out / "trajectory.csv")) >= 2
+    from cutkit.io.model_h5 import read_model
+
+    assert read_model(out / "model.h5").tets.shape[0] == summary["tets_final"]
+
+
+def test_the_window_draws_the_session_and_shows_the_cut(model, tmp_path):
+    pv = pytest.importorskip("pyvista")
+    from cutkit.live.window import WindowView, cut_colour_fraction
+
+    pv.OFF_SCREEN = True
+    window = WindowView(off_screen=True, window_size=(640, 480))
+    drawn = []
+    try:
+        s = run_live(model, TrajectoryPoseSource(_incision()), [window], tmp_path / "live", max_seconds=60,
+                     idle_end_s=1.0, on_frame=lambda f: drawn.append(f.tets_cut))
+        # look into the wound: from outside the cut face (-y), the blade's way in
+        window.plotter.camera_position = [(16.0, -60.0, 8.3), (16.0, 0.0, 8.3), (0.0, 0.0, 1.0)]
+        window.plotter.render()
+        image = window.screenshot(tmp_path / "live.png")
+    finally:
+        window.close()
+    assert len(drawn) >= 5 and drawn[-1] == s["cut_tets"] > 0
+    assert cut_colour_fraction(image) > 1e-4
+
+
+def test_igtl_transforms_in_polydata_out_with_the_cut(model):
+    pyigtl = pytest.importorskip("pyigtl")
+    from cutkit.live.igtl import RAS_TO_LPS, IGTLEndpoint, IGTLPolyDataView, IGTLPoseSource, PolyDataMessage
+    from cutkit.live.igtl import decode_polydata
+
+    pyigtl.messages.message_type_to_class_constructor["POLYDATA"] = PolyDataMessage
+    endpoint = IGTLEndpoint(0)
+    source = IGTLPoseSource(endpoint=endpoint)
+    view = IGTLPolyDataView(endpoint=endpoint, max_rate_hz=30.0)
+    client = pyigtl.OpenIGTLinkClient("127.0.0.1", endpoint.port)
+    traj = _incision()
+    got, done = {}, threading.Event()
+
+    def tool():  # the tracked tool: TRANSFORMs along the incision at 100 Hz, then the last one held
+        t_end = time.monotonic() + 30.0
+        while not endpoint.connected and time.monotonic() < t_end:
+            time.sleep(0.01)
+        for i in range(len(traj)):
+            m = np.eye(4)
+            m[:3, 0], m[:3, 2], m[:3, 3] = traj.n[i], -traj.a[i], traj.tip[i]
+            m[:3, 1] = np.cross(m[:3, 2], m[:3, 0])
+            client.send_message(pyigtl.TransformMessage(RAS_TO_LPS @ m, device_name="ScalpelToReference"),
+                                wait=True)
+            time.sleep(0.01)
+        done.set()
+
+    def collect(frame):
+        for msg in client.get_latest_messages():
+            got[msg.device_name] = msg
+
+    sender = threading.Thread(target=tool, daemon=True)
+    try:
+        sender.start()
+        s = run_live(model, source, [view], Path(__import__("tempfile").mkdtemp()), max_seconds=60,
+                     until_idle_s=1.0, on_frame=collect)
+        sender.join(timeout=10)
+        time.sleep(0.2)
+        collect(None)
+    finally:
+        client.stop()
+        source.close()
+        view.close()
+        endpoint.close()
+    assert done.is_set() and s["cut_tets"] > 0
+    assert "CutkitCutSurface" in got and "CutkitTissue" in got
+    pts, tris = decode_polydata(got["CutkitCutSurface"])
+    assert len(tris) > 0
+    lps = pts * [-1.0, -1.0, 1.0]
+    assert lps[:, 0].max() - lps[:, 0].min() > 10.0  # the cut runs along the incision (20 mm along x)
+
+
+@pytest.mark.slow
+def test_haptics_play_into_cutkit_live_on_the_knee(tmp_path):
+    """The reference device streams the demo incision through the service into `cutkit live --no-window`."""
+    from cutkit.haptics.client import spawned_server
+    from cutkit.simulate.demo import build_or_reuse
+
+    knee, _, _ = build_or_reuse(tmp_path / "demo")
+    incision = ROOT / "sample_volumes" / "incision.csv"
+    for attempt in range(2):  # the rate is the machine's: one retry
+        out = tmp_path / f"live{attempt}"
+        live = _live_session(spawned_server, knee, incision, out)
+        if live["live"]["haptic_hz"] >= 990.0:
+            break
+    assert live["live"]["haptic_hz"] >= 990.0, live["live"]
+    assert live["cut_tets"] > 0 and live["cut_opening_mm"]["final_mean"] > 1.0, live["cut_opening_mm"]
+    replay = _run([sys.executable, "-m", "cutkit.cli.main", "simulate", str(knee), "--trajectory",
+                   str(out / "trajectory.csv"), "-o", str(tmp_path / "replay"), "--fps", "1"])
+    assert replay.returncode == 0, replay.stderr
+    again = json.loads((tmp_path / "replay" / "summary.json").read_text())
+    assert abs(again["cut_tets"] - live["cut_tets"]) <= 0.1 * live["cut_tets"], (again["cut_tets"], live["cut_tets"])
+
+
+def _run(cmd, timeout=600):
+    return subprocess.run(cmd, capture_output=True, text=True, timeout=timeout)
+
+
+def _live_session(spawned_server, knee, incision, out) -> dict:
+    with spawned_server("--priority", "realtime") as (host, port, _):
+        live = subprocess.Popen([sys.executable, "-m", "cutkit.cli.main", "live", str(knee), "-o", str(out),
+                                 "--haptics", f"{host}:{port}", "--no-window", "--until-idle", "3", "--seconds", "300"],
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        try:
+            assert live.stdout.readline().strip() == "cutkit live: running"
+            play = _run([sys.executable, "-m", "cutkit.cli.main", "haptics", "play", str(incision), "--host", host,
+                         "--port", str(port), "--priority", "high", "--json"], timeout=120)
+            assert play.returncode == 0, play.stderr
+            _, err = live.communicate(timeout=300)
+        finally:
+            if live.poll() is None:
+                live.kill()
+        assert live.returncode == 0, err
+    return json.loads((out / "summary.json").read_text())
