@@ -91,6 +91,7 @@ class LiveLoop:
         self.frames = 0
         self.frame_s: list[float] = []
         self.faces = np.zeros((0, 3), np.int64), self.boundary.get(0)
+        self.faces_version = 0
 
     def run(self, max_seconds=None, idle_end_s: float = 0.5, stop=None, on_frame=None,
             until_idle_s: float | None = None, on_start=None) -> dict:
@@ -98,6 +99,9 @@ class LiveLoop:
         chunk = getattr(s.tis, "step_s", 4 * self.opt.dt0)
         # one step before the clock starts: kernels not yet compiled compile here, not in the session
         s.relax.advance(np.zeros((s.tis.n_nodes, 3)), s.tis.time + chunk)
+        self.t0 = time.perf_counter() - s.tis.time
+        self._frame(None)  # views build their windows before the clock starts
+        self.frame_s.clear()
         self.t0 = time.perf_counter() - s.tis.time
         clock = self.now
         self.relax = RelaxThread(s, clock, chunk)
@@ -189,10 +193,17 @@ class LiveLoop:
         s = self.session
         t1 = time.perf_counter()
         # topology changes only in this thread; the relaxation thread moves positions in place,
-        # and a frame may show them half a step old
+        # and a frame may show them half a step old.  A cut waiting for its turn is drawn at once:
+        # its new nodes placed by their weights over the deformed original nodes
+        cm = s.tis.cm
         points = np.array(s.tis.positions, np.float64)
-        if s.cut.result is None:  # the cut mesh and the tissue agree (no cut waiting for its turn)
-            self.faces = cut_surface_faces(s.tis.cm), self.boundary.get(s.counts["cut_steps"])
+        if cm.n_points > points.shape[0]:
+            ahead = np.arange(points.shape[0], cm.n_points)
+            points = np.concatenate([points, s.tis.interpolate_positions(ahead)])
+        version = cm.n_tets_total
+        if version != self.faces_version:
+            self.faces = cut_surface_faces(cm), self.boundary.get(version)
+            self.faces_version = version
         cut_faces, outer = self.faces
         rgb = self.colours.get(points.shape[0])
         tip, a, n = self.pose[:3] if self.pose is not None else (None, None, None)
