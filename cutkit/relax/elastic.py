@@ -496,7 +496,9 @@ def local_step(em: ElementModel, state: ElementState, h: float, f_ext, r2, seeds
     x0 = x.copy()
     y = x0.copy()
     y[awake] += h * np.where(em.fixed[awake], 0.0, v[awake])
-    x[awake] = y[awake]
+    # the sweeps start from x^n, not from the inertial prediction y: from a state
+    # without inverted tets no sweep makes one (_elastic_kernels.KEEP_J_FRACTION),
+    # while y itself could fold a tet over
     terms = _node_terms(em, x0, h, f_ext, None, y)
     n_colours = int(em.colour.max(initial=-1)) + 1
     r0 = res = 0.0

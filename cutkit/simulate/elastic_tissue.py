@@ -51,6 +51,10 @@ SETTLE_RTOL = 1e-3
 STEP_CHEBYSHEV = 0.9
 
 
+#: A new node within this (barycentric) distance of a removed tet is placed by its deformation.
+PLACE_TOLERANCE = 1e-9
+
+
 class ElasticTissue(TissueBase):
     """Cut mesh + element model + state of one tissue model.
 
@@ -158,7 +162,7 @@ class ElasticTissue(TissueBase):
             self._seeds = []
             info = local_step(self.em, self.state, self.step_s, f_ext, self.r2, seeds,
                               atol=max(self.step_rtol * self.force_scale, DEFAULT_ATOL_N),
-                              max_iterations=self.step_max_iterations, chebyshev=STEP_CHEBYSHEV)
+                              max_iterations=self.step_max_iterations)
             sweeps += info.iterations
             self.counts["steps"] += 1
             self.counts["sweeps"] += info.iterations
@@ -183,7 +187,7 @@ class ElasticTissue(TissueBase):
         added, removed = np.setdiff1d(added, both), np.setdiff1d(removed, both)
         moved = np.asarray(res.moved_nodes, np.int64)
         if n_new > n_old:
-            self._append_nodes(np.arange(n_old, n_new))
+            self._append_nodes(np.arange(n_old, n_new), removed)
         # tets of moved nodes (and not otherwise touched) get their rest shape again
         again = np.zeros(0, np.int64)
         if moved.size:
@@ -207,17 +211,42 @@ class ElasticTissue(TissueBase):
         return {"nodes_added": int(n_new - n_old), "elements_added": int(added.size),
                 "elements_removed": int(removed.size)}
 
-    def _append_nodes(self, new: np.ndarray) -> None:
+    def _append_nodes(self, new: np.ndarray, removed: np.ndarray) -> None:
         em, st = self.em, self.state
         par, w, valid = self._interpolation_weights(new)
         held = np.all(~valid | self.bc_fixed[par], axis=1)  # a node between held nodes only is held too
         damping = (w * em.damping[par]).sum(axis=1)
         vel = np.einsum("pq,pqc->pc", w, st.velocities[par])
-        x = self.interpolate_positions(new)
+        x = self._place(new, removed)
         self.bc_fixed = np.concatenate([self.bc_fixed, held])
         em.add_nodes(new.size, damping=damping, fixed=held)
         st.positions = np.concatenate([st.positions, x])
         st.velocities = np.concatenate([st.velocities, np.where(held[:, None], 0.0, vel)])
+
+    def _place(self, new: np.ndarray, removed: np.ndarray) -> np.ndarray:
+        """Current positions of new nodes: through the deformation of a removed tet whose rest
+        shape holds them (the sub-tets of a tet are then the pieces of its deformed shape, never
+        folded over), else from their defining nodes."""
+        cm = self.cm
+        x = self.interpolate_positions(new)
+        q = cm._tets[removed]
+        q = q[np.all(q < self.state.positions.shape[0], axis=1)]
+        if q.size == 0:
+            return x
+        X = cm._X[q]  # (r, 4, 3) rest corners
+        T = np.stack([X[:, 1] - X[:, 0], X[:, 2] - X[:, 0], X[:, 3] - X[:, 0]], axis=2)
+        ok = np.abs(np.linalg.det(T)) > 0
+        q, X, T = q[ok], X[ok], T[ok]
+        if q.size == 0:
+            return x
+        lam = np.einsum("rij,prj->pri", np.linalg.inv(T), cm._X[new][:, None, :] - X[None, :, 0])  # (p, r, 3)
+        bary = np.concatenate([1.0 - lam.sum(axis=2, keepdims=True), lam], axis=2)  # (p, r, 4)
+        worst = bary.min(axis=2)
+        best = np.argmax(worst, axis=1)
+        inside = worst[np.arange(new.size), best] >= -PLACE_TOLERANCE
+        b = bary[np.arange(new.size), best]
+        cur = self.state.positions[q[best]]  # (p, 4, 3)
+        return np.where(inside[:, None], np.einsum("pk,pkc->pc", b, cur), x)
 
     def _hold_orphans(self) -> None:
         """Nodes no tet uses any more stay where they are; nodes with tets are free unless held by a condition."""
