@@ -51,10 +51,11 @@ def _corner_row(D, c):
 
 
 @njit(cache=True, nogil=True)
-def _accumulate(i, x, el, adj):
+def _accumulate(i, x, el, adj, jg):
     """-dW/dx_i (f0, f1, f2) and the upper triangle of d2W/dx_i^2 over the tets of node i.
 
-    Scalars only: no heap allocation in the innermost loop.
+    Scalars only in the innermost loop.  ``jg`` (K, 4), if it has rows, receives J and
+    dJ/dx_i = cof(F) b_i of each tet (J of an inactive tet: 0), for :func:`_max_step`.
     """
     f0 = f1 = f2 = 0.0
     h00 = h01 = h02 = h11 = h12 = h22 = 0.0
@@ -62,6 +63,8 @@ def _accumulate(i, x, el, adj):
         t = adj.tets[i, k]
         V = el.volume[t]
         if V <= 0.0:
+            if jg.shape[0]:
+                jg[k, 0] = 0.0
             continue
         mu = el.mu[t]
         lm = el.lam[t] + mu
@@ -97,6 +100,8 @@ def _accumulate(i, x, el, adj):
         gb0 = g00 * b0 + g01 * b1 + g02 * b2
         gb1 = g10 * b0 + g11 * b1 + g12 * b2
         gb2 = g20 * b0 + g21 * b1 + g22 * b2
+        if jg.shape[0]:
+            jg[k, 0], jg[k, 1], jg[k, 2], jg[k, 3] = J, gb0, gb1, gb2
         # dW/dx_i = V P b with P = mu F + s G
         f0 -= V * (mu * (F00 * b0 + F01 * b1 + F02 * b2) + s * gb0)
         f1 -= V * (mu * (F10 * b0 + F11 * b1 + F12 * b2) + s * gb1)
@@ -116,7 +121,8 @@ def _accumulate(i, x, el, adj):
 @njit(cache=True, nogil=True)
 def _node_update(i, x, el, adj, nt):
     """Move x_i to the exact minimiser of the incremental potential in x_i; return the squared residual."""
-    f0, f1, f2, h00, h01, h02, h11, h12, h22 = _accumulate(i, x, el, adj)
+    jg = np.empty((adj.degree[i], 4))
+    f0, f1, f2, h00, h01, h02, h11, h12, h22 = _accumulate(i, x, el, adj, jg)
     m, c = nt.inertia[i], nt.damping[i]
     f0 += m * (nt.target[i, 0] - x[i, 0]) - c * (x[i, 0] - nt.previous[i, 0]) + nt.force[i, 0]
     f1 += m * (nt.target[i, 1] - x[i, 1]) - c * (x[i, 1] - nt.previous[i, 1]) + nt.force[i, 1]
@@ -145,7 +151,7 @@ def _node_update(i, x, el, adj, nt):
     d0 = (i00 * f0 + i01 * f1 + i02 * f2) / det
     d1 = (i01 * f0 + i11 * f1 + i12 * f2) / det
     d2 = (i02 * f0 + i12 * f1 + i22 * f2) / det
-    a = _max_step(i, x, el, adj, d0, d1, d2)
+    a = _max_step(jg, d0, d1, d2)
     x[i, 0] += a * d0
     x[i, 1] += a * d1
     x[i, 2] += a * d2
@@ -153,37 +159,17 @@ def _node_update(i, x, el, adj, nt):
 
 
 @njit(cache=True, nogil=True)
-def _max_step(i, x, el, adj, d0, d1, d2):
+def _max_step(jg, d0, d1, d2):
     """The largest a in [0, 1] for which x_i + a d keeps every tet of node i with J > 0 at
     J >= KEEP_J_FRACTION of its present value (J is affine in x_i: J(a) = J + a (cof F b_i) . d)."""
     a = 1.0
-    for k in range(adj.degree[i]):
-        t = adj.tets[i, k]
-        if el.volume[t] <= 0.0:
+    for k in range(jg.shape[0]):
+        J = jg[k, 0]
+        if J <= 0.0:
             continue
-        D = el.Dminv[t]
-        a0, a1, a2, a3 = el.tets[t, 0], el.tets[t, 1], el.tets[t, 2], el.tets[t, 3]
-        u0, u1, u2 = x[a1, 0] - x[a0, 0], x[a1, 1] - x[a0, 1], x[a1, 2] - x[a0, 2]
-        v0, v1, v2 = x[a2, 0] - x[a0, 0], x[a2, 1] - x[a0, 1], x[a2, 2] - x[a0, 2]
-        w0, w1, w2 = x[a3, 0] - x[a0, 0], x[a3, 1] - x[a0, 1], x[a3, 2] - x[a0, 2]
-        # J = det Ds det Dminv, and dJ/dx_i = det(Dminv) (cof Ds) (Ds-row of corner i)
-        cu0, cu1, cu2 = v1 * w2 - v2 * w1, v2 * w0 - v0 * w2, v0 * w1 - v1 * w0  # v x w
-        cv0, cv1, cv2 = w1 * u2 - w2 * u1, w2 * u0 - w0 * u2, w0 * u1 - w1 * u0  # w x u
-        cw0, cw1, cw2 = u1 * v2 - u2 * v1, u2 * v0 - u0 * v2, u0 * v1 - u1 * v0  # u x v
-        det_ds = u0 * cu0 + u1 * cu1 + u2 * cu2
-        if det_ds <= 0.0:
-            continue
-        c = adj.corner[i, k]
-        if c == 1:
-            slope = cu0 * d0 + cu1 * d1 + cu2 * d2
-        elif c == 2:
-            slope = cv0 * d0 + cv1 * d1 + cv2 * d2
-        elif c == 3:
-            slope = cw0 * d0 + cw1 * d1 + cw2 * d2
-        else:
-            slope = -((cu0 + cv0 + cw0) * d0 + (cu1 + cv1 + cw1) * d1 + (cu2 + cv2 + cw2) * d2)
+        slope = jg[k, 1] * d0 + jg[k, 2] * d1 + jg[k, 3] * d2
         if slope < 0.0:
-            limit = (1.0 - KEEP_J_FRACTION) * det_ds / -slope
+            limit = (1.0 - KEEP_J_FRACTION) * J / -slope
             if limit < a:
                 a = limit
     return a
@@ -207,8 +193,9 @@ def vbd_sweep(x, el, adj, nt, colour_offsets, colour_nodes, r2):
 @njit(cache=True, parallel=True, nogil=True)
 def node_forces(x, el, adj, out):
     """Elastic force -dW/dx on every node, N: ``out`` (n, 3)."""
+    none = np.empty((0, 4))
     for i in prange(x.shape[0]):
-        f0, f1, f2, h00, h01, h02, h11, h12, h22 = _accumulate(i, x, el, adj)
+        f0, f1, f2, h00, h01, h02, h11, h12, h22 = _accumulate(i, x, el, adj, none)
         out[i, 0] = f0
         out[i, 1] = f1
         out[i, 2] = f2
