@@ -226,7 +226,7 @@ class Tissue(TissueBase):
         counts : dict
             ``nodes_added``, ``springs_added``, ``springs_removed``.
         """
-        cm, sm, st = self.cm, self.springs, self.state
+        cm, sm = self.cm, self.springs
         n_old = sm.n_nodes
         n_new = cm.n_points
         added = [int(t) for t in res.added_tets]
@@ -239,6 +239,15 @@ class Tissue(TissueBase):
             self.rec_V = np.concatenate([self.rec_V, np.zeros(grow)])
             self.rec_sv = np.concatenate([self.rec_sv, np.zeros((grow, 6))])
 
+        new = self._cut_nodes(n_old, n_new, moved)
+        keys, sums = self._cut_tet_sums(added, removed, moved)
+        new_pairs, n_dead = self._cut_springs(keys, sums)
+        self._cut_refresh(new_pairs)
+        return {"nodes_added": int(new.size), "springs_added": len(new_pairs), "springs_removed": n_dead}
+
+    def _cut_nodes(self, n_old: int, n_new: int, moved: list) -> np.ndarray:
+        """Append the cut's new nodes and re-interpolate the moved ones; returns the new node ids."""
+        cm, sm, st = self.cm, self.springs, self.state
         # ---- nodes: append, and re-interpolate moved ones
         new = np.arange(n_old, n_new)
         if new.size:
@@ -247,7 +256,11 @@ class Tissue(TissueBase):
             mv = np.asarray(moved, np.int64)
             sm.rest_positions[mv] = cm._X[mv]
             st.positions[mv] = self.interpolate_positions(mv)
+        return new
 
+    def _cut_tet_sums(self, added: list, removed: list, moved: list):
+        """Take back what removed (and reweighed) tets gave, record what added ones give: edge keys and sums."""
+        cm, sm = self.cm, self.springs
         # ---- tets to take back and to (re)record
         added_set = set(added)
         removed_set = set(removed)
@@ -287,6 +300,12 @@ class Tissue(TissueBase):
                             owners.add(int(ids[r]))
                         else:
                             owners.discard(int(ids[r]))
+        return keys, sums
+
+    def _cut_springs(self, keys: list, sums: list):
+        """Apply the per-edge sums to the springs: update, create, drop; returns (new pairs, dropped count)."""
+        cm, sm = self.cm, self.springs
+        key_base = np.int64(cm.n_points + 1)
         if keys:
             uk, inv = np.unique(np.concatenate(keys), return_inverse=True)
             allsums = np.concatenate(sums)
@@ -338,7 +357,12 @@ class Tissue(TissueBase):
             self.spring_ev = self.spring_ev[keep]
             self.spring_v = self.spring_v[keep]
             self.spring_sv = self.spring_sv[keep]
+        return new_pairs, n_dead
 
+    def _cut_refresh(self, new_pairs) -> None:
+        """Hold orphan nodes, refresh the volume term, adjacency, colours and node lists."""
+        sm, st = self.springs, self.state
+        masses = sm.masses
         # ---- nodes left without tets (orphans) are held; nodes with tets are free unless BC-fixed
         orphan = self.node_tet_count <= 0
         masses[orphan] = 0.0  # exactly: what is left is rounding
@@ -359,8 +383,6 @@ class Tissue(TissueBase):
         if len(new_pairs):
             _recolour(sm, np.unique(new_pairs))
         self.lists.topology_changed()
-        return {"nodes_added": int(new.size), "springs_added": len(new_pairs), "springs_removed": n_dead}
-
     def _rebuild_volume_term(self) -> None:
         """The volume term over the live tets: rest volumes from the per-tet records (the cut is made at rest)."""
         from cutkit.relax.volume import VolumeTerm
