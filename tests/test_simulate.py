@@ -144,7 +144,7 @@ def test_trajectory_that_never_touches_warns(tmp_path, capsys):
 @pytest.mark.parametrize("what, content, message", [
     ("trajectory", "t,x,y,z,ax,ay,az,nx,ny,nz\n0,0,0,0,0,1,0,1,0,0\n0,0,0,1,0,1,0,1,0,0\n", "cut.csv:3: t = 0 does not increase"),
     ("model", b"not an hdf5 file", "model"),
-    ("option", ["--volume-stiffness", "-1"], "volume-stiffness must be a number >= 0, got -1.0"),
+    ("option", ["--volume-stiffness", "-1"], "cutkit: error: --volume-stiffness must be a number >= 0, got -1"),
 ])
 def test_bad_input_is_one_line_error(tmp_path, capsys, what, content, message):
     write_model(tmp_path / "slab.h5", slab())
