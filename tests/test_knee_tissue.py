@@ -3,7 +3,6 @@
 import json
 
 import meshio
-import numpy as np
 import pytest
 
 from cutkit.cli.main import main

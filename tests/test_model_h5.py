@@ -16,8 +16,8 @@ def _model():
     points, tets = box_mesh((3, 2, 2), spacing=(1.0, 1.5, 2.0), origin=(-1.0, 2.0, 3.0))
     labels = np.where(points[tets].mean(axis=1)[:, 0] < 0.5, 1, 2).astype(np.int32)
     rows = [
-        dict(label=1, name="fat", **{k: 1.0 + i for i, k in enumerate(MATERIAL_FIELDS)}),
-        dict(label=2, name="muscle", **{k: 10.0 + i for i, k in enumerate(MATERIAL_FIELDS)}),
+        dict(label=1, name="fat", **{**{k: 1.0 + i for i, k in enumerate(MATERIAL_FIELDS)}, "poisson_ratio": 0.41}),
+        dict(label=2, name="muscle", **{**{k: 10.0 + i for i, k in enumerate(MATERIAL_FIELDS)}, "poisson_ratio": 0.3}),
     ]
     rng = np.random.default_rng(0)
     texture = Texture(
@@ -173,6 +173,46 @@ def test_write_is_atomic_on_failure(tmp_path, model_file):
         write_model(target, bad)
     assert target.read_bytes() == before
     assert sorted(p.name for p in tmp_path.iterdir()) == ["keep.h5", "model.h5"]
+
+
+def test_version_1_file_reads_with_the_documented_poisson_ratio(model_file):
+    """A version-1 file has no Poisson ratio: reading gives every material 0.45 and says so."""
+    import h5py
+
+    from cutkit.io.model_h5 import V1_POISSON_RATIO
+
+    with h5py.File(model_file, "r+") as f:
+        f["cutkit"].attrs["schema_version"] = 1
+        del f["cutkit/materials/poisson_ratio"]
+        del f["cutkit/materials"].attrs["material_model"]
+    m = read_model(model_file)
+    assert V1_POISSON_RATIO == 0.45
+    np.testing.assert_array_equal(m.materials["poisson_ratio"], [0.45, 0.45])
+    assert m.materials.material_model == "neohookean"
+    assert m.provenance["schema_upgrade"] == {"from_version": 1, "to_version": 2, "poisson_ratio": 0.45,
+                                              "material_model": "neohookean"}
+
+
+def test_material_model_round_trips_and_a_bad_one_is_named(model_file, tmp_path):
+    import dataclasses
+
+    import h5py
+
+    from cutkit.errors import ModelFormatError
+
+    m = _model()
+    write_model(tmp_path / "s.h5", dataclasses.replace(m, materials=dataclasses.replace(m.materials,
+                                                                                      material_model="springs")))
+    assert read_model(tmp_path / "s.h5").materials.material_model == "springs"
+    with h5py.File(model_file, "r+") as f:
+        f["cutkit/materials"].attrs["material_model"] = "jelly"
+    with pytest.raises(ModelFormatError, match="material_model is 'jelly', not one of neohookean, springs"):
+        read_model(model_file)
+    with h5py.File(model_file, "r+") as f:
+        f["cutkit/materials"].attrs["material_model"] = "springs"
+        f["cutkit/materials/poisson_ratio"][0] = 0.5
+    with pytest.raises(ModelFormatError, match="poisson_ratio has 0.5, outside"):
+        read_model(model_file)
 
 
 def test_schema_version_constant_is_written(model_file):
