@@ -259,6 +259,10 @@ def test_simulate_through_the_haptics_service(tmp_path):
     # The service paces ticks to the wall clock, so the simulation can never see more than 1 kHz; how many
     # fewer it sees depends on how busy the machine is, which a test must not assert.
     assert 0 < s["rates_hz"]["haptics"] < 1050
+    # the tissue moves as offline: the blade's reaction and the cut's opening
+    assert s["max_displacement_mm"] > 0.1 and s["cut_opening_mm"]["final_mean"] > 0.0
+    slow = any("haptic loop reached" in w for w in s["warnings"])
+    assert slow == (s["rates_hz"]["haptics"] < 900.0)
 
 
 def test_png_pictures_show_the_tissue(tmp_path):

@@ -28,7 +28,9 @@ import numpy as np
 
 from cutkit.scalpel import FREE, N_OUT, O_A, O_CUT, O_FORCE, O_N, STATIC
 
-CUT_FORCE_FROM_SERVICE = False
+#: The service sends no cut force: while cutting, the force on the blade stands in for it on the
+#: tissue (as in ``simulate --haptics``).
+CUT_FORCE_FROM_SERVICE = True
 
 #: Most in-process force-model ticks run back to back when the loop falls behind.
 MAX_CATCH_UP_TICKS = 50

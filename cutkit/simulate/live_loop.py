@@ -257,6 +257,8 @@ class LiveLoop:
         if self.opt.write_model:
             write_cut_model(s, out_dir, out)
         out["time_per_task_s"] = dict(s.task_s)
+        if hasattr(s.tis, "counts"):
+            out["counts"].update({f"relax_{k}": v for k, v in s.tis.counts.items()})
         write_json(out_dir / "summary.json", out)
         return out
 
