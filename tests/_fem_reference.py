@@ -2,6 +2,7 @@
 
 import numpy as np
 
+from cutkit.decimate.optimize import _ignore_sigpipe_again
 from cutkit.mesh.generate import box_mesh
 from cutkit.mesh.quality import signed_volumes
 
@@ -18,6 +19,7 @@ def delaunay_box(L, h):
     import gmsh
 
     gmsh.initialize(interruptible=False)
+    _ignore_sigpipe_again()
     try:
         gmsh.option.setNumber("General.Terminal", 0)
         gmsh.option.setNumber("General.NumThreads", 1)

@@ -77,6 +77,17 @@ def _face_set(faces, sheets) -> set:
     return set(map(tuple, np.concatenate([faces, sheets], axis=1).tolist()))
 
 
+def _ignore_sigpipe_again() -> None:
+    """gmsh's initialisation sets SIGPIPE back to its default (terminate the process); Python
+    ignores it so that a write to a closed socket raises BrokenPipeError (the haptics client
+    relies on that).  Restore Python's setting; only the main thread may set a signal."""
+    import signal
+    import threading
+
+    if hasattr(signal, "SIGPIPE") and threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGPIPE, signal.SIG_IGN)
+
+
 def _run_gmsh(method, points, tets, labels, faces, sheets):
     """Optimise with gmsh; returns ``(points, tets, labels)`` of the result (nodes renumbered by gmsh)."""
     import gmsh
@@ -84,6 +95,7 @@ def _run_gmsh(method, points, tets, labels, faces, sheets):
     own = not gmsh.isInitialized()
     if own:
         gmsh.initialize(interruptible=False)
+        _ignore_sigpipe_again()
     previous = None if own else gmsh.model.getCurrent()
     try:
         gmsh.option.setNumber("General.Terminal", 0)
