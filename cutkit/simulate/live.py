@@ -4,8 +4,10 @@ Three activities, as in the paper's Fig. 1 (section 2):
 
 * the **force model** at 1 kHz: in ``cutkit haptics serve`` for a
   :class:`~cutkit.live.HapticsPoseSource` (the session sends a SIM_UPDATE
-  every loop and reads the service's state back), in this process for the
-  other sources (every elapsed millisecond is one tick with the newest pose);
+  every loop; a copy of the model, :class:`MirroredForceModel`, ticked with
+  every forwarded device pose, gives the cut its proxy), in this process
+  for the other sources (every elapsed millisecond is one tick with the
+  newest pose);
 * **relaxation** in its own thread (:class:`RelaxThread`), continuously:
   the element kernels release the GIL, so it runs beside the main loop;
   it holds the session's lock for one step at a time;
@@ -20,84 +22,52 @@ simulate model.h5 --trajectory OUT/trajectory.csv`` replays it.
 
 from __future__ import annotations
 
+import collections
 import threading
 import time
 from pathlib import Path
 
 import numpy as np
 
-from cutkit.scalpel import FREE, N_OUT, O_A, O_CUT, O_FORCE, O_N, STATIC
-
-#: The service sends no cut force: while cutting, the force on the blade stands in for it on the
-#: tissue (as in ``simulate --haptics``).
-CUT_FORCE_FROM_SERVICE = True
+from cutkit.simulate.blade import InProcessScalpel
 
 #: Most in-process force-model ticks run back to back when the loop falls behind.
 MAX_CATCH_UP_TICKS = 50
 
 
-class ServiceForceModel:
-    """The force model in ``cutkit haptics serve``, seen through a :class:`~cutkit.live.HapticsPoseSource`.
+class MirroredForceModel(InProcessScalpel):
+    """The force model in process, fed with every pose the service's model got, tick by tick.
 
-    It has the scalpel interface of :mod:`cutkit.simulate.blade` (``code``,
-    ``proxy``, ``enter``, ``leave``, ``tick``), so the session's tasks do not
-    know where the force model runs.  The device sends its own poses to the
-    service; :meth:`tick` only reads the newest state.
+    The service renders the device's force at 1 kHz; this copy of the same
+    model (same poses in the same order, same entry, leave and material)
+    gives the session the proxy at every tick, so the cut is sampled on
+    the device's tick clock, as ``cutkit simulate`` replays the recorded
+    poses.  Entry and leave go to the service too (SIM_UPDATE).
     """
 
-    def __init__(self, source):
+    def __init__(self, source, blade_breadth: float):
+        super().__init__(blade_breadth=blade_breadth)
         self.source = source
-        self.out = np.zeros(N_OUT)
         self.contact = False
         self.entry = np.zeros(3)
         self.normal = np.zeros(3)
-        self._proxy = np.zeros(3)
-
-    @property
-    def code(self) -> int:
-        if not self.contact:
-            return FREE
-        st = self.source.state
-        code = FREE if st is None else int(st.state)
-        return STATIC if code == FREE else code  # entered, the service has not answered yet
-
-    @property
-    def proxy(self) -> np.ndarray:
-        st = self.source.state
-        if st is not None and self.contact:
-            self._proxy[:] = st.proxy
-        return self._proxy
 
     def enter(self, entry, normal, tip, material: dict) -> None:
         from cutkit.scalpel import CUT_FIELDS
 
+        super().enter(entry, normal, tip, material)
         self.entry[:], self.normal[:] = entry, normal
         self.contact = True
         self.source.update(self.entry, self.normal, material=[material[k] for k in CUT_FIELDS], contact=True)
 
     def leave(self) -> None:
+        super().leave()
         self.contact = False
         self.source.update(self.entry, self.normal, contact=False)
 
     def keep_alive(self) -> None:
         """One SIM_UPDATE: the service ramps the force to zero 0.1 s after the last one."""
         self.source.update(self.entry, self.normal, contact=self.contact)
-
-    def tick(self, tip, a, n) -> np.ndarray:
-        st = self.source.state
-        self.out[:] = 0.0
-        if st is not None:
-            self.out[O_FORCE:O_FORCE + 3] = st.force
-            self.out[O_A:O_A + 3] = st.a
-            self.out[O_N:O_N + 3] = st.n
-            if self.code != FREE and CUT_FORCE_FROM_SERVICE:
-                self.out[O_CUT:O_CUT + 3] = st.force
-        if not np.any(self.out[O_N:O_N + 3]):
-            self.out[O_A:O_A + 3], self.out[O_N:O_N + 3] = n, a
-        return self.out
-
-    def close(self) -> None:
-        pass
 
 
 class TickMeter:
@@ -116,6 +86,7 @@ class TickMeter:
         from cutkit.haptics.client import decode_device_pose
 
         self.ticks = np.zeros((capacity, 2), np.int64)  # tick, server ns
+        self.queue: collections.deque = collections.deque()  # (t, tip, a, n, arrival) not yet ticked
         self.n = 0
         drain = source.client.drain
         kind = P.DEVICE_POSE
@@ -127,10 +98,13 @@ class TickMeter:
                     d = decode_device_pose(ts, payload, 0)
                     self.ticks[self.n] = d.tick, ts
                     self.n += 1
-                    if poses is not None and any(d.n) and any(d.a):
+                    if any(d.n) and any(d.a):
                         # every pose the service's force model acted on, at its tick's time;
                         # the device frame's a is the trajectory's n and the other way round
-                        poses.add(ts / 1e9, d.tip, d.n, d.a)
+                        tip, a, n = np.array(d.tip), np.array(d.n), np.array(d.a)
+                        self.queue.append((ts / 1e9, tip, a, n, time.perf_counter()))
+                        if poses is not None:
+                            poses.add(ts / 1e9, tip, a, n)
             return frames
 
         source.client.drain = counting_drain
@@ -190,7 +164,7 @@ class RelaxThread(threading.Thread):
         self.join(timeout=30.0)
 
 
-__all__ = ["ServiceForceModel", "TickMeter", "RelaxThread", "MAX_CATCH_UP_TICKS", "run_live"]
+__all__ = ["MirroredForceModel", "TickMeter", "RelaxThread", "MAX_CATCH_UP_TICKS", "run_live"]
 
 
 def run_live(model, source, views, out_dir, opt=None, *, max_seconds: float | None = None, fps: float = 30.0,

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from cutkit.scalpel import FREE
-from cutkit.simulate.live import MAX_CATCH_UP_TICKS, RelaxThread, ServiceForceModel, TickMeter
+from cutkit.simulate.live import MAX_CATCH_UP_TICKS, MirroredForceModel, RelaxThread, TickMeter
 from cutkit.simulate.run import HAPTIC_DT, RATE_WARN_FRACTION, SimulateOptions
 
 
@@ -78,8 +78,11 @@ class LiveLoop:
         self.poses = PoseRecorder(blade_length, DEFAULT_BLADE_BREADTH)
         self.meter = TickMeter(source, poses=self.poses) if self.service else None
         if self.service:
-            s.scalpel = ServiceForceModel(source)
+            # the cut follows an in-process copy of the service's model, ticked with every device pose
+            s.scalpel = MirroredForceModel(source, DEFAULT_BLADE_BREADTH)
             s.out = s.scalpel.out
+        self.geo_every = max(1, int(round(1.0 / (self.opt.geometry_rate_hz * HAPTIC_DT))))
+        self.ticks = 0
         self.forces = ForceRecorder(1 << 14)
         self.colours = NodeColours(model, s.tis.cm)
         self.boundary = OuterBoundary(s.tis.cm, s.contact.faces, s.contact.face_tet)
@@ -139,16 +142,18 @@ class LiveLoop:
             if pose is not None:
                 self._on_pose(pose)
             if self.service:
+                self._device_ticks()
                 self.session.scalpel.keep_alive()
             elif self.pose is not None:
                 next_tick = self._ticks(now, next_tick)
-            if now >= next_geo:
+            if not self.service and now >= next_geo:
                 self._geometry()
                 next_geo = max(next_geo + self.geo_period, now)
             if now >= next_frame:
                 self._frame(on_frame)
                 next_frame = max(next_frame + self.frame_period, self.now())
-            idle = until_idle_s is not None and self.pose is not None and now - self.pose[3] > until_idle_s
+            idle = (until_idle_s is not None and self.pose is not None and now - self.pose[3] > until_idle_s
+                    and not (self.meter is not None and self.meter.queue))
             if self.source.finished or idle:
                 finished_at = now if finished_at is None else finished_at
                 if now - finished_at >= idle_end_s:
@@ -156,14 +161,24 @@ class LiveLoop:
             time.sleep(0.0002)
 
     def _on_pose(self, pose) -> None:
-        s = self.session
         arrival = self.now()
         self.pose = (pose.tip, pose.a, pose.n, arrival)
-        if not self.service:  # the service's poses are recorded as they come (TickMeter)
+        if not self.service:  # the service's poses are recorded and ticked as they come (TickMeter)
             self.poses.add(arrival, pose.tip, pose.a, pose.n)
-        else:  # the service ticks; each new pose is one tick of the session's tasks
-            out = s.haptic_tick(pose.tip, pose.a, pose.n)
-            self.forces.add(arrival, s.code, out, pose.tip, s.scalpel.proxy)
+
+    def _device_ticks(self) -> None:
+        """Every device pose the service forwarded, in order: one tick each; the cut every ``geo_every``."""
+        s, queue = self.session, self.meter.queue
+        while queue:
+            if not s.cut.hand_over():
+                return  # the cut waits for the relaxation step in flight, and the device's ticks with it
+            t, tip, a, n, arrival = queue.popleft()
+            out = s.haptic_tick(tip, a, n)
+            self.forces.add(t, s.code, out, tip, s.scalpel.proxy)
+            if self.ticks % self.geo_every == 0:
+                self.pose = (tip, a, n, arrival - self.t0)
+                self._geometry()
+            self.ticks += 1
 
     def _ticks(self, now: float, next_tick: float) -> float:
         """In-process force model: one tick per elapsed millisecond with the newest pose."""

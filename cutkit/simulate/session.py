@@ -185,6 +185,10 @@ class CutTask:
         self.pending = False
         self.result = None
 
+    def hand_over(self) -> bool:
+        """Hand a waiting cut over to the tissue if the lock is free; True when none waits any more."""
+        return self.result is None or self._apply()
+
     def _apply(self) -> bool:
         """Hand the pending cut over to the tissue; False when the lock was busy (non-blocking)."""
         if self.blocking:
