@@ -28,6 +28,8 @@ from cutkit.relax.elastic import ElementModel, SolveInfo, elastic_energy, elasti
 LINEAR_RTOL = 1e-3
 #: Step halvings before a Newton step is given up.
 MAX_HALVINGS = 8
+#: Seed of the random vectors pyamg's setup draws.
+AMG_SEED = 0
 
 
 def linear_stiffness(em: ElementModel):
@@ -75,7 +77,14 @@ def settle_static(em: ElementModel, x: np.ndarray, f_ext=None, *, rtol: float = 
     f_ext = np.zeros_like(x) if f_ext is None else np.asarray(f_ext, np.float64)
     free = (~em.fixed).ravel() & np.repeat(em.adj_degree > 0, 3)
     K = linear_stiffness(em)[free][:, free].tocsr()
-    ml = pyamg.smoothed_aggregation_solver(K, B=_rigid_modes(x)[free], symmetry="symmetric", max_coarse=500)
+    # pyamg estimates spectral radii from random vectors of numpy's global generator: seed it
+    # for the setup (and give the caller's state back) so that a settle is repeatable
+    saved = np.random.get_state()
+    np.random.seed(AMG_SEED)
+    try:
+        ml = pyamg.smoothed_aggregation_solver(K, B=_rigid_modes(x)[free], symmetry="symmetric", max_coarse=500)
+    finally:
+        np.random.set_state(saved)
     M = ml.aspreconditioner(cycle="V")
 
     def residual(xx):
