@@ -143,6 +143,17 @@ class PoseRecorder:
         return True
 
 
+def volume_change(tis) -> float:
+    """Deformed total volume of the live tets over their rest volume, minus 1 (a cut keeps the rest volume)."""
+    from cutkit.mesh.quality import signed_volumes
+
+    tets = tis.cm.tets
+    if len(tets) == 0:
+        return 0.0
+    rest = float(signed_volumes(tis.rest_positions, tets).sum())
+    return float(signed_volumes(tis.positions, tets).sum()) / rest - 1.0 if rest > 0 else 0.0
+
+
 def summary(session, *, model_path, loop_wall: float, t_traj_end, opening_at_traj_end, frames: int,
             forces: ForceRecorder, interrupted: bool, rates: bool) -> dict:
     """What ``summary.json`` holds (docs/simulate.md)."""
@@ -180,6 +191,7 @@ def summary(session, *, model_path, loop_wall: float, t_traj_end, opening_at_tra
             "final_max": float(opening.max()) if opening.size else 0.0,
         },
         "inverted_tets_deformed": count_inverted(tis.positions, cm.tets),
+        "volume_change": volume_change(tis),
         "max_displacement_mm": float(np.linalg.norm(tis.displacement, axis=1).max(initial=0.0)),
         "max_F_ext_N": forces.max_force(),
         "interrupted": bool(interrupted),

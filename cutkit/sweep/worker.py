@@ -11,7 +11,6 @@ from __future__ import annotations
 import contextlib
 import copy
 import math
-import sys
 import tempfile
 import threading
 import time
@@ -177,18 +176,11 @@ def _simulate(model, run: dict, out_dir: Path) -> dict:
         from cutkit.cutting.incision import Incision, incision
 
         traj = incision(Incision.from_dict(run["incision"], "incision"), tet_model)
-    holder = {}
-
-    def on_progress(t, total):
-        # the run loop's tissue, for the volume change at the end
-        if "tissue" not in holder:
-            holder["tissue"] = sys._getframe(1).f_locals.get("tis")
-
-    summary = simulate(tet_model, traj, out_dir, opt, progress=on_progress, model_path=run["model"])
-    return figures(summary, out_dir / "forces.csv", holder.get("tissue"), tet_model)
+    summary = simulate(tet_model, traj, out_dir, opt, model_path=run["model"])
+    return figures(summary, out_dir / "forces.csv")
 
 
-def figures(summary: dict, forces_csv, tissue=None, model=None) -> dict:
+def figures(summary: dict, forces_csv) -> dict:
     """The measured figures of a finished run.
 
     Parameters
@@ -197,10 +189,6 @@ def figures(summary: dict, forces_csv, tissue=None, model=None) -> dict:
         What :func:`cutkit.simulate.simulate` returned.
     forces_csv : path-like
         Its forces.csv.
-    tissue : Tissue, optional
-        The run's tissue at the end (for the volume change; NaN without).
-    model : TetModel, optional
-        The model at rest (for the volume change).
 
     Returns
     -------
@@ -209,16 +197,14 @@ def figures(summary: dict, forces_csv, tissue=None, model=None) -> dict:
         mean |F_ext| over the ticks in the cutting state (0 when it never
         cut); ``cut_tets``; ``opening_mm``: final mean distance between the
         two copies of the cut nodes; ``inverted_tets`` in the deformed
-        tissue; ``volume_change``: deformed total volume over rest volume
-        minus 1; ``simulated_per_wall``.
+        tissue; ``volume_change``: deformed total volume of the live tets
+        over their rest volume, minus 1 (the summary's); ``simulated_per_wall``.
     """
     f = np.loadtxt(forces_csv, delimiter=",", skiprows=1, usecols=(2, 3, 4), ndmin=2)
     states = np.loadtxt(forces_csv, delimiter=",", skiprows=1, usecols=(1,), dtype=str, ndmin=1)
     mag = np.linalg.norm(f, axis=1) if f.size else np.zeros(0)
     cutting = mag[states == "cutting"] if mag.size else mag
-    volume_change = float("nan")
-    if tissue is not None and model is not None:
-        volume_change = _volume_change(tissue, model)
+    volume_change = float(summary.get("volume_change", float("nan")))
     return {
         "peak_force_N": float(mag.max()) if mag.size else 0.0,
         "mean_cut_force_N": float(cutting.mean()) if cutting.size else 0.0,
@@ -230,14 +216,3 @@ def figures(summary: dict, forces_csv, tissue=None, model=None) -> dict:
     }
 
 
-def _volume_change(tissue, model) -> float:
-    """Deformed total volume of the live (cut) tets over the model's rest volume, minus 1; NaN if unknown."""
-    from cutkit.mesh.quality import signed_volumes
-
-    try:
-        positions = tissue.positions if hasattr(tissue, "positions") else tissue.state.positions
-        deformed = float(signed_volumes(positions, tissue.cm.tets).sum())
-        rest = float(signed_volumes(model.points, model.tets).sum())
-    except (AttributeError, ValueError, IndexError):  # a tissue without these: the figure is left out
-        return float("nan")
-    return deformed / rest - 1.0 if rest > 0 else float("nan")
