@@ -314,8 +314,9 @@ def test_element_model_run_has_no_inverted_tet_and_springs_stay_available(run, t
     assert s["material_model"] == "neohookean"
     assert s["inverted_tets_deformed"] == 0
     assert s["settle"]["converged"] and s["settle"]["relative_residual"] <= 1e-3
-    # nu = 0.45: the prestressed, cut slab keeps its volume within a few per cent
-    assert abs(s["volume_change"]) < 0.05
+    # held at its ends, the slab prestrained by 15 % along z contracts sideways (nu = 0.45):
+    # about (1 - 0.15) * 1.176 * 0.93^2 - 1 = -13 % of the mesh's volume, far from a collapse
+    assert -0.2 < s["volume_change"] < -0.05
 
 
 def _slab_run(d, *extra):
