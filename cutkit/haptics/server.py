@@ -7,8 +7,10 @@ client its force.  Poses and simulation updates are "newest state wins": a
 tick uses the last one received and drops older ones.
 
 Pacing: each tick has an absolute deadline; the loop sleeps until
-``SPIN_S`` before it and busy-waits the rest.  A loop more than one period
-late starts afresh from now instead of catching up in a burst.
+``SPIN_S`` before it and busy-waits the rest.  A loop late by up to
+``MAX_CATCH_UP_PERIODS`` periods runs the missed ticks at once (each one a
+step of the force model), so a short stall of the machine costs no ticks; a
+loop later than that starts afresh from now instead of catching up in a burst.
 
 A watchdog ramps the rendered force to zero, at ``1 / WATCHDOG_RAMP_S`` per
 second, once no simulation update has arrived for ``WATCHDOG_TIMEOUT_S``;
@@ -43,6 +45,11 @@ log = logging.getLogger("cutkit.haptics")
 
 #: Haptic rate, Hz.
 RATE_HZ = 1000
+#: A stall of up to this many periods (the machine's scheduler, a page fault)
+#: is caught up tick by tick, so the loop still runs 1000 force-model ticks a
+#: second; after a longer one the loop resynchronises and those ticks are lost
+#: (counted in ``resyncs``).  The periods the device sees show the stall.
+MAX_CATCH_UP_PERIODS = 20
 #: The loop sleeps until this long before a deadline, then busy-waits (s).
 SPIN_S = 0.0002
 #: Without a simulation update for this long the force ramps down (s).
@@ -190,8 +197,8 @@ class HapticsServer:
                 self._tick(now)
                 deadline += period
                 late = clock() - deadline
-                if late > period:
-                    deadline = clock()  # resynchronise: no burst of catch-up ticks
+                if late > MAX_CATCH_UP_PERIODS * period:
+                    deadline = clock()  # resynchronise: no long burst of catch-up ticks
                     self.stats["resyncs"] += 1
                 if end is not None and now >= end:
                     break
