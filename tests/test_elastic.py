@@ -154,16 +154,19 @@ def test_static_solve_stops_at_the_residual_it_was_asked_for():
     assert np.linalg.norm(elastic_forces(em, x)[free]) < 1e-4 * info.initial_residual
 
 
-def test_no_node_step_inverts_a_tet():
-    """A pull that would fold a tet over moves the node only as far as keeps it positive."""
+def one_tet_on_its_base():
+    """The unit corner tet with its base (nodes 0-2) held: its element model and rest points."""
     X = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], float)
-    row = dict(label=1, name="m", E=30e3, poisson_ratio=0.45, density=1090.0, damping=0.0, F_enter=0.8,
-               mu_static=1e-6, mu_dynamic=1e-6, rho_dynamic=1e-8, alpha_static=0.1, alpha_dynamic=0.1,
-               c_edge=1.0, c_shape=1.0)
-    model = TetModel.from_arrays(X, np.array([[0, 1, 2, 3]]), materials=Materials.from_rows([row]))
+    model = TetModel.from_arrays(X, np.array([[0, 1, 2, 3]]), materials=block().materials)
     em = build_element_model(model)
     em.fixed[:3] = True
     em._classes = None
+    return em, X
+
+
+def test_no_node_step_inverts_a_tet():
+    """A pull that would fold a tet over moves the node only as far as keeps it positive."""
+    em, X = one_tet_on_its_base()
     x = X.copy()
     force = np.zeros((4, 3))
     force[3, 2] = -1e3  # far more than the tet can hold
@@ -177,14 +180,7 @@ def test_no_node_step_inverts_a_tet():
 
 def test_inverted_tet_is_pushed_back():
     """A single tet with one vertex pushed through the opposite face recovers its orientation."""
-    X = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], float)
-    row = dict(label=1, name="m", E=30e3, poisson_ratio=0.45, density=1090.0, damping=0.0, F_enter=0.8,
-               mu_static=1e-6, mu_dynamic=1e-6, rho_dynamic=1e-8, alpha_static=0.1, alpha_dynamic=0.1,
-               c_edge=1.0, c_shape=1.0)
-    model = TetModel.from_arrays(X, np.array([[0, 1, 2, 3]]), materials=Materials.from_rows([row]))
-    em = build_element_model(model)
-    em.fixed[:3] = True
-    em._classes = None
+    em, X = one_tet_on_its_base()
     x = X.copy()
     x[3, 2] = -0.5  # inverted
     static_solve(em, x, rtol=1e-10, atol=0.0)
