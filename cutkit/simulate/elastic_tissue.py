@@ -46,9 +46,6 @@ STEP_RTOL = 1e-2
 STEP_MAX_ITERATIONS = 50
 #: Relative residual the settle before a cut reaches (docs/relaxation.md).
 SETTLE_RTOL = 1e-3
-#: Chebyshev spectral radius estimate of the steps' sweeps (Wang 2015):
-#: 0.95 converged on the test models, 0.98 diverged on a slender bar.
-STEP_CHEBYSHEV = 0.9
 
 
 #: A new node within this (barycentric) distance of a removed tet is placed by its deformation.
