@@ -103,8 +103,30 @@ def make_path(kind, rng, L, tremor=0.0):
     return poses
 
 
+def crossing_strokes(rng, L, through=True, tremor=0.0):
+    """Two straight strokes crossing near the middle of a mesh spanning [0, L] (3,), ``None`` between.
+
+    Each stroke runs along a random direction in the x-y plane through a
+    point near the middle (the second at 45-135 degrees to the first), the
+    blade tilted at random; ``through``: the tip below the mesh (each stroke
+    cuts it in two), else at a random depth.
+    """
+    L = np.asarray(L, float)
+    mid = L / 2
+    phi = rng.uniform(0.0, np.pi)
+    poses = []
+    for k, ang in enumerate((phi, phi + rng.uniform(0.25 * np.pi, 0.75 * np.pi))):
+        d = np.array([np.cos(ang), np.sin(ang), 0.0])
+        c = mid + np.array([*rng.uniform(-0.15, 0.15, 2) * L[:2], 0.0])
+        c[2] = -0.5 if through else rng.uniform(0.3, 0.8) * L[2]
+        a = _unit([*rng.uniform(-0.2, 0.2, 2), -1.0])
+        reach = np.linalg.norm(L) + 1.0  # past the mesh at every height of the tilted blade
+        n = int(rng.integers(6, 14))
+        poses += [None] if k else []
+        poses += [(c + s * d + rng.normal(0, tremor / 3, 3), a) for s in np.linspace(-reach, reach, n)]
+    return poses
+
+
 def lift(cm):
-    """The blade leaves the tissue: the next pose starts a new sweep."""
-    cm.prev_pose = None
-    cm.tip_tet = -1
-    cm.active_tets = np.zeros(0, np.int64)
+    """The blade leaves the tissue: the next pose starts a new sweep, which may cross this one (rebase)."""
+    cm.rebase()

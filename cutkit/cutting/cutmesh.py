@@ -27,6 +27,7 @@ from cutkit.errors import InputError
 from cutkit.mesh.topology import TET_EDGES, TET_FACES, unique_edges, unique_faces, tet_neighbors
 from cutkit.cutting import subdivision as S
 from cutkit.cutting import _kernels_step as K
+from cutkit.cutting.rebase import cut_twins, init_records, rebase, twin_face_bary
 from cutkit.cutting.splits import (COMPACT_VOL_MIN, SPLIT_ANGLE_GAIN, SPLIT_ANGLE_GOOD, compact_split,
                                    min_angles_per_group)
 
@@ -143,12 +144,22 @@ class CutMesh:
         self.tip_tet = -1
         self.prev_pose = None
         self._delta_reset()
+        init_records(self, n0, m0)  # what outlives a rebase (model counts, earlier strokes' cut surface)
 
     @classmethod
     def from_model(cls, model, blade_length=20.0, centre_nodes=False, compact_splits=True):
         """Cut state of a :class:`~cutkit.model.tetmodel.TetModel` (rest = current positions)."""
         return cls(model.points, model.tets, texcoords=model.texcoords, labels=model.labels,
                    blade_length=blade_length, centre_nodes=centre_nodes, compact_splits=compact_splits)
+
+    def rebase(self):
+        """Make the live tets the original ones of a fresh cut state (blade out); see :func:`.rebase.rebase`.
+
+        Returns
+        -------
+        old_ids : (k,) int64  old tet id of each new original tet (node ids unchanged)
+        """
+        return rebase(self)
 
     # ------------------------------------------------------------------ nodes
     def _grow_nodes(self):
@@ -176,6 +187,9 @@ class CutMesh:
                    i, np.asarray(nodes, np.int64), np.asarray(w, np.float64))
 
     def _move_node(self, i, nodes, w):
+        # the rest position before the step's first move of the node: the tissue maps the
+        # node's new place through the old shape of the tets around it
+        self._delta["moved_from"].setdefault(i, self._X[i].copy())
         self._set_node(i, nodes, w)
         self._delta["moved_nodes"].append(i)
 
@@ -204,7 +218,7 @@ class CutMesh:
 
     # ------------------------------------------------------------------ deltas
     def _delta_reset(self):
-        self._delta = {"added_nodes": [], "moved_nodes": [], "removed_tets": [], "added_tets": []}
+        self._delta = {"added_nodes": [], "moved_nodes": [], "removed_tets": [], "added_tets": [], "moved_from": {}}
 
     # ------------------------------------------------------------------ cut state
     def edge_ring(self, e):
@@ -250,6 +264,8 @@ class CutMesh:
         """
         if np.isfinite(self.edge_t[e]):
             return []
+        if int(e) in self.edge_twins:  # a copy along an earlier cut (after a rebase): cut all alike
+            return cut_twins(self, int(e), float(s), self.edge_twins[int(e)])
         faces = self.faces_of_edge(e)
         if any(self.face_ncut[f] >= 2 for f in faces):
             return []
@@ -271,6 +287,13 @@ class CutMesh:
             t = todo.pop()
             for e in self.tet_edges[t].tolist():
                 if e not in self.pending_edges or np.isfinite(self.edge_t[e]):
+                    continue
+                if e in self.edge_twins:  # re-deferred by cut_twins while still not allowed
+                    more = cut_twins(self, e, self.pending_edges.pop(e), self.edge_twins[e])
+                    self.retried_edges.extend([e] if more else [])
+                    todo.extend(u for u in more if u not in seen)
+                    seen.update(more)
+                    touched.extend(more)
                     continue
                 faces = self.faces_of_edge(e)
                 if any(self.face_ncut[f] >= 2 for f in faces):
@@ -341,7 +364,12 @@ class CutMesh:
                 self.face_node[f, 1] = self._new_node(fv, b)
 
     def set_face_crossing(self, f, bary):
-        """Record where the blade crosses face ``f``; moves a notch node F.  Returns changed."""
+        """Record where the blade crosses face ``f`` (and its copies along an earlier cut); moves notch nodes F."""
+        for g in self.face_twins.get(int(f), ()):
+            self._set_face_crossing(g, twin_face_bary(self, int(f), g, bary))
+        return self._set_face_crossing(f, bary)
+
+    def _set_face_crossing(self, f, bary):
         self.face_bary[f] = np.asarray(bary, np.float64)
         if self.face_ncut[f] == 1:
             self._update_face_node(f)

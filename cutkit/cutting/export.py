@@ -5,26 +5,31 @@ from __future__ import annotations
 import numpy as np
 
 from cutkit.cutting.cutmesh import CutMesh
+from cutkit.cutting.rebase import cut_surface_mask, made_by_cut, node_model_source
 
 
 def cut_surface_faces(cm: CutMesh) -> np.ndarray:
-    """(k, 3) int64 boundary triangles of the cut surface (both sides of each cut).
+    """(k, 3) int64 boundary triangles of the cut surface (both sides of each cut, every stroke).
 
-    Every triangle of the Fig. 2 face patterns contains an original
-    vertex, and every cut-surface triangle is made of cut nodes only.  Only
-    sub-tets of cut tets hold cut nodes, so the faces are looked for among
-    them alone: the work follows the size of the cut, not of the mesh.
+    Only tets made by a cut (in this stroke or one before a
+    :meth:`~CutMesh.rebase`) hold cut nodes, so the faces are looked for
+    among them alone: the work follows the size of the cut, not of the
+    mesh.  Which of their boundary triangles are cut surface (not a piece
+    of the model's outer surface, not a face shared with an uncut tet) is
+    told by :func:`cutkit.cutting.rebase.cut_surface_mask`.
     """
     from cutkit.mesh.topology import boundary_faces
 
     m0, total = cm.orig_tets.shape[0], cm.n_tets_total
-    sub_tets = cm._tets[m0:total][cm._alive[m0:total]]
-    if sub_tets.shape[0] == 0:
+    ids = m0 + np.flatnonzero(cm._alive[m0:total])
+    if cm.n_rebases:  # live original tets made by the strokes before the rebase
+        ids = np.concatenate([np.flatnonzero(cm.orig_made_by_cut & cm._alive[:m0]), ids])
+    if ids.shape[0] == 0:
         return np.zeros((0, 3), np.int64)
-    faces, _ = boundary_faces(sub_tets)
-    # A face made only of cut nodes belongs to sub-tets only, so appearing
+    faces, _ = boundary_faces(cm._tets[ids])
+    # A face of the cut surface belongs to cut-made tets only, so appearing
     # once among them it appears once in the whole mesh: it is on the boundary.
-    return faces[(faces >= cm.n_orig_points).all(axis=1)]
+    return faces[cut_surface_mask(cm, faces)]
 
 
 def compact_nodes(tets, n_points):
@@ -94,19 +99,21 @@ def to_model(cm: CutMesh, model=None, points=None, point_data=None):
     tets = new_index[cm._tets[ids]]
     origin = cm._tet_orig[ids]
     pts = (cm.points if points is None else np.asarray(points, np.float64)[:n])[kept]
-    pd = {"new_node": (kept >= cm.n_orig_points).astype(np.uint8)}
-    cd = {"new_tet": (ids >= cm.orig_tets.shape[0]).astype(np.uint8)}
+    # cut-made nodes and tets of every stroke, also those before a rebase
+    pd = {"new_node": (kept >= cm.n_model_points).astype(np.uint8)}
+    cd = {"new_tet": made_by_cut(cm, ids).astype(np.uint8)}
     labels = cm.labels[origin]
     texcoords = None if cm.texcoords is None else cm.texcoords[kept].copy()
     if model is not None:
-        # new nodes take their first defining node's value
-        src = np.where(kept < cm.n_orig_points, kept, cm._def_nodes[kept, 0])
+        # new nodes take their first defining node's value (traced back to the model's nodes)
+        src = node_model_source(cm, kept)
+        mtet = cm.model_tet[origin]
         for k, v in model.point_data.items():
-            if v.shape[0] == cm.n_orig_points and k != "new_node":
+            if v.shape[0] == cm.n_model_points and k != "new_node":
                 pd[k] = v[src]
         for k, v in model.cell_data.items():
-            if v.shape[0] == cm.orig_tets.shape[0] and k != "new_tet":
-                cd[k] = v[origin]
+            if v.shape[0] == cm.n_model_tets and k != "new_tet":
+                cd[k] = v[mtet]
     for k, v in (point_data or {}).items():
         pd[k] = np.asarray(v)[:n][kept]
     if model is not None:

@@ -49,6 +49,7 @@ class StepResult:
     ----------
     added_nodes : (a,) int64   new node ids
     moved_nodes : (b,) int64   existing cut nodes re-interpolated (tip/front)
+    moved_from : (b, 3) float64  their rest positions before the step
     removed_tets : (r,) int64  tet ids (CutMesh numbering) no longer alive
     added_tets : (c,) int64    new tet ids
     cut_edges : (e,) int64     original edges cut in this step
@@ -58,6 +59,7 @@ class StepResult:
 
     added_nodes: np.ndarray
     moved_nodes: np.ndarray
+    moved_from: np.ndarray
     removed_tets: np.ndarray
     added_tets: np.ndarray
     cut_edges: np.ndarray
@@ -74,7 +76,7 @@ def find_trajectory_tetra(cm: CutMesh, start: int, target) -> int:
     return int(KS.walk(cm._x, cm.orig_tets, cm.neighbors, int(start), np.asarray(target, np.float64), MAX_WALK))
 
 
-def _surface_seeds(cm, P0, Q0, P1, Q1):
+def _surface_seeds(cm, P0, Q0, P1, Q1, crack=False):
     """Original tets of the boundary faces the blade met between two poses (surface collision, 4.1).
 
     The whole blade counts, not only its tip: the faces met by the swept
@@ -84,21 +86,31 @@ def _surface_seeds(cm, P0, Q0, P1, Q1):
     is found.  The surface BVH is built on first contact; afterwards it is
     refitted (``SurfaceBVH.update``: only nodes that left their tolerance
     box cost anything) so surface entry follows a deforming mesh.
+
+    With ``crack``, only the cut surface of the strokes before the last
+    :meth:`~CutMesh.rebase` is looked at (its own BVH): the boundary faces
+    the tets across an earlier cut are reached through, since no face
+    adjacency links the two sides.
     """
     from cutkit.collision import swept_faces
 
     pts = cm._x[:cm.n_orig_points]
-    bvh = getattr(cm, "_bvh", None)
+    key = "_crack_bvh" if crack else "_bvh"
+    bvh = getattr(cm, key, None)
     if bvh is None:
         from cutkit.collision import SurfaceBVH
         from cutkit.mesh.topology import boundary_faces
         faces, face_tet = boundary_faces(cm.orig_tets)
-        cm._bvh = bvh = SurfaceBVH.build(pts.copy(), faces)
-        cm._bvh_face_tet = face_tet
+        if crack:
+            keep = [tuple(f) in cm.cut_faces_before for f in np.sort(faces, axis=1).tolist()]
+            faces, face_tet = faces[keep], face_tet[keep]
+        bvh = SurfaceBVH.build(pts.copy(), faces)
+        setattr(cm, key, bvh)
+        setattr(cm, key + "_face_tet", face_tet)
     else:
         bvh.update(pts)
     faces, _ = swept_faces(bvh, pts, P0, Q0, P1, Q1)
-    return cm._bvh_face_tet[faces].tolist()
+    return getattr(cm, key + "_face_tet")[faces].tolist()
 
 
 def _sweep(cm, stamp, seeds, swept, blade, P0):
@@ -166,6 +178,9 @@ def cut_step(cm: CutMesh, tip, a) -> StepResult:
             tip_tet = find_trajectory_tetra(cm, o, P1)
             if tip_tet >= 0:
                 break
+    elif cm.cut_faces_before:
+        # the tip is inside, but the blade may reach across an earlier stroke's cut
+        seeds.extend(_surface_seeds(cm, P0, Q0, P1, Q1, crack=True))
     if tip_tet >= 0:
         seeds.append(tip_tet)
     if cm.tip_tet >= 0:
@@ -205,9 +220,11 @@ def cut_step(cm: CutMesh, tip, a) -> StepResult:
     cm.tip_tet = tip_tet
     cm.prev_pose = (P1, Q1)
     d = cm._delta
+    moved = np.unique(np.array(d["moved_nodes"], np.int64))
     return StepResult(
         added_nodes=np.array(d["added_nodes"], np.int64),
-        moved_nodes=np.unique(np.array(d["moved_nodes"], np.int64)),
+        moved_nodes=moved,
+        moved_from=np.array([d["moved_from"][i] for i in moved.tolist()], np.float64).reshape(-1, 3),
         removed_tets=np.array(d["removed_tets"], np.int64),
         added_tets=np.array(d["added_tets"], np.int64),
         cut_edges=np.array(cut_edges, np.int64),

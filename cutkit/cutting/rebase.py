@@ -1,0 +1,209 @@
+"""Rebase a cut mesh between strokes, so that a later cut may cross an earlier one.
+
+The cut state of :class:`~cutkit.cutting.cutmesh.CutMesh` is kept per
+*original* edge, face and tetrahedron (one cut node pair per edge, one
+subdivision per tetrahedron), so a tetrahedron is cut once.  When the blade
+has left the tissue, no cut is in progress and nothing of that state is
+needed any more: :func:`rebase` makes the current live tetrahedra the
+original ones of a fresh cut state.  The next stroke then cuts the
+sub-tetrahedra of the earlier strokes like any tetrahedra, and a through X
+gives four pieces.
+
+Node ids do not change (every current node becomes an original node, so
+per-node arrays held elsewhere stay valid); tetrahedron ids are renumbered
+(the live ones in ascending order of their old ids).  What must outlive a
+rebase is kept as records on the CutMesh (:func:`init_records`): the node
+and tetrahedron counts of the model as loaded, the model tetrahedron of
+each original tetrahedron, which original tetrahedra and faces were made by
+earlier cuts, and the model node each node takes point data from.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def init_records(cm, n_model_points, n_model_tets):
+    """Records of the model as loaded, on a new CutMesh (nothing cut yet, no rebase).
+
+    Sets on ``cm``:
+
+    * ``n_model_points`` : int, nodes of the model as loaded; nodes with a
+      larger id were made by cuts (kept across rebases).
+    * ``n_model_tets`` : int, tetrahedra of the model as loaded.
+    * ``model_tet`` : (m0,) int64, model tetrahedron of each original tet.
+    * ``orig_made_by_cut`` : (m0,) bool, original tet made by an earlier stroke.
+    * ``model_node`` : (n0,) int64, model node each original node takes point
+      data from (itself for a model node, its first defining node's for a cut node).
+    * ``cut_faces_before`` : set of sorted (3,) tuples, faces of the original
+      tets that are cut surface of earlier strokes.
+    * ``n_rebases`` : int.
+    """
+    cm.n_model_points = int(n_model_points)
+    cm.n_model_tets = int(n_model_tets)
+    cm.model_tet = np.arange(n_model_tets, dtype=np.int64)
+    cm.orig_made_by_cut = np.zeros(n_model_tets, bool)
+    cm.model_node = np.arange(n_model_points, dtype=np.int64)
+    cm.cut_faces_before = set()
+    cm.n_rebases = 0
+    cm.node_rep = np.arange(n_model_points, dtype=np.int64)  # see _node_reps
+    cm.edge_twins, cm.face_twins = {}, {}  # see find_twins
+
+
+def made_by_cut(cm, ids):
+    """(k,) bool: whether each tet of ``ids`` (k,) int64 (CutMesh numbering) was made by a cut, in any stroke."""
+    ids = np.asarray(ids, np.int64)
+    return (ids >= cm.orig_tets.shape[0]) | cm.orig_made_by_cut[cm._tet_orig[ids]]
+
+
+def node_model_source(cm, nodes):
+    """(k,) int64 model node each of ``nodes`` (k,) int64 takes point data from.
+
+    A node made in the current stroke takes its first defining (original)
+    node's source; an original node its recorded one.
+    """
+    nodes = np.asarray(nodes, np.int64)
+    first = np.where(nodes < cm.n_orig_points, nodes, cm._def_nodes[nodes, 0])
+    return cm.model_node[first]
+
+
+def cut_surface_mask(cm, faces):
+    """(k,) bool: which boundary triangles ``faces`` (k, 3) int64 of cut-made tets are cut surface.
+
+    A triangle made of nodes of the current stroke only is on its cut
+    surface (every triangle of the Fig. 2 face patterns holds a vertex of
+    the original face it lies in).  Any other triangle lies in one face of
+    the original tets: the face of the triangle's original vertices and the
+    defining nodes of its cut nodes; it is cut surface when that face was
+    (``cut_faces_before``, kept by :func:`rebase`).
+    """
+    faces = np.asarray(faces, np.int64).reshape(-1, 3)
+    new = faces >= cm.n_orig_points
+    out = new.all(axis=1)
+    if not cm.cut_faces_before:
+        return out
+    for i in np.flatnonzero(~out).tolist():
+        support = set()
+        for q in faces[i].tolist():
+            if q < cm.n_orig_points:
+                support.add(q)
+            else:
+                support.update(d for d in cm._def_nodes[q].tolist() if d >= 0)
+        out[i] = len(support) == 3 and tuple(sorted(support)) in cm.cut_faces_before
+    return out
+
+
+def rebase(cm):
+    """Make the live tetrahedra of ``cm`` the original ones of a fresh cut state (in place).
+
+    Call it only while no cut is in progress (the blade out of the tissue):
+    the crack fronts, tip nodes and the blade's previous pose are dropped.
+
+    Parameters
+    ----------
+    cm : CutMesh
+
+    Returns
+    -------
+    old_ids : (k,) int64
+        Old tet id (CutMesh numbering before the call) of each new original
+        tetrahedron ``i``; node ids are unchanged.
+    """
+    from cutkit.cutting.cutmesh import CutMesh
+    from cutkit.cutting.export import cut_surface_faces
+
+    cut_faces = {tuple(f) for f in np.sort(cut_surface_faces(cm), axis=1).tolist()}
+    n = cm.n_points
+    ids = np.flatnonzero(cm._alive[:cm.n_tets_total])
+    origin = cm._tet_orig[ids]
+    made = made_by_cut(cm, ids)
+    model_node = node_model_source(cm, np.arange(n))
+    fresh = CutMesh(cm._x[:n], cm._tets[ids], rest_points=cm._X[:n],
+                    texcoords=None if cm._uvw is None else cm._uvw[:n], labels=cm.labels[origin],
+                    blade_length=cm.blade_length, centre_nodes=cm.centre_nodes, compact_splits=cm.compact_splits)
+    fresh.n_model_points, fresh.n_model_tets = cm.n_model_points, cm.n_model_tets
+    fresh.model_tet = cm.model_tet[origin]
+    fresh.orig_made_by_cut = made
+    fresh.model_node = model_node
+    fresh.cut_faces_before = cut_faces
+    fresh.n_rebases = cm.n_rebases + 1
+    fresh.step_count = cm.step_count
+    fresh.node_rep = _node_reps(cm)
+    find_twins(fresh)
+    # replace the whole state: caches keyed by the old numbering (surface BVH, sweep buffers) go too
+    vars(cm).clear()
+    vars(cm).update(vars(fresh))
+    return ids
+
+
+def _node_reps(cm):
+    """(n_points,) int64 the lowest id among each node's coincident copies (the two sides of a cut).
+
+    Copies of a cut node are made with the same defining nodes and weights
+    (edge nodes, centre nodes, the T nodes of a complete split), so their
+    definitions, taken on the defining nodes' own representatives, are equal.
+    """
+    rep = np.arange(cm.n_points, dtype=np.int64)
+    rep[:cm.n_orig_points] = cm.node_rep
+    seen = {}
+    for i in range(cm.n_orig_points, cm.n_points):
+        d = cm._def_nodes[i]
+        key = tuple(sorted((int(rep[q]), float(w)) for q, w in zip(d.tolist(), cm._def_w[i].tolist()) if q >= 0))
+        rep[i] = seen.setdefault(key, i)
+    return rep
+
+
+def _twins(rows, rep):
+    """Dict: row -> the other rows (k, c) int64 of ``rows`` whose nodes' representatives are the same."""
+    keys = np.sort(rep[rows], axis=1)
+    _, inv, cnt = np.unique(keys, axis=0, return_inverse=True, return_counts=True)
+    inv = inv.ravel()
+    order = np.argsort(inv, kind="stable")
+    groups = np.split(order, np.cumsum(cnt)[:-1])
+    out = {}
+    for members in (g.tolist() for g in groups if g.size > 1):
+        for r in members:
+            out[r] = [q for q in members if q != r]
+    return out
+
+
+def find_twins(cm):
+    """Set ``cm.edge_twins`` and ``cm.face_twins``: coincident copies of edges and faces along earlier cuts.
+
+    The two sides of an earlier cut hold coincident copies of the same
+    edges and faces; a later stroke must cut them alike, or a node on one
+    side would lie inside a face of the other (a hanging node).
+    """
+    cm.edge_twins = _twins(cm.edges, cm.node_rep)
+    cm.face_twins = _twins(cm.faces, cm.node_rep)
+
+
+def cut_twins(cm, e, s, twins):
+    """Cut edge ``e`` at parameter ``s`` together with its coincident copies ``twins`` (list); returns touched tets.
+
+    All are cut, at the same point, or none: refused when one is cut
+    already or would give some face a third cut edge, deferred (kept in
+    ``pending_edges`` under ``e``) when one would split a sheet (see
+    :meth:`CutMesh.try_cut_edge`).
+    """
+    group = [e] + list(twins)
+    faces = [cm.faces_of_edge(g) for g in group]
+    if any(np.isfinite(cm.edge_t[g]) for g in group) or any(cm.face_ncut[f] >= 2 for fs in faces for f in fs):
+        return []
+    if any(cm._splits_a_sheet(g) for g in group):
+        cm.pending_edges.setdefault(e, s)
+        return []
+    first = cm.node_rep[cm.edges[e, 0]]
+    touched = []
+    for g, fs in zip(group, faces):
+        cm.pending_edges.pop(g, None)
+        # a copy numbered the other way round is cut at 1 - s (the clamp is symmetric)
+        touched += cm._cut_edge(g, s if cm.node_rep[cm.edges[g, 0]] == first else 1.0 - s, fs)
+    cm._retry_pending(touched)
+    return touched
+
+
+def twin_face_bary(cm, f, g, bary):
+    """(3,) float64 barycentric weights ``bary`` (3,) on face ``f`` re-ordered for its coincident copy ``g``."""
+    rf = cm.node_rep[cm.faces[f]].tolist()
+    return np.array([bary[rf.index(r)] for r in cm.node_rep[cm.faces[g]].tolist()])
