@@ -28,7 +28,6 @@ TREMORS = (0.0, 0.1, 0.3, 1.0)
 
 
 def measure(p, t, poses, blade_length=10.0):
-    from _cut_paths import lift
     from cutkit.cutting import CutMesh, cut_step, to_model
     from cutkit.cutting._kernels import edge_cross
     from cutkit.mesh.quality import min_dihedral_angles
@@ -37,7 +36,8 @@ def measure(p, t, poses, blade_length=10.0):
     crossed = set()
     for pose in poses:
         if pose is None:
-            lift(cm)
+            # the blade leaves without a rebase: losses are counted on the original edges
+            cm.prev_pose, cm.tip_tet, cm.active_tets = None, -1, np.zeros(0, np.int64)
             continue
         prev = cm.prev_pose
         cut_step(cm, *pose)
