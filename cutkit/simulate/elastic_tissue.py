@@ -48,8 +48,11 @@ STEP_MAX_ITERATIONS = 50
 SETTLE_RTOL = 1e-3
 
 
-#: A new node within this (barycentric) distance of a removed tet is placed by its deformation.
-PLACE_TOLERANCE = 1e-9
+#: A new or moved node within this (barycentric) distance outside the nearest tet of the
+#: old shape is placed by that tet's affine map extended; farther, by its defining nodes.
+PLACE_REACH = 0.5
+#: Most (node, tet) pairs whose barycentric weights are held at once when placing nodes.
+PLACE_BLOCK = 1 << 18
 
 
 class ElasticTissue(TissueBase):
@@ -183,14 +186,21 @@ class ElasticTissue(TissueBase):
         both = np.intersect1d(added, removed)  # made and unmade within one step: never simulated
         added, removed = np.setdiff1d(added, both), np.setdiff1d(removed, both)
         moved = np.asarray(res.moved_nodes, np.int64)
+        old_moved = moved[moved < n_old]
+        around = (np.unique(np.concatenate([em.adj_tets[k, : em.adj_degree[k]] for k in old_moved]).astype(np.int64))
+                  if old_moved.size else np.zeros(0, np.int64))
+        # the tissue as it was before the step, piecewise affine over the removed tets and those
+        # around moved nodes: new and moved nodes are placed in it (see _through_old_shape)
+        old_shape = self._old_shape(np.union1d(removed, around), old_moved,
+                                    np.asarray(res.moved_from, np.float64)[moved < n_old])
+        x_moved = self._through_old_shape(old_shape, old_moved)
         if n_new > n_old:
-            self._append_nodes(np.arange(n_old, n_new), removed)
+            self._append_nodes(np.arange(n_old, n_new), old_shape)
         # tets of moved nodes (and not otherwise touched) get their rest shape again
         again = np.zeros(0, np.int64)
-        if moved.size:
-            self.state.positions[moved] = self.interpolate_positions(moved)
-            around = [em.adj_tets[k, : em.adj_degree[k]] for k in moved]
-            again = np.setdiff1d(np.concatenate(around).astype(np.int64), np.concatenate([added, removed]))
+        if old_moved.size:
+            self.state.positions[old_moved] = x_moved
+            again = np.setdiff1d(around, np.concatenate([added, removed]))
         em.remove_elements(np.concatenate([removed, again]))
         redo = np.concatenate([added, again])
         if redo.size:
@@ -208,42 +218,81 @@ class ElasticTissue(TissueBase):
         return {"nodes_added": int(n_new - n_old), "elements_added": int(added.size),
                 "elements_removed": int(removed.size)}
 
-    def _append_nodes(self, new: np.ndarray, removed: np.ndarray) -> None:
+    def _append_nodes(self, new: np.ndarray, old_shape) -> None:
         em, st = self.em, self.state
         par, w, valid = self._interpolation_weights(new)
         held = np.all(~valid | self.bc_fixed[par], axis=1)  # a node between held nodes only is held too
         damping = (w * em.damping[par]).sum(axis=1)
         vel = np.einsum("pq,pqc->pc", w, st.velocities[par])
-        x = self._place(new, removed)
+        x = self._through_old_shape(old_shape, new)
         self.bc_fixed = np.concatenate([self.bc_fixed, held])
         em.add_nodes(new.size, damping=damping, fixed=held)
         st.positions = np.concatenate([st.positions, x])
         st.velocities = np.concatenate([st.velocities, np.where(held[:, None], 0.0, vel)])
 
-    def _place(self, new: np.ndarray, removed: np.ndarray) -> np.ndarray:
-        """Current positions of new nodes: through the deformation of a removed tet whose rest
-        shape holds them (the sub-tets of a tet are then the pieces of its deformed shape, never
-        folded over), else from their defining nodes."""
+    def _old_shape(self, tets: np.ndarray, moved: np.ndarray, moved_from: np.ndarray):
+        """Rest and current corners of tets as they were before a cut step moved some of their nodes.
+
+        Parameters
+        ----------
+        tets : (r,) int64
+            Cut-mesh tet ids alive before the step (removed ones included).
+        moved : (b,) int64
+            Nodes the step moved in the rest configuration.
+        moved_from : (b, 3) float64
+            Their rest positions before the step.
+
+        Returns
+        -------
+        (X, x) : (r, 4, 3) float64 each
+            Rest and current corners; tets with no rest volume are left out.
+        """
         cm = self.cm
-        x = self.interpolate_positions(new)
-        q = cm._tets[removed]
+        q = cm._tets[tets]
         q = q[np.all(q < self.state.positions.shape[0], axis=1)]
-        if q.size == 0:
-            return x
-        X = cm._X[q]  # (r, 4, 3) rest corners
+        X = cm._X[q]
+        if moved.size:
+            order = np.argsort(moved)
+            k = np.searchsorted(moved[order], q)
+            k = np.minimum(k, moved.size - 1)
+            hit = moved[order][k] == q
+            X[hit] = moved_from[order][k[hit]]
+        x = self.state.positions[q]
         T = np.stack([X[:, 1] - X[:, 0], X[:, 2] - X[:, 0], X[:, 3] - X[:, 0]], axis=2)
         ok = np.abs(np.linalg.det(T)) > 0
-        q, X, T = q[ok], X[ok], T[ok]
-        if q.size == 0:
+        return X[ok], x[ok]
+
+    def _through_old_shape(self, old_shape, nodes: np.ndarray) -> np.ndarray:
+        """Current positions of nodes at their (new) rest positions, through the old shape.
+
+        The old shape is the deformation of the tets before the step: each is
+        affine, so the new sub-tets of a tet, pieces of its rest shape, are
+        pieces of its deformed shape and never folded over.  A node inside
+        none of them takes the affine map of the
+        nearest one (the largest smallest weight), extended, if it lies within
+        :data:`PLACE_REACH` of it, else its interpolation over its defining
+        nodes.
+
+        Returns
+        -------
+        x : (p, 3) float64
+        """
+        x = self.interpolate_positions(nodes)
+        X, xc = old_shape
+        if X.shape[0] == 0 or nodes.size == 0:
             return x
-        lam = np.einsum("rij,prj->pri", np.linalg.inv(T), cm._X[new][:, None, :] - X[None, :, 0])  # (p, r, 3)
-        bary = np.concatenate([1.0 - lam.sum(axis=2, keepdims=True), lam], axis=2)  # (p, r, 4)
-        worst = bary.min(axis=2)
-        best = np.argmax(worst, axis=1)
-        inside = worst[np.arange(new.size), best] >= -PLACE_TOLERANCE
-        b = bary[np.arange(new.size), best]
-        cur = self.state.positions[q[best]]  # (p, 4, 3)
-        return np.where(inside[:, None], np.einsum("pk,pkc->pc", b, cur), x)
+        Tinv = np.linalg.inv(np.stack([X[:, 1] - X[:, 0], X[:, 2] - X[:, 0], X[:, 3] - X[:, 0]], axis=2))
+        chunk = max(1, PLACE_BLOCK // X.shape[0])  # (chunk, r, 4) barycentric weights at a time
+        for lo in range(0, nodes.size, chunk):
+            p = slice(lo, min(lo + chunk, nodes.size))
+            lam = np.einsum("rij,prj->pri", Tinv, self.cm._X[nodes[p]][:, None, :] - X[None, :, 0])
+            bary = np.concatenate([1.0 - lam.sum(axis=2, keepdims=True), lam], axis=2)
+            worst = bary.min(axis=2)
+            best = np.argmax(worst, axis=1)
+            rows = np.arange(best.size)
+            reach = worst[rows, best] >= -PLACE_REACH
+            x[p] = np.where(reach[:, None], np.einsum("pk,pkc->pc", bary[rows, best], xc[best]), x[p])
+        return x
 
     def _hold_orphans(self) -> None:
         """Nodes no tet uses any more stay where they are; nodes with tets are free unless held by a condition."""
