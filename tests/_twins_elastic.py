@@ -10,12 +10,24 @@ def deformation_gradients(x, tets, Dminv):
     return Ds @ Dminv
 
 
+BARRIER_J = 0.1  # as cutkit.relax._elastic_kernels.BARRIER_J
+
+
+def barrier(J, k):
+    """-k (J - Jb)^2 ln(J / Jb) for 0 < J < Jb, else 0, and its derivative in J (by sympy-free hand)."""
+    inside = (J > 0) & (J < BARRIER_J)
+    Js = np.where(inside, J, BARRIER_J)
+    d, ln = Js - BARRIER_J, np.log(Js / BARRIER_J)
+    return np.where(inside, -k * d * d * ln, 0.0), np.where(inside, -k * (2 * d * ln + d * d / Js), 0.0)
+
+
 def energy(x, tets, Dminv, volume, mu, lam):
-    """sum V [mu/2 (|F|^2 - 3) - mu (J - 1) + (lam + mu)/2 (J - 1)^2]."""
+    """sum V [mu/2 (|F|^2 - 3) - mu (J - 1) + (lam + mu)/2 (J - 1)^2 + b(J)]."""
     F = deformation_gradients(x, tets, Dminv)
     J = np.linalg.det(F)
     ic = np.einsum("mij,mij->m", F, F)
-    return float(np.sum(volume * (0.5 * mu * (ic - 3.0) - mu * (J - 1.0) + 0.5 * (lam + mu) * (J - 1.0) ** 2)))
+    psi = 0.5 * mu * (ic - 3.0) - mu * (J - 1.0) + 0.5 * (lam + mu) * (J - 1.0) ** 2 + barrier(J, lam + mu)[0]
+    return float(np.sum(volume * psi))
 
 
 def forces(x, tets, Dminv, volume, mu, lam):
@@ -23,7 +35,7 @@ def forces(x, tets, Dminv, volume, mu, lam):
     F = deformation_gradients(x, tets, Dminv)
     J = np.linalg.det(F)
     G = J[:, None, None] * np.linalg.inv(F).transpose(0, 2, 1)
-    P = mu[:, None, None] * F + ((lam + mu) * (J - 1.0) - mu)[:, None, None] * G
+    P = mu[:, None, None] * F + ((lam + mu) * (J - 1.0) - mu + barrier(J, lam + mu)[1])[:, None, None] * G
     # dF/dx_j = I (x) b_j, b_j = row j-1 of Dminv, b_0 = -sum
     B = np.concatenate([-Dminv.sum(axis=1, keepdims=True), Dminv], axis=1)  # (m, 4, 3)
     g = np.einsum("mrc,mjc->mjr", P, B) * volume[:, None, None]  # (m, 4, 3) dW/dx_j

@@ -15,6 +15,7 @@ from cutkit.relax.elastic import (
     elastic_forces,
     implicit_step,
     lame,
+    local_step,
     rest_shape,
     static_solve,
 )
@@ -94,6 +95,68 @@ def test_energy_is_exactly_quadratic_in_one_vertex_even_through_inversion(deform
     e = [elastic_energy(em, np.where(np.arange(len(x))[:, None] == i, x + s * d, x)) for s in (-3, -1, 1, 3)]
     third = e[3] - 3 * e[2] + 3 * e[1] - e[0]
     assert abs(third) < 1e-9 * max(abs(v) for v in e)
+
+
+def crushed(model, em, J):
+    """The block with node 0's tets' first tet flattened to volume ratio J by moving its corner 0."""
+    t = em.tets[0]
+    x = model.points.copy()
+    p = x[t]
+    n = np.cross(p[2] - p[1], p[3] - p[1])
+    n /= np.linalg.norm(n)
+    height = np.dot(p[0] - p[1], n)
+    x[t[0]] -= (1.0 - J) * height * n  # J is affine in one corner: scale its height over the opposite face
+    return x, t
+
+
+def test_barrier_forces_match_the_twin_and_the_energy_gradient():
+    """A tet crushed to J = 0.04 is inside the barrier band: kernel and twin agree, forces are -grad W."""
+    model = block()
+    em = build_element_model(model)
+    x, t = crushed(model, em, 0.04)
+    F = T.deformation_gradients(x, em.tets[:1], em.Dminv[:1])
+    assert np.linalg.det(F)[0] == pytest.approx(0.04 * np.linalg.det(T.deformation_gradients(
+        model.points, em.tets[:1], em.Dminv[:1]))[0], rel=1e-9)
+    assert elastic_energy(em, x) == pytest.approx(T.energy(x, *arrays(em)), rel=1e-12)
+    assert np.allclose(elastic_forces(em, x), T.forces(x, *arrays(em)), atol=1e-14, rtol=1e-10)
+    h = 1e-7
+    i = int(t[0])
+    f = elastic_forces(em, x)[i]
+    for c in range(3):
+        xp, xm = x.copy(), x.copy()
+        xp[i, c] += h
+        xm[i, c] -= h
+        grad = (elastic_energy(em, xp) - elastic_energy(em, xm)) / (2 * h)
+        assert -grad == pytest.approx(f[c], rel=1e-5, abs=1e-6 * np.abs(f).max())
+
+
+def test_barrier_energy_grows_without_bound_as_a_tet_is_crushed():
+    model = block()
+    em = build_element_model(model)
+    W = [elastic_energy(em, crushed(model, em, J)[0]) for J in (0.2, 0.1, 1e-2, 1e-4, 1e-8)]
+    assert W[0] < W[1] < W[2] < W[3] < W[4]
+    # the stable neo-Hookean part alone levels off as J -> 0; the barrier grows like -ln J:
+    # J from 1e-4 to 1e-8 (four decades) costs about twice what 1e-2 to 1e-4 (two) does
+    assert W[4] - W[3] > 1.3 * (W[3] - W[2])
+
+
+def test_a_point_load_does_not_crush_a_tet():
+    """A node pressed into the fixed base by a load far above what the tissue can carry (the blade
+    before it enters): every tet keeps a volume ratio well above rounding after 200 steps."""
+    model = block(shape=(3, 3, 2))
+    em = build_element_model(model)
+    em.fixed[model.points[:, 2] == 0] = True
+    em._classes = None
+    top = int(np.flatnonzero((model.points[:, 2] == model.points[:, 2].max()))[4])
+    f = np.zeros_like(model.points)
+    f[top, 2] = -0.3  # N: ten times E over a 1 mm^2 face (E = 30 kPa)
+    st = ElementState(model.points.copy(), np.zeros_like(model.points))
+    r2 = np.zeros(em.n_nodes)
+    for _ in range(200):  # as the tissue steps (the sweeps start from the last positions)
+        local_step(em, st, 0.01, f, r2, np.arange(em.n_nodes), atol=1e-9, max_iterations=50)
+    J = np.linalg.det(T.deformation_gradients(st.positions, *arrays(em)[:2]))
+    assert J.min() > 1e-3
+    assert st.positions[top, 2] < 0.5 * model.points[top, 2]  # the load did squash the block
 
 
 def test_sweep_matches_the_twin_in_colour_order(deformed):
