@@ -320,3 +320,37 @@ class ElasticTissue(TissueBase):
             if clash.any():
                 em.recolour(np.unique(q[clash]))
         em._classes = None
+
+    # ------------------------------------------------------------ strokes
+    def rebase(self, old_of_new: np.ndarray, old_orig: np.ndarray) -> None:
+        """Follow :meth:`CutMesh.rebase <cutkit.cutting.CutMesh.rebase>` (called after it, between strokes).
+
+        The live tets became the original tets ``0 .. m-1`` of a fresh cut
+        state.  The per-original-tet materials follow (each new original tet
+        keeps the material, prestrain and fibre of the old original tet it
+        was cut from), and the elements are built again on the new
+        numbering from the cut mesh's rest positions (the same rest shapes;
+        masses summed again from them).  Node data stay: damping, fixed
+        flags, colours, positions, velocities (node ids do not change).
+
+        Parameters
+        ----------
+        old_of_new : (m,) int64
+            Old CutMesh tet id of each new original tet.
+        old_orig : (m,) int64
+            Old original tet of each (``old _tet_orig[old_of_new]``).
+        """
+        cm, old = self.cm, self.em
+        old_orig = np.asarray(old_orig, np.int64)
+        self.mu, self.lam, self.density = self.mu[old_orig], self.lam[old_orig], self.density[old_orig]
+        self.prestrain, self.fibre = self.prestrain[old_orig], self.fibre[old_orig]
+        m = int(np.asarray(old_of_new).shape[0])
+        self.n_orig_tets = m
+        n = old.n_nodes
+        em = ElementModel.empty(n, cm._tets.shape[0])
+        em.add_elements(cm._X[:n], cm.orig_tets, self.mu, self.lam, self.density, self.prestrain, self.fibre,
+                        ids=np.arange(m))
+        em.damping[:] = old.damping
+        em.fixed[:] = old.fixed
+        em.colour[:] = old.colour  # the same tets on the same nodes: the colouring stays valid
+        self.em = em

@@ -19,6 +19,8 @@ class OuterBoundary:
     Uncut original tets keep their boundary faces; among the sub-tets of cut
     tets a boundary face is outer when it has an original and a cut node (a
     piece of a subdivided face) or is an intact original boundary face.
+    After a rebase (:meth:`rebase`) the original tets' boundary holds the
+    earlier strokes' cut surface too: it is left out, and so are pieces of it.
     """
 
     def __init__(self, cm, faces, face_tet):
@@ -36,6 +38,7 @@ class OuterBoundary:
     def get(self, version: int):
         if version == self.version:
             return self.value
+        from cutkit.cutting.rebase import cut_surface_mask
         from cutkit.mesh.topology import boundary_faces
 
         cm = self.cm
@@ -48,6 +51,7 @@ class OuterBoundary:
             f, _ = boundary_faces(sub)
             is_orig = f < self.n0
             mixed = is_orig.any(axis=1) & ~is_orig.all(axis=1)
+            mixed[mixed] = ~cut_surface_mask(cm, f[mixed])  # not a piece of an earlier stroke's cut surface
             whole = is_orig.all(axis=1)
             whole_outer = whole.copy()
             whole_outer[whole] = np.isin(self._key(f[whole]), self.keys)
@@ -55,6 +59,24 @@ class OuterBoundary:
         self.value = np.ascontiguousarray(np.concatenate(parts), np.int64)
         self.version = version
         return self.value
+
+    def rebase(self, old_of_new=None) -> None:
+        """Follow a :meth:`Session.rebase <cutkit.simulate.session.Session.rebase>`: the outer faces on the new original tets.
+
+        The boundary of the new original tets (the contact's) without the
+        earlier strokes' cut surface; every node is an original node now.
+        """
+        from cutkit.cutting.rebase import cut_surface_mask
+        from cutkit.mesh.topology import boundary_faces
+
+        cm = self.cm
+        faces, face_tet = boundary_faces(cm.orig_tets)
+        outer = ~cut_surface_mask(cm, faces)
+        self.faces, self.face_tet = faces[outer], face_tet[outer]
+        self.n0 = cm.n_orig_points
+        self.keys = np.sort(self._key(self.faces))
+        self.version = None
+        self.value = self.faces
 
 
 class LiveLoop:
@@ -86,6 +108,7 @@ class LiveLoop:
         self.forces = ForceRecorder(1 << 14)
         self.colours = NodeColours(model, s.tis.cm)
         self.boundary = OuterBoundary(s.tis.cm, s.contact.faces, s.contact.face_tet)
+        s.on_rebase.append(self.boundary.rebase)
         self.frame_period = 1.0 / float(fps)
         self.geo_period = 1.0 / self.opt.geometry_rate_hz
         self.pose = None  # newest (tip, a, n, arrival)
@@ -194,9 +217,9 @@ class LiveLoop:
 
     def _geometry(self) -> None:
         s = self.session
-        before = len(s.tis.cm.subtets), s.tis.n_nodes
+        before = s.tets_cut, s.tis.n_nodes
         self.relax.f_ext = s.geometry_update()
-        if (len(s.tis.cm.subtets), s.tis.n_nodes) != before and self.pose is not None:
+        if (s.tets_cut, s.tis.n_nodes) != before and self.pose is not None:
             self.pending_cut.append(self.pose[3])
         if s.scalpel.code == FREE:  # the hierarchy serves the entry test: refit to the relaxed surface
             s.refit()
@@ -215,7 +238,7 @@ class LiveLoop:
         if cm.n_points > points.shape[0]:
             ahead = np.arange(points.shape[0], cm.n_points)
             points = np.concatenate([points, s.tis.interpolate_positions(ahead)])
-        version = cm.n_tets_total
+        version = (cm.n_rebases, cm.n_tets_total)
         if version != self.faces_version:
             self.faces = cut_surface_faces(cm), self.boundary.get(version)
             self.faces_version = version

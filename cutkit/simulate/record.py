@@ -36,6 +36,7 @@ class FrameRecorder:
     def show(self, t: float) -> None:
         """Write the tissue and its cut surface at time ``t``."""
         from cutkit.cutting import compact_nodes, cut_surface_faces
+        from cutkit.cutting.rebase import made_by_cut
 
         s = self.session
         t1 = time.perf_counter()
@@ -49,9 +50,10 @@ class FrameRecorder:
             positions = tis.positions.copy()
             labels = cm.labels[cm._tet_orig[ids]].astype(np.int32)
             surf_faces = cut_surface_faces(cm)
+            made = made_by_cut(cm, ids)  # in any stroke
         if rgb is not None:
             pd["texture_rgb"] = rgb
-        cd = {"label": labels, "new_tet": (ids >= tis.n_orig_tets).astype(np.uint8)}
+        cd = {"label": labels, "new_tet": made.astype(np.uint8)}
         kept, new_index = compact_nodes(tets, n)  # no orphan node in a frame
         self.series.write(t, positions[kept], new_index[tets], point_data={k: v[kept] for k, v in pd.items()},
                           cell_data=cd)
@@ -160,15 +162,14 @@ def summary(session, *, model_path, loop_wall: float, t_traj_end, opening_at_tra
     tis, counts, task_s, opt = session.tis, session.counts, session.task_s, session.opt
     cm = tis.cm
     simulated = tis.time
-    n_cut = len(cm.subtets)
-    new_tets = int(sum(len(v) for v in cm.subtets.values()))
+    n_cut, new_tets = session.tets_cut, session.new_tets  # summed over the strokes
     opening = session.opening()
     loop_wall = max(loop_wall, 1e-12)
     work = task_s["haptics"] + task_s["collision_and_cut"] + task_s["relaxation"]
     out = {
         "model": model_path,
-        "tets_initial": int(tis.n_orig_tets),
-        "nodes_initial": int(cm.n_orig_points),
+        "tets_initial": int(cm.n_model_tets),
+        "nodes_initial": int(cm.n_model_points),
         "tets_final": int(cm._alive[:cm.n_tets_total].sum()),
         "nodes_final": tis.n_nodes,
         "material_model": session.material_model,
@@ -176,6 +177,7 @@ def summary(session, *, model_path, loop_wall: float, t_traj_end, opening_at_tra
         "cut_tets": n_cut,
         "new_tets": new_tets,
         "new_tets_per_cut_tet": (new_tets / n_cut) if n_cut else 0.0,
+        "rebases": int(session.cut_before["rebases"]),
         "states": list(session.states_seen),
         "frames": int(frames),
         "pictures": [],
@@ -213,7 +215,7 @@ def closing_warnings(session) -> None:
     """The warnings a finished session adds: no touch, or a touch without a cut."""
     if session.counts["entries"] == 0:
         session.warnings.append("the trajectory never touches the tissue: no cut")
-    elif not session.tis.cm.subtets:
+    elif not session.tets_cut:
         session.warnings.append("the blade touched the tissue but never cut it (F_enter not reached)")
 
 

@@ -114,15 +114,10 @@ class ContactTask:
     """
 
     def __init__(self, tissue, model, blade_length: float):
-        from cutkit.collision import SurfaceBVH
-        from cutkit.mesh.topology import boundary_faces
-
         self.tis = tissue
-        self.n0 = tissue.cm.n_orig_points
-        self.faces, self.face_tet = boundary_faces(tissue.cm.orig_tets)
-        self.bvh = SurfaceBVH.build(tissue.positions[:self.n0].copy(), self.faces)
+        self.materials = model.materials
         self.rows = model.materials.rows()
-        self.row_of_tet = model.materials.row_of(tissue.cm.labels)
+        self.rebase()
         self.blade_length = float(blade_length)
         self.contact = Contact()
         self.first_plane = None
@@ -164,6 +159,23 @@ class ContactTask:
     def refit(self) -> None:
         """Refit the hierarchy to the relaxed surface (it serves the entry test)."""
         self.bvh.update(self.tis.positions[:self.n0])
+
+    def rebase(self) -> None:
+        """(Re)build the boundary and its hierarchy from the original tets of the cut mesh.
+
+        Called at the start and after every :meth:`Session.rebase`: then the
+        original tets are the live ones, so the cut surface of the earlier
+        strokes is tissue surface too (the blade may enter through it), and
+        every node (``n0``) is an original node.
+        """
+        from cutkit.collision import SurfaceBVH
+        from cutkit.mesh.topology import boundary_faces
+
+        cm = self.tis.cm
+        self.n0 = cm.n_orig_points
+        self.faces, self.face_tet = boundary_faces(cm.orig_tets)
+        self.bvh = SurfaceBVH.build(self.tis.positions[:self.n0].copy(), self.faces)
+        self.row_of_tet = self.materials.row_of(cm.labels)
 
 
 class CutTask:
@@ -314,6 +326,11 @@ class Session:
         self.task_s = dict.fromkeys(("setup", "settle", "haptics", "collision_and_cut", "relaxation", "output"), 0.0)
         self.counts = {"cut_steps": 0, "geometry_updates": 0, "haptic_ticks": 0, "relax_passes": 0,
                        "nodes_added": 0, "entries": 0}
+        # strokes: what the strokes before the last rebase cut, and who follows a rebase
+        self.rebase_due = False
+        self.cut_before = {"cut_tets": 0, "new_tets": 0, "rebases": 0}
+        self.pairs_before = np.zeros((0, 2), np.int64)
+        self.on_rebase: list = []
         self.material_model = opt.material_model or model.materials.material_model
         self.tis = make_tissue(model, self.material_model, opt, blade_length)
         if not self.tis.fixed.any():
@@ -351,6 +368,7 @@ class Session:
         if sc.code != FREE and self.contact.left(tip):
             sc.leave()
             self.cut.leave()
+            self.rebase_due = True  # at the next geometry update (see rebase_if_left)
         self.note_state(sc.code)
         self.cut.note(sc.code)
         self.counts["haptic_ticks"] += 1
@@ -366,6 +384,7 @@ class Session:
         """Collision and cut at the proxy; returns the forces on the tissue for the relaxation."""
         tg = time.perf_counter()
         f_ext = self.cut.step(self.scalpel.proxy, self.out, self.scalpel.code, self.contact.contact)
+        self.rebase_if_left()
         self.counts["geometry_updates"] += 1
         self.task_s["collision_and_cut"] += time.perf_counter() - tg
         return f_ext
@@ -386,22 +405,97 @@ class Session:
         self.contact.refit()
         self.task_s["collision_and_cut"] += time.perf_counter() - tg
 
+    def rebase_if_left(self) -> bool:
+        """Rebase once the blade has left the tissue after a stroke that cut; True when done.
+
+        Waits while a cut is not handed over yet; a blade back in the tissue
+        before the next geometry update keeps the stroke going (the rebase
+        comes at the next leaving).  A live session (non-blocking cut task)
+        tries again at the next geometry update when a relaxation step holds
+        the lock.
+        """
+        if not self.rebase_due or self.scalpel.code != FREE or self.cut.result is not None:
+            return False
+        cm = self.tis.cm
+        if not cm.subtets and cm.n_points == cm.n_orig_points:
+            self.rebase_due = False  # the stroke cut nothing: nothing to rebase
+            return False
+        if self.cut.blocking:
+            with self.lock.urgent():
+                self.rebase()
+        elif self.lock.try_urgent():
+            try:
+                self.rebase()
+            finally:
+                self.lock.release()
+        else:
+            return False
+        self.rebase_due = False
+        return True
+
+    def rebase(self) -> np.ndarray:
+        """Make the live tets the original ones of a fresh cut state (:meth:`CutMesh.rebase`), between strokes.
+
+        The one place where every holder of data keyed by CutMesh tet ids or
+        built from the original tets follows: the tissue
+        (``tis.rebase(old_of_new, old_orig)``), the surface collision
+        (:meth:`ContactTask.rebase`), then each callable of
+        :attr:`on_rebase` (``f(old_of_new)``, e.g. a live view's boundary).
+        What the strokes so far cut is kept for the summary (:attr:`tets_cut`,
+        :attr:`new_tets`, :meth:`opening`).  Node ids do not change.  Call it
+        with the lock held and no cut in progress.
+
+        Returns
+        -------
+        old_of_new : (m,) int64
+            Old CutMesh tet id of each new (original) tet.
+        """
+        cm = self.tis.cm
+        self.cut_before["cut_tets"] = self.tets_cut
+        self.cut_before["new_tets"] = self.new_tets
+        self.cut_before["rebases"] += 1
+        self.pairs_before = cut_pairs(cm, self.pairs_before)
+        old_orig = cm._tet_orig[:cm.n_tets_total].copy()
+        old_of_new = cm.rebase()
+        self.tis.rebase(old_of_new, old_orig[old_of_new])
+        self.contact.rebase()
+        for hook in self.on_rebase:
+            hook(old_of_new)
+        return old_of_new
+
     def opening(self) -> np.ndarray:
-        """(p,) distances between the two copies of every duplicated cut node, mm."""
-        return cut_opening(self.tis.cm, self.tis.positions)
+        """(p,) distances between the two copies of every duplicated cut node (all strokes), mm."""
+        return cut_opening(self.tis.cm, self.tis.positions, self.pairs_before)
 
     @property
     def tets_cut(self) -> int:
-        return len(self.tis.cm.subtets)
+        """Tets cut, summed over the strokes (each stroke counts the original tets of its cut state)."""
+        return self.cut_before["cut_tets"] + len(self.tis.cm.subtets)
+
+    @property
+    def new_tets(self) -> int:
+        """Sub-tets made, summed over the strokes."""
+        return self.cut_before["new_tets"] + int(sum(len(v) for v in self.tis.cm.subtets.values()))
 
 
-def cut_opening(cm, positions) -> np.ndarray:
-    """(p,) distances between the two copies of every duplicated cut node, mm."""
+def cut_pairs(cm, before=None) -> np.ndarray:
+    """(p, 2) int64 the two copies of every duplicated cut node of the current stroke, after ``before`` (q, 2)."""
     pairs = [cm.edge_node[np.all(cm.edge_node >= 0, axis=1)], cm.face_node[np.all(cm.face_node >= 0, axis=1)]]
-    pairs = np.concatenate(pairs)
+    if before is not None:
+        pairs.insert(0, before)
+    return np.concatenate(pairs).astype(np.int64, copy=False)
+
+
+def cut_opening(cm, positions, before=None) -> np.ndarray:
+    """(p,) distances between the two copies of every duplicated cut node, mm.
+
+    ``before`` (q, 2) int64: the pairs of the strokes before the last
+    rebase (node ids do not change), measured first.
+    """
+    pairs = cut_pairs(cm, before)
     if pairs.size == 0:
         return np.zeros(0)
     return np.linalg.norm(positions[pairs[:, 0]] - positions[pairs[:, 1]], axis=1)
 
 
-__all__ = ["Session", "HandoverLock", "ContactTask", "CutTask", "RelaxTask", "Contact", "cut_opening", "settle", "LEAVE_MARGIN_MM"]
+__all__ = ["Session", "HandoverLock", "ContactTask", "CutTask", "RelaxTask", "Contact", "cut_opening", "cut_pairs", "settle", "LEAVE_MARGIN_MM"]

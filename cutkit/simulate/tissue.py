@@ -189,6 +189,8 @@ class Tissue(TissueBase):
         V, sv = self._contributions(np.arange(self.n_orig_tets))
         self.rec_V[:self.n_orig_tets] = V
         self.rec_sv[:self.n_orig_tets] = sv
+        # rest volume of the model tet each original tet comes from (flat sub-tets: _rebuild_volume_term)
+        self.model_V = V.copy()
         edges, tet_edge = unique_edges(tets)
         if not np.array_equal(edges, sm.springs):
             raise RuntimeError("spring order differs from the mesh edge order")
@@ -385,6 +387,7 @@ class Tissue(TissueBase):
         self.lists.topology_changed()
     def _rebuild_volume_term(self) -> None:
         """The volume term over the live tets: rest volumes from the per-tet records (the cut is made at rest)."""
+        from cutkit.cutting.rebase import made_by_cut
         from cutkit.relax.volume import VolumeTerm
 
         cm = self.cm
@@ -392,8 +395,8 @@ class Tissue(TissueBase):
         # Flat sub-tets of a cut are left out: their volume stiffness
         # (bulk |dV/dx|^2 / V0) dwarfs their springs' and the semi-implicit
         # step, which treats it per node, overshoots on them.
-        sub = ids[ids >= self.n_orig_tets]
-        small = self.rec_V[sub] < VOLUME_TERM_MIN_FRACTION * self.rec_V[cm._tet_orig[sub]]
+        sub = ids[made_by_cut(cm, ids)]  # in any stroke
+        small = self.rec_V[sub] < VOLUME_TERM_MIN_FRACTION * self.model_V[cm._tet_orig[sub]]
         flat = sub[small | (self.rec_V[sub] <= 0.0)
                    | (_shape_quality(cm._X, cm._tets[sub], self.rec_V[sub]) < VOLUME_TERM_MIN_QUALITY)]
         ids = np.setdiff1d(ids, flat, assume_unique=True)
@@ -493,3 +496,31 @@ class Tissue(TissueBase):
         """
         return self.lists.advance(Control(external_forces=f_ext), until, synchronise=True)
 
+    # ------------------------------------------------------------------ strokes
+    def rebase(self, old_of_new: np.ndarray, old_orig: np.ndarray) -> None:
+        """Follow :meth:`CutMesh.rebase <cutkit.cutting.CutMesh.rebase>` (called after it, between strokes).
+
+        The live tets became the original tets ``0 .. m-1`` of a fresh cut
+        state: the per-tet records (rest volume, prestress terms) move to
+        the new ids, the per-original-tet materials follow the old original
+        tet each came from.  Springs, their sums, masses and node lists are
+        per node pair or node and stay; no node is a cut node any more, so
+        the cut nodes' tet lists restart.
+
+        Parameters
+        ----------
+        old_of_new : (m,) int64
+            Old CutMesh tet id of each new original tet.
+        old_orig : (m,) int64
+            Old original tet of each (``old _tet_orig[old_of_new]``).
+        """
+        old_of_new = np.asarray(old_of_new, np.int64)
+        old_orig = np.asarray(old_orig, np.int64)
+        m, cap = old_of_new.shape[0], max(self.cm._tets.shape[0], old_of_new.shape[0])
+        rec_V, rec_sv = np.zeros(cap), np.zeros((cap, 6))
+        rec_V[:m], rec_sv[:m] = self.rec_V[old_of_new], self.rec_sv[old_of_new]
+        self.rec_V, self.rec_sv = rec_V, rec_sv
+        for name in ("E", "rho", "prestrain", "fibre", "model_V"):
+            setattr(self, name, getattr(self, name)[old_orig])
+        self.n_orig_tets = int(m)
+        self._node_tets = {}

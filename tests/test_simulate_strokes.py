@@ -1,0 +1,127 @@
+"""Strokes: the blade leaves the tissue between two cuts, the session rebases, the second cut crosses the first.
+
+A small prestressed slab is cut twice right through its depth, the cuts
+crossing as an X seen from above (docs/simulate.md, "Strokes"): the run
+completes with both strokes' cut tets counted, and the written cut model is
+valid in rest positions and falls into four pieces.
+"""
+
+import json
+
+import numpy as np
+import pytest
+
+from cutkit.assign.defaults import DEFAULT_MATERIALS
+from cutkit.cutting.trajectory import Trajectory
+from cutkit.io.model_h5 import read_model
+from cutkit.mesh.generate import box_mesh
+from cutkit.model.tetmodel import BoundaryConditions, Materials, Prestress, TetModel
+
+#: Every test here simulates two cuts.
+pytestmark = pytest.mark.slow
+
+#: Slab 20 x 8 x 20 mm (x, y, z); y = 0 is the top, the blade points down (+y) through the whole depth.
+SHAPE, H = (10, 4, 10), 2.0
+L = np.array(SHAPE, float) * H
+#: Tip below the bottom while cutting, above the top between strokes, mm.
+DEEP, HIGH = L[1] + 3.0, -3.0
+#: Where the cuts lie (off the node planes) and where each stroke presses in, mm.
+Z_CUT, X_CUT, START = 10.3, 10.3, 3.1
+
+
+def slab():
+    """Prestressed along z, held at both z ends."""
+    points, tets = box_mesh(SHAPE, spacing=(H, H, H))
+    ends = np.flatnonzero((points[:, 2] == 0) | (points[:, 2] == L[2]))
+    row = dict(label=1, name="muscle", **DEFAULT_MATERIALS["muscle"])
+    return TetModel.from_arrays(
+        points, tets, materials=Materials.from_rows([row]),
+        boundary=BoundaryConditions(fixed_nodes=ends),
+        prestress=Prestress(label=np.array([1], np.int32), fibre_direction=np.array([[0.0, 0.0, 1.0]]),
+                            prestrain=np.array([0.1])))
+
+
+def polyline(start, legs, rate=100.0):
+    """A trajectory from tip ``start`` along ``legs`` [(tip, n, seconds)], the blade pointing down (a = +y)."""
+    t, tips, ns = [0.0], [np.asarray(start, float)], [np.asarray(legs[0][1], float)]
+    for end, n, seconds in legs:
+        k = max(1, int(round(seconds * rate)))
+        p, q = tips[-1], np.asarray(end, float)
+        for i in range(1, k + 1):
+            t.append(t[-1] + 1.0 / rate)
+            tips.append(p + (q - p) * i / k)
+            ns.append(np.asarray(n, float))
+    m = len(t)
+    return Trajectory(t=np.array(t), tip=np.array(tips), a=np.tile([0.0, 1.0, 0.0], (m, 1)), n=np.array(ns))
+
+
+def crossing_strokes():
+    """Two incisions through the depth, an X seen from above: along x at z = Z_CUT, lift, along z at x = X_CUT.
+
+    Each presses in through the top at ``START``, draws the blade out through
+    the far side and lifts it above the top (the blade leaves the tissue).
+    """
+    ex, ez = [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]
+    far = L[0] + 3.0
+    return polyline([START, HIGH, Z_CUT], [
+        ([START, DEEP, Z_CUT], ex, 0.4),  # press in
+        ([far, DEEP, Z_CUT], ex, 0.7),  # first stroke, out through the far side
+        ([far, HIGH, Z_CUT], ex, 0.2),  # lift: the blade leaves the tissue
+        ([X_CUT, HIGH, START], ez, 0.3),  # over the top
+        ([X_CUT, DEEP, START], ez, 0.4),
+        ([X_CUT, DEEP, far], ez, 0.7),  # second stroke, across the first
+        ([X_CUT, HIGH, far], ez, 0.2),
+    ])
+
+
+def _run(out, material_model):
+    from cutkit.simulate import SimulateOptions, simulate
+
+    return simulate(slab(), crossing_strokes(), out,
+                    SimulateOptions(fps=5, hold_s=0.1, material_model=material_model))
+
+
+@pytest.fixture(scope="module", params=["neohookean", "springs"])
+def run(request, tmp_path_factory):
+    out = tmp_path_factory.mktemp(f"strokes-{request.param}")
+    return out, _run(out, request.param)
+
+
+def test_both_strokes_cut_and_are_counted(run):
+    out, s = run
+    assert s["rebases"] >= 2  # the blade left the tissue after each stroke (it may graze a lip on the way out)
+    assert s["warnings"] == []
+    assert s["states"].count("free") >= 3
+    assert s["cut_tets"] > 300 and s["new_tets"] > 2 * s["cut_tets"]
+    assert s["tets_initial"] == slab().tets.shape[0]
+    assert json.loads((out / "summary.json").read_text())["cut_tets"] == s["cut_tets"]
+
+
+def test_cut_model_is_valid_in_rest_positions(run):
+    from cutkit.cli.main import main
+
+    out, _ = run
+    m = read_model(out / "model.h5")
+    p = m.points[m.tets]  # rest positions
+    vol = np.einsum("ij,ij->i", np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), p[:, 3] - p[:, 0]) / 6.0
+    assert np.all(vol > 0)
+    assert vol.sum() == pytest.approx(np.prod(L), rel=1e-9)  # a cut keeps the rest volume
+    assert main(["check", str(out / "model.h5")]) == 0
+
+
+def test_each_cut_goes_through_the_depth_past_where_it_started(run):
+    """Beyond the press-in points each stroke's cut splits the slab; the second one crosses the first.
+
+    Near where a stroke presses in the tissue holds together (the sweep
+    starts where the blade starts to cut, docs/simulate.md), so the model
+    as a whole stays one piece.
+    """
+    from _twins_cut import components
+
+    out, _ = run
+    m = read_model(out / "model.h5")
+    c = m.points[m.tets].mean(axis=1)
+    beyond = START + 5.0
+    assert components(m.tets[c[:, 0] > beyond]) == 2  # the first cut, across x
+    assert components(m.tets[c[:, 2] > beyond]) == 2  # the second cut, across z, through the first
+    assert components(m.tets[(c[:, 0] > beyond) & (c[:, 2] > beyond)]) >= 3
