@@ -24,8 +24,42 @@ from collections import namedtuple
 import numpy as np
 from numba import njit, prange
 
-#: tets (m, 4) int64, Dminv (m, 3, 3) float64, volume (m,) float64 (0: inactive), mu, lam (m,) float64 MPa
-Elements = namedtuple("Elements", ["tets", "Dminv", "volume", "mu", "lam"])
+#: tets (m, 4) int64, Dminv (m, 3, 3) float64, volume (m,) float64 (0: inactive), mu, lam (m,) float64 MPa,
+#: node_terms (m, NODE_TERMS) float64: what a node update reads of a tet (:func:`node_term_rows`)
+Elements = namedtuple("Elements", ["tets", "Dminv", "volume", "mu", "lam", "node_terms"])
+
+#: Corner pairs (j, c) of a tet's six edges, in the order of the first six node-term columns.
+EDGE_PAIRS = ((0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3))
+#: Columns of a tet's node-term row: the six edge weights V mu b_j . b_c, then 1 / det Dm,
+#: V (lam + mu) and V mu.
+NODE_TERMS = 9
+#: For corner c, the corners (j, k, l) with (j, c, k, l) an even permutation of (0, 1, 2, 3):
+#: det Ds = (x_c - x_j) . ((x_k - x_j) x (x_l - x_j)), so d det Ds / d x_c is the cross product.
+OPPOSITE = np.array([[1, 3, 2], [0, 2, 3], [0, 3, 1], [0, 1, 2]], np.int64)
+#: Column of the edge (c, j) for corner c and each other corner j (-1 on the diagonal).
+EDGE_COLUMN = np.array([[-1, 0, 1, 2], [0, -1, 3, 4], [1, 3, -1, 5], [2, 4, 5, -1]], np.int64)
+
+
+def node_term_rows(Dminv, volume, mu, lam):
+    """The per-tet constants of a node update, (m, NODE_TERMS) float64.
+
+    With the shape-function gradients b_0..b_3 (b_c = row c-1 of Dminv,
+    b_0 = -(b_1 + b_2 + b_3)), F = sum_j x_j b_j^T, so the mu F b_c part of a
+    node's force is sum_j V mu (b_j . b_c) (x_j - x_c): six edge weights per
+    tet (the cotangent Laplacian).  J = det Ds / det Dm and dJ/dx_c is the
+    cross product of the opposite face's edges over det Dm (:data:`OPPOSITE`).
+    """
+    B = np.concatenate([-Dminv.sum(axis=1, keepdims=True), Dminv], axis=1)  # (m, 4, 3)
+    L = np.einsum("mjd,mcd->mjc", B, B)
+    out = np.zeros((Dminv.shape[0], NODE_TERMS))
+    for col, (j, c) in enumerate(EDGE_PAIRS):
+        out[:, col] = volume * mu * L[:, j, c]
+    active = volume > 0
+    out[active, 6] = 1.0 / (6.0 * volume[active])
+    out[:, 7] = volume * (lam + mu)
+    out[:, 8] = volume * mu
+    return out
+
 #: tets (n, K) int32, corner (n, K) int8, degree (n,) int32: the tets around each node
 Adjacency = namedtuple("Adjacency", ["tets", "corner", "degree"])
 #: inertia (n,) m/h^2, damping (n,) c m / h, fixed (n, 3) bool, target y (n, 3), previous x (n, 3),
@@ -72,70 +106,73 @@ def _corner_row(D, c):
     return D[c - 1, 0], D[c - 1, 1], D[c - 1, 2]
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _volume_ratio(i, c, t, x, el):
+    """J of tet t and dJ/dx_i (node i at its corner c): (J, g0, g1, g2), from the opposite face."""
+    aj = el.tets[t, OPPOSITE[c, 0]]
+    ak = el.tets[t, OPPOSITE[c, 1]]
+    al = el.tets[t, OPPOSITE[c, 2]]
+    p0, p1, p2 = x[ak, 0] - x[aj, 0], x[ak, 1] - x[aj, 1], x[ak, 2] - x[aj, 2]
+    q0, q1, q2 = x[al, 0] - x[aj, 0], x[al, 1] - x[aj, 1], x[al, 2] - x[aj, 2]
+    alpha = el.node_terms[t, 6]
+    g0 = (p1 * q2 - p2 * q1) * alpha
+    g1 = (p2 * q0 - p0 * q2) * alpha
+    g2 = (p0 * q1 - p1 * q0) * alpha
+    return (x[i, 0] - x[aj, 0]) * g0 + (x[i, 1] - x[aj, 1]) * g1 + (x[i, 2] - x[aj, 2]) * g2, g0, g1, g2
+
+
 @njit(cache=True, nogil=True)
-def _accumulate(i, x, el, adj, jg):
+def _accumulate(i, x, el, adj):
     """-dW/dx_i (f0, f1, f2) and the upper triangle of d2W/dx_i^2 over the tets of node i.
 
-    W includes the :data:`BARRIER_J` barrier: a function of J only, it adds
-    b'(J) to the factor of dJ/dx_i in the force and b''(J) to the weight of
-    its outer product in the block (J being affine in x_i, as above).
+    Scalars only in the innermost loop, from the tet's node-term row
+    (:func:`node_term_rows`): W = V psi(F) + V b(J) with P = mu F + s cof F,
+    s = (lam + mu)(J - 1) - mu + b'(J), so
 
-    Scalars only in the innermost loop.  ``jg`` (K, 4), if it has rows, receives J and
-    dJ/dx_i = cof(F) b_i of each tet (J of an inactive tet: 0), for :func:`_max_step`.
+        dW/dx_i = sum_j w_ij (x_j - x_i) + V s dJ/dx_i  (w_ij <= 0 on good tets),
+        d2W/dx_i^2 = -(sum_j w_ij) I + V ((lam + mu) + b''(J)) dJ/dx_i dJ/dx_i^T
+
+    (the J-Hessian term vanishes: J is affine in one vertex; b is the
+    :data:`BARRIER_J` barrier).
     """
     f0 = f1 = f2 = 0.0
     h00 = h01 = h02 = h11 = h12 = h22 = 0.0
     for k in range(adj.degree[i]):
         t = adj.tets[i, k]
-        V = el.volume[t]
-        if V <= 0.0:
-            if jg.shape[0]:
-                jg[k, 0] = 0.0
+        row = el.node_terms[t]
+        Vk = row[7]
+        if Vk <= 0.0:
             continue
-        mu = el.mu[t]
-        lm = el.lam[t] + mu
-        D = el.Dminv[t]
-        a0, a1, a2, a3 = el.tets[t, 0], el.tets[t, 1], el.tets[t, 2], el.tets[t, 3]
-        # Ds = [x1 - x0, x2 - x0, x3 - x0]
-        u0, u1, u2 = x[a1, 0] - x[a0, 0], x[a1, 1] - x[a0, 1], x[a1, 2] - x[a0, 2]
-        v0, v1, v2 = x[a2, 0] - x[a0, 0], x[a2, 1] - x[a0, 1], x[a2, 2] - x[a0, 2]
-        w0, w1, w2 = x[a3, 0] - x[a0, 0], x[a3, 1] - x[a0, 1], x[a3, 2] - x[a0, 2]
-        # F = Ds Dminv: F_rc = u_r D0c + v_r D1c + w_r D2c
-        F00 = u0 * D[0, 0] + v0 * D[1, 0] + w0 * D[2, 0]
-        F01 = u0 * D[0, 1] + v0 * D[1, 1] + w0 * D[2, 1]
-        F02 = u0 * D[0, 2] + v0 * D[1, 2] + w0 * D[2, 2]
-        F10 = u1 * D[0, 0] + v1 * D[1, 0] + w1 * D[2, 0]
-        F11 = u1 * D[0, 1] + v1 * D[1, 1] + w1 * D[2, 1]
-        F12 = u1 * D[0, 2] + v1 * D[1, 2] + w1 * D[2, 2]
-        F20 = u2 * D[0, 0] + v2 * D[1, 0] + w2 * D[2, 0]
-        F21 = u2 * D[0, 1] + v2 * D[1, 1] + w2 * D[2, 1]
-        F22 = u2 * D[0, 2] + v2 * D[1, 2] + w2 * D[2, 2]
-        # cofactor G = dJ/dF, columns g0 = f1 x f2, g1 = f2 x f0, g2 = f0 x f1
-        g00 = F11 * F22 - F21 * F12
-        g10 = F21 * F02 - F01 * F22
-        g20 = F01 * F12 - F11 * F02
-        g01 = F12 * F20 - F22 * F10
-        g11 = F22 * F00 - F02 * F20
-        g21 = F02 * F10 - F12 * F00
-        g02 = F10 * F21 - F20 * F11
-        g12 = F20 * F01 - F00 * F21
-        g22 = F00 * F11 - F10 * F01
-        J = F00 * g00 + F10 * g10 + F20 * g20
-        _, db, ddb = barrier(J, lm)
-        s = lm * (J - 1.0) - mu + db
-        b0, b1, b2 = _corner_row(D, adj.corner[i, k])
-        gb0 = g00 * b0 + g01 * b1 + g02 * b2
-        gb1 = g10 * b0 + g11 * b1 + g12 * b2
-        gb2 = g20 * b0 + g21 * b1 + g22 * b2
-        if jg.shape[0]:
-            jg[k, 0], jg[k, 1], jg[k, 2], jg[k, 3] = J, gb0, gb1, gb2
-        # dW/dx_i = V P b with P = mu F + s G
-        f0 -= V * (mu * (F00 * b0 + F01 * b1 + F02 * b2) + s * gb0)
-        f1 -= V * (mu * (F10 * b0 + F11 * b1 + F12 * b2) + s * gb1)
-        f2 -= V * (mu * (F20 * b0 + F21 * b1 + F22 * b2) + s * gb2)
-        # the J-Hessian term vanishes here: J is affine in one vertex
-        d = V * mu * (b0 * b0 + b1 * b1 + b2 * b2)
-        w = V * (lm + ddb)
+        c = adj.corner[i, k]
+        aj = el.tets[t, OPPOSITE[c, 0]]
+        ak = el.tets[t, OPPOSITE[c, 1]]
+        al = el.tets[t, OPPOSITE[c, 2]]
+        xi0, xi1, xi2 = x[i, 0], x[i, 1], x[i, 2]
+        e0, e1, e2 = xi0 - x[aj, 0], xi1 - x[aj, 1], xi2 - x[aj, 2]  # x_i - x_j
+        p0, p1, p2 = x[ak, 0] - x[aj, 0], x[ak, 1] - x[aj, 1], x[ak, 2] - x[aj, 2]  # x_k - x_j
+        q0, q1, q2 = x[al, 0] - x[aj, 0], x[al, 1] - x[aj, 1], x[al, 2] - x[aj, 2]  # x_l - x_j
+        # the mu F b_c part: edge weights to the three other corners
+        wj = row[EDGE_COLUMN[c, OPPOSITE[c, 0]]]
+        wk = row[EDGE_COLUMN[c, OPPOSITE[c, 1]]]
+        wl = row[EDGE_COLUMN[c, OPPOSITE[c, 2]]]
+        wsum = wj + wk + wl
+        # sum_m w_m (x_i - x_m) with x_i - x_k = e - p, x_i - x_l = e - q
+        f0 += wsum * e0 - wk * p0 - wl * q0
+        f1 += wsum * e1 - wk * p1 - wl * q1
+        f2 += wsum * e2 - wk * p2 - wl * q2
+        # J and dJ/dx_i from the opposite face (as _volume_ratio)
+        alpha = row[6]
+        gb0 = (p1 * q2 - p2 * q1) * alpha
+        gb1 = (p2 * q0 - p0 * q2) * alpha
+        gb2 = (p0 * q1 - p1 * q0) * alpha
+        J = e0 * gb0 + e1 * gb1 + e2 * gb2
+        _, db, ddb = barrier(J, Vk)
+        s = Vk * (J - 1.0) - row[8] + db  # V s
+        f0 -= s * gb0
+        f1 -= s * gb1
+        f2 -= s * gb2
+        d = -wsum  # V mu |b_c|^2: the weights of a row sum to minus the diagonal
+        w = Vk + ddb
         h00 += d + w * gb0 * gb0
         h11 += d + w * gb1 * gb1
         h22 += d + w * gb2 * gb2
@@ -148,8 +185,7 @@ def _accumulate(i, x, el, adj, jg):
 @njit(cache=True, nogil=True)
 def _node_update(i, x, el, adj, nt):
     """Move x_i to the exact minimiser of the incremental potential in x_i; return the squared residual."""
-    jg = np.empty((adj.degree[i], 4))
-    f0, f1, f2, h00, h01, h02, h11, h12, h22 = _accumulate(i, x, el, adj, jg)
+    f0, f1, f2, h00, h01, h02, h11, h12, h22 = _accumulate(i, x, el, adj)
     m, c = nt.inertia[i], nt.damping[i]
     f0 += m * (nt.target[i, 0] - x[i, 0]) - c * (x[i, 0] - nt.previous[i, 0]) + nt.force[i, 0]
     f1 += m * (nt.target[i, 1] - x[i, 1]) - c * (x[i, 1] - nt.previous[i, 1]) + nt.force[i, 1]
@@ -178,7 +214,7 @@ def _node_update(i, x, el, adj, nt):
     d0 = (i00 * f0 + i01 * f1 + i02 * f2) / det
     d1 = (i01 * f0 + i11 * f1 + i12 * f2) / det
     d2 = (i02 * f0 + i12 * f1 + i22 * f2) / det
-    a = _max_step(jg, d0, d1, d2)
+    a = _max_step(i, x, el, adj, d0, d1, d2)
     x[i, 0] += a * d0
     x[i, 1] += a * d1
     x[i, 2] += a * d2
@@ -186,15 +222,22 @@ def _node_update(i, x, el, adj, nt):
 
 
 @njit(cache=True, nogil=True)
-def _max_step(jg, d0, d1, d2):
-    """The largest a in [0, 1] for which x_i + a d keeps every tet of node i with J > 0 at
-    J >= KEEP_J_FRACTION of its present value (J is affine in x_i: J(a) = J + a (cof F b_i) . d)."""
+def _max_step(i, x, el, adj, d0, d1, d2):
+    """The largest a in [0, 1] for which x_i + a d keeps every active tet of node i with J > 0 at
+    J >= KEEP_J_FRACTION of its present value (J is affine in x_i: J(a) = J + a (dJ/dx_i) . d).
+
+    J and its gradient are computed again here rather than kept from :func:`_accumulate`:
+    the tets are still in cache, and a per-node buffer would cost an allocation per update.
+    """
     a = 1.0
-    for k in range(jg.shape[0]):
-        J = jg[k, 0]
+    for k in range(adj.degree[i]):
+        t = adj.tets[i, k]
+        if el.node_terms[t, 7] <= 0.0:
+            continue
+        J, g0, g1, g2 = _volume_ratio(i, adj.corner[i, k], t, x, el)
         if J <= 0.0:
             continue
-        slope = jg[k, 1] * d0 + jg[k, 2] * d1 + jg[k, 3] * d2
+        slope = g0 * d0 + g1 * d1 + g2 * d2
         if slope < 0.0:
             limit = (1.0 - KEEP_J_FRACTION) * J / -slope
             if limit < a:
@@ -220,9 +263,8 @@ def vbd_sweep(x, el, adj, nt, colour_offsets, colour_nodes, r2):
 @njit(cache=True, parallel=True, nogil=True)
 def node_forces(x, el, adj, out):
     """Elastic force -dW/dx on every node, N: ``out`` (n, 3)."""
-    none = np.empty((0, 4))
     for i in prange(x.shape[0]):
-        f0, f1, f2, h00, h01, h02, h11, h12, h22 = _accumulate(i, x, el, adj, none)
+        f0, f1, f2, h00, h01, h02, h11, h12, h22 = _accumulate(i, x, el, adj)
         out[i, 0] = f0
         out[i, 1] = f1
         out[i, 2] = f2

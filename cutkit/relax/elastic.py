@@ -111,6 +111,9 @@ class ElementModel:
         Lame parameters, MPa.
     mass_share : (cap,) float64
         Mass each element gives each of its four nodes, t.
+    node_terms : (cap, NODE_TERMS) float64
+        What a node update reads of an element, derived from the four
+        arrays above when an element is added (``_elastic_kernels.node_term_rows``).
     masses : (n,) float64
         Lumped node masses, t.
     damping : (n,) float64
@@ -129,6 +132,7 @@ class ElementModel:
     mu: np.ndarray
     lam: np.ndarray
     mass_share: np.ndarray
+    node_terms: np.ndarray
     n_elements: int
     masses: np.ndarray
     damping: np.ndarray
@@ -145,7 +149,7 @@ class ElementModel:
 
     @property
     def elements(self) -> K.Elements:
-        return K.Elements(self.tets, self.Dminv, self.volume, self.mu, self.lam)
+        return K.Elements(self.tets, self.Dminv, self.volume, self.mu, self.lam, self.node_terms)
 
     @property
     def adjacency(self) -> K.Adjacency:
@@ -157,7 +161,8 @@ class ElementModel:
         cap = max(int(capacity), 1)
         return cls(
             tets=np.zeros((cap, 4), np.int64), Dminv=np.zeros((cap, 3, 3)), volume=np.zeros(cap),
-            mu=np.zeros(cap), lam=np.zeros(cap), mass_share=np.zeros(cap), n_elements=0,
+            mu=np.zeros(cap), lam=np.zeros(cap), mass_share=np.zeros(cap),
+            node_terms=np.zeros((cap, K.NODE_TERMS)), n_elements=0,
             masses=np.zeros(n_nodes), damping=np.zeros(n_nodes), fixed=np.zeros((n_nodes, 3), bool),
             adj_tets=np.zeros((n_nodes, ADJACENCY_SLACK), np.int32),
             adj_corner=np.zeros((n_nodes, ADJACENCY_SLACK), np.int8),
@@ -210,6 +215,7 @@ class ElementModel:
         self.volume[ids] = volume
         self.mu[ids] = mu
         self.lam[ids] = lam
+        self.node_terms[ids] = K.node_term_rows(Dminv, volume, self.mu[ids], self.lam[ids])
         share = np.asarray(density, np.float64) * np.maximum(rest_volume, 0.0) / 4.0
         self.mass_share[ids] = share
         np.add.at(self.masses, tets.ravel(), np.repeat(share, 4))
@@ -231,6 +237,7 @@ class ElementModel:
         np.add.at(self.masses, self.tets[ids].ravel(), np.repeat(-self.mass_share[ids], 4))
         self.masses[self.adj_degree == 0] = 0.0  # exactly: what is left is rounding
         self.volume[ids] = 0.0
+        self.node_terms[ids] = 0.0
         self.mass_share[ids] = 0.0
         self._classes = None
 
@@ -242,6 +249,7 @@ class ElementModel:
         grow = new - old
         self.tets = np.concatenate([self.tets, np.zeros((grow, 4), np.int64)])
         self.Dminv = np.concatenate([self.Dminv, np.zeros((grow, 3, 3))])
+        self.node_terms = np.concatenate([self.node_terms, np.zeros((grow, K.NODE_TERMS))])
         for name in ("volume", "mu", "lam", "mass_share"):
             setattr(self, name, np.concatenate([getattr(self, name), np.zeros(grow)]))
 
