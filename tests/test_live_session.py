@@ -186,7 +186,7 @@ def _run(cmd, timeout=600):
 def _live_session(spawned_server, knee, incision, out) -> dict:
     with spawned_server("--priority", "realtime") as (host, port, _):
         live = subprocess.Popen([sys.executable, "-m", "cutkit.cli.main", "live", str(knee), "-o", str(out),
-                                 "--haptics", f"{host}:{port}", "--no-window", "--until-idle", "3", "--seconds", "300",
+                                 "--haptics", f"{host}:{port}", "--no-window", "--until-idle", "6", "--seconds", "300",
                                  "--threads", "1"],  # the other core is the 1 kHz service's
                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         try:

@@ -121,7 +121,7 @@ class ElementModel:
     fixed : (n, 3) bool
         Components held at their current value.
     adj_tets, adj_corner, adj_degree : the elements around each node
-        ``(n, K) int32, (n, K) int8, (n,) int32``.
+        ``(cap, K) int32, (cap, K) int8, (n,) int32`` (``cap >= n`` rows).
     colour : (n,) int32
         No two nodes of one element share a colour: the parallel classes.
     """
@@ -176,8 +176,12 @@ class ElementModel:
         fx = np.zeros((p, 3), bool) if fixed is None else np.broadcast_to(np.asarray(fixed, bool).reshape(p, -1),
                                                                              (p, 3))
         self.fixed = np.concatenate([self.fixed, fx])
-        self.adj_tets = np.concatenate([self.adj_tets, np.zeros((p, self.adj_tets.shape[1]), np.int32)])
-        self.adj_corner = np.concatenate([self.adj_corner, np.zeros((p, self.adj_corner.shape[1]), np.int8)])
+        if n + p > self.adj_tets.shape[0]:
+            # the lists are K wide: they grow by doubling (a cut adds a few nodes at a time),
+            # and rows past n_nodes are unused
+            rows = max(n + p, 2 * self.adj_tets.shape[0]) - self.adj_tets.shape[0]
+            self.adj_tets = np.concatenate([self.adj_tets, np.zeros((rows, self.adj_tets.shape[1]), np.int32)])
+            self.adj_corner = np.concatenate([self.adj_corner, np.zeros((rows, self.adj_corner.shape[1]), np.int8)])
         self.adj_degree = np.concatenate([self.adj_degree, np.zeros(p, np.int32)])
         self.colour = np.concatenate([self.colour, np.full(p, -1, np.int32)])
         self._classes = None
@@ -473,7 +477,8 @@ def implicit_step(em: ElementModel, state: ElementState, h: float, f_ext=None, g
 
 
 def local_step(em: ElementModel, state: ElementState, h: float, f_ext, r2, seeds, *,
-               atol: float, max_iterations: int = DEFAULT_MAX_ITERATIONS, chebyshev=None) -> SolveInfo:
+               atol: float, max_iterations: int = DEFAULT_MAX_ITERATIONS, chebyshev=None,
+               should_stop=None) -> SolveInfo:
     """One backward Euler step that moves only the nodes out of balance (and their neighbours).
 
     A node whose out-of-balance force stays below ``tau = atol / (2 sqrt(n))``
@@ -491,6 +496,9 @@ def local_step(em: ElementModel, state: ElementState, h: float, f_ext, r2, seeds
         Squared residual of every node at its last sweep, N^2; updated in place.
     seeds : (k,) int64
         Nodes to wake.
+    should_stop : callable() -> bool, optional
+        Asked after every sweep; True ends the step there, unconverged, with
+        the positions reached (a live session's cut waiting for the tissue).
     """
     x, v = state.positions, state.velocities
     n = em.n_nodes
@@ -528,7 +536,7 @@ def local_step(em: ElementModel, state: ElementState, h: float, f_ext, r2, seeds
         res = float(np.sqrt(r2.sum()))
         if it == 1:
             r0 = res
-        if res <= atol:
+        if res <= atol or (should_stop is not None and should_stop()):
             break
         awake = K.awake_after_sweep(em.adjacency, em.tets, movable, r2, tau2, awake, mark)
     v[:] = np.where(em.fixed, 0.0, (x - x0) / h)

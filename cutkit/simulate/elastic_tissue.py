@@ -152,17 +152,25 @@ class ElasticTissue(TissueBase):
         return {"iterations": info.iterations, "relative_residual": info.residual / info.initial_residual
                 if info.initial_residual > 0 else 0.0, "converged": info.converged, "rtol": rtol}
 
-    def advance(self, f_ext: np.ndarray, until: float) -> int:
-        """Implicit steps of :attr:`step_s` up to ``until`` s; returns the sweeps made."""
+    def advance(self, f_ext: np.ndarray, until: float, should_stop=None) -> int:
+        """Implicit steps of :attr:`step_s` up to ``until`` s; returns the sweeps made.
+
+        ``should_stop`` (callable() -> bool, live sessions only) is asked after
+        every sweep: True ends the step in flight there and the advance with it,
+        so a waiting cut never waits for more than one sweep.  Offline runs
+        pass none, and every step ends on its residual.
+        """
         n_steps = int(np.floor((until - self.state.time) / self.step_s + 1e-6))
         sweeps = 0
         loaded = np.flatnonzero(np.any(f_ext != 0.0, axis=1))
         for _ in range(max(n_steps, 0)):
+            if should_stop is not None and should_stop():
+                break
             seeds = np.concatenate([loaded, *self._seeds]) if self._seeds else loaded
             self._seeds = []
             info = local_step(self.em, self.state, self.step_s, f_ext, self.r2, seeds,
                               atol=max(self.step_rtol * self.force_scale, DEFAULT_ATOL_N),
-                              max_iterations=self.step_max_iterations)
+                              max_iterations=self.step_max_iterations, should_stop=should_stop)
             sweeps += info.iterations
             self.counts["steps"] += 1
             self.counts["sweeps"] += info.iterations

@@ -150,7 +150,7 @@ class RelaxThread(threading.Thread):
                 before = s.tis.time
                 until = min(self.clock(), before + self.chunk_s)
                 t1 = time.perf_counter()
-                s.relax.advance(self.f_ext, until)
+                s.relax.advance(self.f_ext, until, yield_to_cut=True)
                 if s.tis.time == before:
                     self.stop.wait(0.001)
                     continue

@@ -95,7 +95,9 @@ class LiveLoop:
         self.out_dir, self.source, self.views, self.model_path = out_dir, source, list(views), model_path
         blade_length = self.opt.blade_length or DEFAULT_BLADE_LENGTH
         self.session = s = Session(model, self.opt, blade_length, DEFAULT_BLADE_BREADTH)
-        s.cut.blocking = False  # the loop goes on while a relaxation step is in flight
+        # a cut waits for the lock: the relaxation ends its step after the sweep in flight
+        # (RelaxTask.advance(yield_to_cut=True)), so the wait is one sweep, not one step
+        s.cut.blocking = True
         self.service = isinstance(source, HapticsPoseSource)
         self.poses = PoseRecorder(blade_length, DEFAULT_BLADE_BREADTH)
         self.meter = TickMeter(source, poses=self.poses) if self.service else None

@@ -78,6 +78,10 @@ class HandoverLock:
     def release(self) -> None:
         self._lock.release()
 
+    def waiting(self) -> bool:
+        """Whether a topology change waits for the lock (asked by the holder between sweeps)."""
+        return self._urgent > 0
+
     @contextmanager
     def urgent(self):
         with self._cond:
@@ -265,12 +269,14 @@ class RelaxTask:
         self.counts = counts
         self.wall_s = 0.0
 
-    def advance(self, f_ext, until: float) -> int:
+    def advance(self, f_ext, until: float, yield_to_cut: bool = False) -> int:
+        """Relax to ``until`` s under the lock; with ``yield_to_cut`` (live) a topology change
+        waiting for the lock ends the step in flight after its current sweep."""
         t0 = time.perf_counter()
         with self.lock:
             if f_ext.shape[0] != self.tis.n_nodes:  # a cut added nodes since the forces were made
                 f_ext = np.concatenate([f_ext, np.zeros((self.tis.n_nodes - f_ext.shape[0], 3))])
-            passes = self.tis.advance(f_ext, until)
+            passes = self.tis.advance(f_ext, until, self.lock.waiting if yield_to_cut else None)
         self.counts["relax_passes"] += passes
         self.wall_s += time.perf_counter() - t0
         return passes
