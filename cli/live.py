@@ -19,7 +19,7 @@ import click
 @click.option("--fps", default=30.0, show_default=True, type=click.FloatRange(min=1.0), help="Frames per second to the views.")
 @click.option("--seconds", type=click.FloatRange(min=0.0), default=None, help="End after this many seconds.")
 @click.option("--until-idle", type=click.FloatRange(min=0.0), default=None,
-              help="End when no pose came for this many seconds (after the first).")
+              help="End once the tissue has relaxed this many seconds of its own time past the last pose.")
 @click.option("--geometry-rate", "geometry_rate_hz", default=50.0, show_default=True, type=float,
               help="Cut updates per second.")
 @click.option("--blade-length", default=None, type=float, help="Blade length, mm [default: 20].")

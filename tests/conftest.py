@@ -13,3 +13,17 @@ def _sigpipe_ignored():
     if hasattr(signal, "SIGPIPE") and threading.current_thread() is threading.main_thread():
         signal.signal(signal.SIGPIPE, signal.SIG_IGN)
     yield
+
+
+@pytest.fixture(scope="session")
+def demo_knee(tmp_path_factory):
+    """The demo knee built once for the whole run: ``(folder, knee.h5, the build's report)``.
+
+    The tests that only read it share it (a build takes about a minute on two
+    cores); the test of the build's reuse copies the folder.
+    """
+    from cutkit.simulate.demo import build_or_reuse
+
+    folder = tmp_path_factory.mktemp("demo-knee")
+    path, _, report = build_or_reuse(folder)
+    return folder, path, report

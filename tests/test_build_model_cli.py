@@ -39,11 +39,17 @@ def test_empty_threshold_is_one_line_error(tmp_path, capsys):
 
 
 @pytest.mark.slow
-def test_demo_build_is_reused_while_inputs_are_unchanged(tmp_path):
+def test_demo_build_is_reused_while_inputs_are_unchanged(tmp_path, demo_knee):
+    import shutil
+
     from cutkit.simulate.demo import build_or_reuse
 
-    path, reused, report = build_or_reuse(tmp_path)
-    assert not reused and report
+    folder, _, report = demo_knee  # built once for the run, into an empty folder
+    assert report
+    for name in ("knee.h5", "knee.h5.key"):
+        shutil.copy2(folder / name, tmp_path / name)
+    path, reused, _ = build_or_reuse(tmp_path)
+    assert reused and path == tmp_path / "knee.h5"
     m = read_model(path)
     assert sorted(np.unique(m.labels).tolist()) == [1, 2, 3, 4, 5]  # skin, fat, muscle, tendon, bone
     assert len(m.boundary.fixed_nodes) > 0 and len(m.prestress.label) == 2

@@ -138,13 +138,12 @@ def test_igtl_transforms_in_polydata_out_with_the_cut(model):
 
 
 @pytest.fixture(scope="module")
-def knee_session(tmp_path_factory):
+def knee_session(tmp_path_factory, demo_knee):
     """The reference device streams the demo incision through the service into `cutkit live --no-window`."""
     from cutkit.haptics.client import spawned_server
-    from cutkit.simulate.demo import build_or_reuse
 
     tmp = tmp_path_factory.mktemp("knee")
-    knee, _, _ = build_or_reuse(tmp / "demo")
+    knee = demo_knee[1]
     incision = ROOT / "sample_volumes" / "incision.csv"
     for attempt in range(2):  # the rate is the machine's: one retry
         out = tmp / f"live{attempt}"
@@ -186,7 +185,7 @@ def _run(cmd, timeout=600):
 def _live_session(spawned_server, knee, incision, out) -> dict:
     with spawned_server("--priority", "realtime") as (host, port, _):
         live = subprocess.Popen([sys.executable, "-m", "cutkit.cli.main", "live", str(knee), "-o", str(out),
-                                 "--haptics", f"{host}:{port}", "--no-window", "--until-idle", "6", "--seconds", "300",
+                                 "--haptics", f"{host}:{port}", "--no-window", "--until-idle", "4", "--seconds", "300",
                                  "--threads", "1"],  # the other core is the 1 kHz service's
                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         try:

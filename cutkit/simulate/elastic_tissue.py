@@ -51,6 +51,10 @@ SETTLE_RTOL = 1e-3
 #: A new or moved node within this (barycentric) distance outside the nearest tet of the
 #: old shape is placed by that tet's affine map extended; farther, by its defining nodes.
 PLACE_REACH = 0.5
+#: A tet born folded is opened to this volume ratio by moving one of its placed nodes ...
+UNFOLD_J = 0.05
+#: ... in at most this many exact steps per node (ElasticTissue._lift).
+UNFOLD_STEPS = 4
 #: Most (node, tet) pairs whose barycentric weights are held at once when placing nodes.
 PLACE_BLOCK = 1 << 18
 
@@ -202,6 +206,7 @@ class ElasticTissue(TissueBase):
         old_shape = self._old_shape(np.union1d(removed, around), old_moved,
                                     np.asarray(res.moved_from, np.float64)[moved < n_old])
         x_moved = self._through_old_shape(old_shape, old_moved)
+        x_before = self.state.positions[old_moved].copy()
         if n_new > n_old:
             self._append_nodes(np.arange(n_old, n_new), old_shape)
         # tets of moved nodes (and not otherwise touched) get their rest shape again
@@ -215,6 +220,8 @@ class ElasticTissue(TissueBase):
             orig = cm._tet_orig[redo]
             em.add_elements(cm._X, cm._tets[redo], self.mu[orig], self.lam[orig], self.density[orig],
                             self.prestrain[orig], self.fibre[orig], ids=redo)
+            placed = np.concatenate([old_moved, np.arange(n_old, n_new)])
+            self._unfold(redo, placed, np.concatenate([x_before, self.state.positions[n_old:n_new]]))
         self._hold_orphans()
         self._recolour(added, n_old)
         if self.r2.shape[0] < em.n_nodes:
@@ -237,6 +244,98 @@ class ElasticTissue(TissueBase):
         em.add_nodes(new.size, damping=damping, fixed=held)
         st.positions = np.concatenate([st.positions, x])
         st.velocities = np.concatenate([st.velocities, np.where(held[:, None], 0.0, vel)])
+
+    def _unfold(self, tets: np.ndarray, placed: np.ndarray, before: np.ndarray) -> None:
+        """Re-place the placed nodes of tets born folded, among a few candidate positions.
+
+        A sub-tet spanning several old tets near the opened crack can be
+        born folded however its nodes are placed by one map.  Each placed
+        node of such a tet takes, of its position through the old shape, its
+        interpolation over its defining nodes, its position before the step
+        (moved nodes), the centroid of its tets' other corners and the
+        midpoints, the one whose tets have the largest smallest volume ratio
+        (deformed over rest volume, signed); if none opens them all,
+        :meth:`_lift` moves it, and then any free corner of a tet still
+        folded.
+
+        Parameters
+        ----------
+        tets : (r,) int64
+            Tets the step made or re-shaped.
+        placed : (p,) int64
+            Nodes the step placed (moved, then new).
+        before : (p, 3) float64
+            Their positions before the step (new nodes: as placed).
+        """
+        from cutkit.mesh.quality import signed_volumes
+
+        x, em = self.state.positions, self.em
+        q = self.cm._tets[tets]
+        folded = signed_volumes(x, q) <= 0.0
+        if not folded.any():
+            return
+        X = self.cm._X[: em.n_nodes]
+        interp = self.interpolate_positions(placed)
+        for k in np.flatnonzero(np.isin(placed, q[folded])):
+            i = placed[k]
+            around = em.tets[em.adj_tets[i, : em.adj_degree[i]]]
+            rest = signed_volumes(X, around)
+            now = x[i].copy()
+            best, best_j = now, -np.inf
+            ring = x[around[around != i]].mean(axis=0) if around.size else now  # the one-ring's centroid
+            for c in (now, interp[k], before[k], 0.5 * (now + interp[k]), 0.5 * (now + before[k]), ring,
+                      0.5 * (now + ring)):
+                x[i] = c
+                j = float(np.min(signed_volumes(x, around) / rest)) if around.size else 0.0
+                if j > best_j:
+                    best, best_j = c, j
+            x[i] = best
+            if best_j <= 0.0:
+                self._lift(i, around, rest)
+        # what one node could not open, the other corners of the tet may
+        for i in np.unique(q[signed_volumes(x, q) <= 0.0]):
+            if not em.fixed[i].any():
+                around = em.tets[em.adj_tets[i, : em.adj_degree[i]]]
+                self._lift(i, around, signed_volumes(X, around))
+
+    def _lift(self, i: int, around: np.ndarray, rest: np.ndarray) -> None:
+        """Move node i so the most folded of its tets opens, keeping the others open.
+
+        Each tet's volume ratio J is affine in x_i, J(x_i + d) = J + g . d, so
+        the step d = (UNFOLD_J - J_min) g / |g|^2 opens the worst tet to
+        UNFOLD_J exactly; it is shortened so that no tet of the node that is
+        open falls below half its ratio.  Repeated for the next worst, at
+        most :data:`UNFOLD_STEPS` times.
+
+        Parameters
+        ----------
+        around : (k, 4) int64
+            The node's tets.
+        rest : (k,) float64
+            Their rest volumes.
+        """
+        from cutkit.mesh.quality import signed_volumes
+
+        x = self.state.positions
+        for _ in range(UNFOLD_STEPS):
+            J = signed_volumes(x, around) / rest
+            w = int(np.argmin(J))
+            if J[w] > 0.0:
+                return
+            g = np.empty((J.shape[0], 3))  # dJ/dx_i of every tet: exact differences, J being affine
+            xi = x[i].copy()
+            for c in range(3):
+                x[i, c] = xi[c] + 1.0
+                g[:, c] = signed_volumes(x, around) / rest - J
+                x[i, c] = xi[c]
+            gg = float(g[w] @ g[w])
+            if gg == 0.0:
+                return
+            d = (UNFOLD_J - J[w]) / gg * g[w]
+            slope = g @ d
+            open_ = (J > 0.0) & (slope < 0.0)
+            a = min(1.0, float(np.min(0.5 * J[open_] / -slope[open_]))) if open_.any() else 1.0
+            x[i] = xi + a * d
 
     def _old_shape(self, tets: np.ndarray, moved: np.ndarray, moved_from: np.ndarray):
         """Rest and current corners of tets as they were before a cut step moved some of their nodes.

@@ -188,7 +188,8 @@ def run_live(model, source, views, out_dir, opt=None, *, max_seconds: float | No
     idle_end_s : float
         Once the source is finished the tissue goes on relaxing for this long.
     until_idle_s : float, optional
-        The source counts as finished when no pose came for this long (after the first).
+        The source counts as finished once the tissue has relaxed this long (its own,
+        simulated time, which lags the wall clock on a slow machine) past the last pose.
     stop : threading.Event, optional
         Set it to end the session.
     on_frame : callable(LiveFrame), optional

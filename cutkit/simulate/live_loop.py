@@ -177,7 +177,10 @@ class LiveLoop:
             if now >= next_frame:
                 self._frame(on_frame)
                 next_frame = max(next_frame + self.frame_period, self.now())
-            idle = (until_idle_s is not None and self.pose is not None and now - self.pose[3] > until_idle_s
+            # idle: the tissue has relaxed until_idle_s of its own time past the last pose (on a
+            # slow machine the tissue lags the wall clock; the recording should not depend on it)
+            idle = (until_idle_s is not None and self.pose is not None
+                    and self.session.tis.time - self.pose[3] > until_idle_s
                     and not (self.meter is not None and self.meter.queue))
             if self.source.finished or idle:
                 finished_at = now if finished_at is None else finished_at

@@ -1,0 +1,49 @@
+"""The element tissue's handling of what a cut makes: tets born folded are opened where they are made."""
+
+import numpy as np
+
+from cutkit.mesh.generate import box_mesh
+from cutkit.mesh.quality import signed_volumes
+from cutkit.model.tetmodel import Materials, TetModel
+from cutkit.simulate.elastic_tissue import ElasticTissue
+
+
+def tissue():
+    p, t = box_mesh((3, 3, 3), spacing=(1.0, 1.0, 1.0))
+    row = dict(label=1, name="m", E=30e3, poisson_ratio=0.45, density=1090.0, damping=8.0, F_enter=0.8,
+               mu_static=1e-6, mu_dynamic=1e-6, rho_dynamic=1e-8, alpha_static=0.1, alpha_dynamic=0.1,
+               c_edge=1.0, c_shape=1.0)
+    model = TetModel.from_arrays(p, t, materials=Materials.from_rows([row]))
+    return ElasticTissue(model, blade_length=10.0, step_s=0.004)
+
+
+def interior_node(tis):
+    x = tis.rest_positions
+    return int(np.argmin(np.linalg.norm(x - x.mean(axis=0), axis=1)))
+
+
+def test_lift_opens_a_folded_tet_and_keeps_the_others_open():
+    tis = tissue()
+    i = interior_node(tis)
+    em = tis.em
+    around = em.tets[em.adj_tets[i, : em.adj_degree[i]]]
+    rest = signed_volumes(tis.rest_positions, around)
+    # push the node through the opposite face of one of its tets: that tet folds
+    t = around[0]
+    others = [a for a in t if a != i]
+    centre = tis.positions[others].mean(axis=0)
+    tis.positions[i] += 1.6 * (centre - tis.positions[i])
+    J = signed_volumes(tis.positions, around) / rest
+    assert J.min() < 0.0
+    tis._lift(i, around, rest)
+    J = signed_volumes(tis.positions, around) / rest
+    assert J.min() > 0.0
+
+
+def test_unfold_leaves_a_mesh_without_folds_alone():
+    tis = tissue()
+    x0 = tis.positions.copy()
+    tets = np.arange(tis.em.n_elements)
+    placed = np.array([interior_node(tis)])
+    tis._unfold(tets, placed, tis.positions[placed].copy())
+    assert np.array_equal(tis.positions, x0)
