@@ -16,7 +16,8 @@ Prints one JSON object with ``--json``:
   knee (with --knee MODEL.h5): wall time to a relative residual of 1e-4 of the settle problem
   (prestress and boundary conditions, from rest), for the element model (vertex block descent)
   and the springs (uniform Gauss-Seidel steps and adaptive node lists), and the sweeps or node
-  updates each took: the equal-accuracy comparison of docs/relaxation.md.
+  updates each took: the equal-accuracy comparison of docs/relaxation.md; and ``simulate``'s
+  simulated/wall on it with the shipped incision, for both material models (knee.simulate).
 """
 
 from __future__ import annotations
@@ -99,6 +100,26 @@ def element_sweep(tm) -> dict:
 
     sweep()
     return {"element_sweep_ms_1m_tets": best_of(sweep, 5) * 1e3, "element_colours": int(offsets.shape[0] - 1)}
+
+
+def knee_simulate(model) -> dict:
+    """``cutkit simulate``'s simulated/wall on the model with the shipped incision, for both material
+    models (no frames written; the settle is not in the ratio)."""
+    import tempfile
+    from pathlib import Path
+
+    from cutkit.cutting.trajectory import read_trajectory
+    from cutkit.simulate import SimulateOptions, simulate
+    from cutkit.simulate.demo import demo_inputs
+
+    traj = read_trajectory(demo_inputs()[1])
+    res = {}
+    for name in ("neohookean", "springs"):
+        with tempfile.TemporaryDirectory() as d:
+            s = simulate(model, traj, Path(d), SimulateOptions(fps=10, frames=False, material_model=name))
+        res[name] = {"simulated_per_wall": s["simulated_per_wall"], "time_per_task_s": s["time_per_task_s"],
+                     "cut_tets": s["cut_tets"], "inverted_tets_deformed": s["inverted_tets_deformed"]}
+    return res
 
 
 def knee_to_residual(model, rtol: float) -> dict:
@@ -222,6 +243,7 @@ def main(argv=None):
         from cutkit.io.model_h5 import read_model
 
         out["knee"] = knee_to_residual(read_model(args.knee), args.rtol)
+        out["knee"]["simulate"] = knee_simulate(read_model(args.knee))
     import numba
 
     out["threads"] = numba.get_num_threads()
