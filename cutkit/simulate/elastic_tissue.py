@@ -351,8 +351,9 @@ class ElasticTissue(TissueBase):
 
         Returns
         -------
-        (X, x) : (r, 4, 3) float64 each
-            Rest and current corners; tets with no rest volume are left out.
+        (X, x, Tinv) : (r, 4, 3), (r, 4, 3), (r, 3, 3) float64
+            Rest and current corners and the inverse rest edge matrices; tets
+            with no rest volume are left out.
         """
         cm = self.cm
         q = cm._tets[tets]
@@ -367,7 +368,7 @@ class ElasticTissue(TissueBase):
         x = self.state.positions[q]
         T = np.stack([X[:, 1] - X[:, 0], X[:, 2] - X[:, 0], X[:, 3] - X[:, 0]], axis=2)
         ok = np.abs(np.linalg.det(T)) > 0
-        return X[ok], x[ok]
+        return X[ok], x[ok], np.linalg.inv(T[ok])
 
     def _through_old_shape(self, old_shape, nodes: np.ndarray) -> np.ndarray:
         """Current positions of nodes at their (new) rest positions, through the old shape.
@@ -385,10 +386,9 @@ class ElasticTissue(TissueBase):
         x : (p, 3) float64
         """
         x = self.interpolate_positions(nodes)
-        X, xc = old_shape
+        X, xc, Tinv = old_shape
         if X.shape[0] == 0 or nodes.size == 0:
             return x
-        Tinv = np.linalg.inv(np.stack([X[:, 1] - X[:, 0], X[:, 2] - X[:, 0], X[:, 3] - X[:, 0]], axis=2))
         chunk = max(1, PLACE_BLOCK // X.shape[0])  # (chunk, r, 4) barycentric weights at a time
         for lo in range(0, nodes.size, chunk):
             p = slice(lo, min(lo + chunk, nodes.size))
@@ -440,12 +440,7 @@ class ElasticTissue(TissueBase):
         masses summed again from them).  Node data stay: damping, fixed
         flags, colours, positions, velocities (node ids do not change).
 
-        Parameters
-        ----------
-        old_of_new : (m,) int64
-            Old CutMesh tet id of each new original tet.
-        old_orig : (m,) int64
-            Old original tet of each (``old _tet_orig[old_of_new]``).
+        Parameters as :meth:`TissueBase.rebase <cutkit.simulate.tissue.TissueBase.rebase>`.
         """
         cm, old = self.cm, self.em
         old_orig = np.asarray(old_orig, np.int64)

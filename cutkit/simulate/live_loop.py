@@ -95,9 +95,6 @@ class LiveLoop:
         self.out_dir, self.source, self.views, self.model_path = out_dir, source, list(views), model_path
         blade_length = self.opt.blade_length or DEFAULT_BLADE_LENGTH
         self.session = s = Session(model, self.opt, blade_length, DEFAULT_BLADE_BREADTH)
-        # a cut waits for the lock: the relaxation ends its step after the sweep in flight
-        # (RelaxTask.advance(yield_to_cut=True)), so the wait is one sweep, not one step
-        s.cut.blocking = True
         self.service = isinstance(source, HapticsPoseSource)
         self.poses = PoseRecorder(blade_length, DEFAULT_BLADE_BREADTH)
         self.meter = TickMeter(source, poses=self.poses) if self.service else None
@@ -198,8 +195,6 @@ class LiveLoop:
         """Every device pose the service forwarded, in order: one tick each; the cut every ``geo_every``."""
         s, queue = self.session, self.meter.queue
         while queue:
-            if not s.cut.hand_over():
-                return  # the cut waits for the relaxation step in flight, and the device's ticks with it
             t, tip, a, n, arrival = queue.popleft()
             out = s.haptic_tick(tip, a, n)
             self.forces.add(t, s.code, out, tip, s.scalpel.proxy)
@@ -235,14 +230,11 @@ class LiveLoop:
 
         s = self.session
         t1 = time.perf_counter()
-        # topology changes only in this thread; the relaxation thread moves positions in place,
-        # and a frame may show them half a step old.  A cut waiting for its turn is drawn at once:
-        # its new nodes placed by their weights over the deformed original nodes
+        # topology changes only in this thread, and each cut reaches the tissue in the step that
+        # makes it; the relaxation thread moves positions in place, and a frame may show them
+        # half a sweep old
         cm = s.tis.cm
         points = np.array(s.tis.positions, np.float64)
-        if cm.n_points > points.shape[0]:
-            ahead = np.arange(points.shape[0], cm.n_points)
-            points = np.concatenate([points, s.tis.interpolate_positions(ahead)])
         version = (cm.n_rebases, cm.n_tets_total)
         if version != self.faces_version:
             self.faces = cut_surface_faces(cm), self.boundary.get(version)
@@ -282,9 +274,6 @@ class LiveLoop:
         from cutkit.simulate.record import closing_warnings, summary, write_cut_model, write_json
 
         s, out_dir = self.session, self.out_dir
-        if s.cut.result is not None:  # the last cut, waiting for its turn
-            s.cut.blocking = True
-            s.cut._apply()
         self.forces.write(out_dir / "forces.csv")
         recorded = self.poses.write(out_dir / "trajectory.csv")
         out = summary(s, model_path=self.model_path, loop_wall=self.loop_wall, t_traj_end=None,

@@ -42,15 +42,15 @@ class HandoverLock:
 
     Plain locks are not fair: a relaxation thread that releases the lock and
     takes it again at once could keep a cut waiting for many steps.  ``with
-    lock.urgent():`` (the cut task, frames) makes ordinary acquirers (``with
-    lock:``, the relaxation) wait until it has had its turn.
+    lock.urgent():`` (the cut task, a rebase) makes ordinary acquirers (``with
+    lock:``, the relaxation) wait until it has had its turn, and
+    :meth:`waiting` tells the holder to end its step early.
     """
 
     def __init__(self):
         self._lock = threading.Lock()
         self._cond = threading.Condition()
         self._urgent = 0
-        self._wanted = False
 
     def __enter__(self):
         with self._cond:
@@ -59,23 +59,6 @@ class HandoverLock:
         return self
 
     def __exit__(self, *exc):
-        self._lock.release()
-
-    def try_urgent(self) -> bool:
-        """Take the lock if it is free now, else ask for the next turn; True when taken (release with :meth:`release`)."""
-        with self._cond:
-            if not self._wanted:
-                self._wanted = True
-                self._urgent += 1
-        if not self._lock.acquire(blocking=False):
-            return False
-        with self._cond:
-            self._wanted = False
-            self._urgent -= 1
-            self._cond.notify_all()
-        return True
-
-    def release(self) -> None:
         self._lock.release()
 
     def waiting(self) -> bool:
@@ -187,41 +170,23 @@ class CutTask:
 
     :meth:`step` cuts when the scalpel was cutting since the last step and
     returns the forces the blade puts on the tissue; the topology change is
-    applied under ``lock``.  With ``blocking`` False (a live session) a
-    change that finds a relaxation step in flight waits for the next
-    geometry update instead of stopping the loop; no new cut is computed
-    before it is applied.
+    handed to the tissue under ``lock`` (``urgent``: a live session's
+    relaxation ends its step after the sweep in flight and lets it in).
     """
 
-    def __init__(self, tissue, lock, counts: dict, blocking: bool = True):
+    def __init__(self, tissue, lock, counts: dict):
         self.tis = tissue
         self.lock = lock
         self.counts = counts
-        self.blocking = blocking
         self.pending = False
-        self.result = None
 
-    def hand_over(self) -> bool:
-        """Hand a waiting cut over to the tissue if the lock is free; True when none waits any more."""
-        return self.result is None or self._apply()
-
-    def _apply(self) -> bool:
-        """Hand the pending cut over to the tissue; False when the lock was busy (non-blocking)."""
-        if self.blocking:
-            with self.lock.urgent():
-                added = self.tis.apply_cut(self.result)
-        elif self.lock.try_urgent():
-            try:
-                added = self.tis.apply_cut(self.result)
-            finally:
-                self.lock.release()
-        else:
-            return False
-        self.result = None
+    def _apply(self, result) -> None:
+        """Hand a cut step's topology change over to the tissue."""
+        with self.lock.urgent():
+            added = self.tis.apply_cut(result)
         for key, value in added.items():
             self.counts[key] = self.counts.get(key, 0) + value
         self.counts["cut_steps"] += 1
-        return True
 
     def note(self, code: int) -> None:
         """Record one haptic tick's scalpel state."""
@@ -235,12 +200,9 @@ class CutTask:
         axis = out[O_N:O_N + 3].copy()
         near = np.unique(cm.orig_tets[cm.active_tets]) if cm.active_tets.size else contact.face_nodes
         blade_tip = self.tis.blade_to_rest(proxy, near)
-        if self.result is not None:
-            self._apply()
-        elif self.pending:
-            self.result = cut_step(cm, blade_tip, axis)
+        if self.pending:
+            self._apply(cut_step(cm, blade_tip, axis))
             self.pending = False
-            self._apply()
         elif code != FREE:
             # in tissue but not cutting: the blade rests or backs out, the sweep restarts here
             cm.prev_pose = (blade_tip, blade_tip - cm.blade_length * axis)
@@ -414,28 +376,17 @@ class Session:
     def rebase_if_left(self) -> bool:
         """Rebase once the blade has left the tissue after a stroke that cut; True when done.
 
-        Waits while a cut is not handed over yet; a blade back in the tissue
-        before the next geometry update keeps the stroke going (the rebase
-        comes at the next leaving).  A live session (non-blocking cut task)
-        tries again at the next geometry update when a relaxation step holds
-        the lock.
+        A blade back in the tissue before the next geometry update keeps the
+        stroke going (the rebase comes at the next leaving).
         """
-        if not self.rebase_due or self.scalpel.code != FREE or self.cut.result is not None:
+        if not self.rebase_due or self.scalpel.code != FREE:
             return False
         cm = self.tis.cm
         if not cm.subtets and cm.n_points == cm.n_orig_points:
             self.rebase_due = False  # the stroke cut nothing: nothing to rebase
             return False
-        if self.cut.blocking:
-            with self.lock.urgent():
-                self.rebase()
-        elif self.lock.try_urgent():
-            try:
-                self.rebase()
-            finally:
-                self.lock.release()
-        else:
-            return False
+        with self.lock.urgent():
+            self.rebase()
         self.rebase_due = False
         return True
 

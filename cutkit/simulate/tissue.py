@@ -70,6 +70,18 @@ class TissueBase:
 
     cm: CutMesh
 
+    def rebase(self, old_of_new: np.ndarray, old_orig: np.ndarray) -> None:
+        """Follow :meth:`CutMesh.rebase <cutkit.cutting.CutMesh.rebase>` (called after it, between strokes).
+
+        Parameters
+        ----------
+        old_of_new : (m,) int64
+            Old CutMesh tet id of each new original tet.
+        old_orig : (m,) int64
+            Old original tet of each (``old _tet_orig[old_of_new]``).
+        """
+        raise NotImplementedError
+
     def interpolate_positions(self, nodes: np.ndarray) -> np.ndarray:
         """Current positions of cut nodes from their defining nodes, (p, 3) float64.
 
@@ -508,12 +520,7 @@ class Tissue(TissueBase):
         per node pair or node and stay; no node is a cut node any more, so
         the cut nodes' tet lists restart.
 
-        Parameters
-        ----------
-        old_of_new : (m,) int64
-            Old CutMesh tet id of each new original tet.
-        old_orig : (m,) int64
-            Old original tet of each (``old _tet_orig[old_of_new]``).
+        Parameters as :meth:`TissueBase.rebase`.
         """
         old_of_new = np.asarray(old_of_new, np.int64)
         old_orig = np.asarray(old_orig, np.int64)
