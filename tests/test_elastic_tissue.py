@@ -47,3 +47,36 @@ def test_unfold_leaves_a_mesh_without_folds_alone():
     placed = np.array([interior_node(tis)])
     tis._unfold(tets, placed, tis.positions[placed].copy())
     assert np.array_equal(tis.positions, x0)
+
+
+def test_a_raised_stop_flag_leaves_the_step_untaken():
+    """A cut waiting for the lock (the flag raised) before the first sweep ends: nothing moves, no time passes."""
+    tis = tissue()
+    f = np.zeros((tis.n_nodes, 3))
+    f[interior_node(tis), 2] = 5.0
+    x0, t0 = tis.positions.copy(), tis.time
+    stop = np.ones(1, np.int64)
+    assert tis.advance(f, t0 + 3 * tis.step_s, stop) == 0
+    assert tis.time == t0 and np.array_equal(tis.positions, x0)
+    stop[0] = 0
+    assert tis.advance(f, t0 + 3 * tis.step_s, stop) > 0
+    assert tis.time > t0 and not np.array_equal(tis.positions, x0)
+
+
+def test_the_sweep_kernel_reads_the_stop_flag_before_each_colour_class():
+    from cutkit.relax import _elastic_kernels as K
+    from cutkit.relax.elastic import _node_terms
+
+    tis = tissue()
+    em = tis.em
+    x = tis.positions.copy()
+    f = np.zeros((em.n_nodes, 3))
+    f[:, 2] = 1.0
+    terms = _node_terms(em, x, tis.step_s, f, None, x.copy())
+    offsets, nodes = em.colour_classes()
+    assert K.vbd_sweep(x, em.elements, em.adjacency, terms, offsets, nodes, np.zeros(em.n_nodes),
+                       np.ones(1, np.int64)) == 0
+    assert np.array_equal(x, tis.positions)
+    assert K.vbd_sweep(x, em.elements, em.adjacency, terms, offsets, nodes, np.zeros(em.n_nodes),
+                       np.zeros(1, np.int64)) == offsets.size - 1
+    assert not np.array_equal(x, tis.positions)

@@ -222,3 +222,24 @@ def test_igtl_malformed_messages_are_dropped_with_one_line(igtl_source, caplog):
     s.sendall(good)
     assert _wait(lambda: src.poll() is not None), "the endpoint stopped serving"
     s.close()
+
+
+def test_the_mirrored_force_model_keeps_the_service_alive_without_flooding_it(monkeypatch):
+    """A SIM_UPDATE at most every KEEP_ALIVE_S (well inside the service's watchdog), however often the loop asks."""
+    import cutkit.simulate.live as live
+    from cutkit.haptics.server import WATCHDOG_TIMEOUT_S
+
+    class Source:
+        sent = 0
+
+        def update(self, *args, **kwargs):
+            Source.sent += 1
+
+    clock = [100.0]
+    monkeypatch.setattr(live.time, "perf_counter", lambda: clock[0])
+    model = live.MirroredForceModel(Source(), blade_breadth=0.3)
+    for _ in range(50):  # one loop pass every 0.5 ms for 25 ms
+        model.keep_alive()
+        clock[0] += 0.0005
+    assert Source.sent == math.ceil(0.025 / live.KEEP_ALIVE_S)
+    assert live.KEEP_ALIVE_S <= WATCHDOG_TIMEOUT_S / 5

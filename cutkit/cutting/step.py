@@ -76,25 +76,21 @@ def find_trajectory_tetra(cm: CutMesh, start: int, target) -> int:
     return int(KS.walk(cm._x, cm.orig_tets, cm.neighbors, int(start), np.asarray(target, np.float64), MAX_WALK))
 
 
-def _surface_seeds(cm, P0, Q0, P1, Q1, crack=False):
-    """Original tets of the boundary faces the blade met between two poses (surface collision, 4.1).
+def surface_bvh(cm: CutMesh, crack: bool = False):
+    """The hierarchy of the original tets' boundary faces that surface collision walks, built once.
 
-    The whole blade counts, not only its tip: the faces met by the swept
-    quad (P0, Q0, Q1, P1) or by the blade at its new pose
-    (:func:`cutkit.collision.swept_faces`), so a blade entering edge-first
-    (a cleaver, a through-cut with the tip outside, a one-step guillotine)
-    is found.  The surface BVH is built on first contact; afterwards it is
-    refitted (``SurfaceBVH.update``: only nodes that left their tolerance
-    box cost anything) so surface entry follows a deforming mesh.
+    Built on first use (O(mesh)) and kept on ``cm`` until its next
+    :meth:`~CutMesh.rebase`; a session builds it before the blade comes
+    (the first cut step would stall for it).  With ``crack``: the cut
+    surface of the strokes before the last rebase only (see
+    :func:`_surface_seeds`).
 
-    With ``crack``, only the cut surface of the strokes before the last
-    :meth:`~CutMesh.rebase` is looked at (its own BVH): the boundary faces
-    the tets across an earlier cut are reached through, since no face
-    adjacency links the two sides.
+    Returns
+    -------
+    bvh : cutkit.collision.SurfaceBVH
+    face_tet : (f,) int64
+        Original tet of each face of ``bvh``.
     """
-    from cutkit.collision import swept_faces
-
-    pts = cm._x[:cm.n_orig_points]
     key = "_crack_bvh" if crack else "_bvh"
     bvh = getattr(cm, key, None)
     if bvh is None:
@@ -104,13 +100,35 @@ def _surface_seeds(cm, P0, Q0, P1, Q1, crack=False):
         if crack:
             keep = [tuple(f) in cm.cut_faces_before for f in np.sort(faces, axis=1).tolist()]
             faces, face_tet = faces[keep], face_tet[keep]
-        bvh = SurfaceBVH.build(pts.copy(), faces)
+        bvh = SurfaceBVH.build(cm._x[:cm.n_orig_points].copy(), faces)
         setattr(cm, key, bvh)
         setattr(cm, key + "_face_tet", face_tet)
-    else:
-        bvh.update(pts)
+    return bvh, getattr(cm, key + "_face_tet")
+
+
+def _surface_seeds(cm, P0, Q0, P1, Q1, crack=False):
+    """Original tets of the boundary faces the blade met between two poses (surface collision, 4.1).
+
+    The whole blade counts, not only its tip: the faces met by the swept
+    quad (P0, Q0, Q1, P1) or by the blade at its new pose
+    (:func:`cutkit.collision.swept_faces`), so a blade entering edge-first
+    (a cleaver, a through-cut with the tip outside, a one-step guillotine)
+    is found.  The surface BVH (:func:`surface_bvh`) is refitted at every
+    call (``SurfaceBVH.update``: only nodes that left their tolerance box
+    cost anything) so surface entry follows a deforming mesh.
+
+    With ``crack``, only the cut surface of the strokes before the last
+    :meth:`~CutMesh.rebase` is looked at (its own BVH): the boundary faces
+    the tets across an earlier cut are reached through, since no face
+    adjacency links the two sides.
+    """
+    from cutkit.collision import swept_faces
+
+    pts = cm._x[:cm.n_orig_points]
+    bvh, face_tet = surface_bvh(cm, crack)
+    bvh.update(pts)
     faces, _ = swept_faces(bvh, pts, P0, Q0, P1, Q1)
-    return getattr(cm, key + "_face_tet")[faces].tolist()
+    return face_tet[faces].tolist()
 
 
 def _sweep(cm, stamp, seeds, swept, blade, P0):

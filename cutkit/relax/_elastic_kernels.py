@@ -246,18 +246,26 @@ def _max_step(i, x, el, adj, d0, d1, d2):
 
 
 @njit(cache=True, parallel=True, nogil=True)
-def vbd_sweep(x, el, adj, nt, colour_offsets, colour_nodes, r2):
+def vbd_sweep(x, el, adj, nt, colour_offsets, colour_nodes, r2, stop):
     """One Gauss-Seidel sweep of vertex block descent, colour class by colour class.
 
     Nodes of one colour share no tet, so they update in parallel and the
     result does not depend on the number of threads.  ``r2[i]`` receives the
     squared residual (out-of-balance force, N^2) of node i before its update.
+    ``stop`` ((1,) int64) is read before each colour class: non-zero ends
+    the sweep there (a live cut waiting for the tissue; every node update
+    made lowers the energy, so a part sweep is a valid descent).  Returns
+    the colour classes swept.
     """
-    for c in range(colour_offsets.shape[0] - 1):
+    n_classes = colour_offsets.shape[0] - 1
+    for c in range(n_classes):
+        if stop[0] != 0:
+            return c
         lo, hi = colour_offsets[c], colour_offsets[c + 1]
         for q in prange(lo, hi):
             i = colour_nodes[q]
             r2[i] = _node_update(i, x, el, adj, nt)
+    return n_classes
 
 
 @njit(cache=True, parallel=True, nogil=True)

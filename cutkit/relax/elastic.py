@@ -43,6 +43,9 @@ MIN_ELEMENT_QUALITY = 1e-6
 #: Spare tets per node in the adjacency table when it is (re)allocated.
 ADJACENCY_SLACK = 16
 
+#: The stop flag of solves nothing interrupts (see :func:`local_step`); never written.
+NEVER_STOP = np.zeros(1, np.int64)
+
 
 def lame(E, nu):
     """Lame parameters (mu, lam) of Young's modulus E and Poisson ratio nu (same units as E)."""
@@ -305,13 +308,17 @@ class ElementState:
 
 @dataclass
 class SolveInfo:
-    """How a solve ended: sweeps made, residual before the first and after the last (N), node updates."""
+    """How a solve ended: sweeps made, residual before the first and after the last (N), node updates.
+
+    ``taken`` is False for a :func:`local_step` stopped within its first sweep (nothing changed).
+    """
 
     iterations: int
     initial_residual: float
     residual: float
     converged: bool
     node_updates: int = 0
+    taken: bool = True
 
 
 def build_element_model(model, *, poisson_ratio=None) -> ElementModel:
@@ -432,7 +439,7 @@ def iterate(em: ElementModel, x, terms, *, rtol=DEFAULT_RTOL, atol=DEFAULT_ATOL_
     while it < max_iterations:
         if chebyshev is not None:
             prev2, prev = prev, x.copy()
-        K.vbd_sweep(x, el, adj, terms, offsets, nodes, r2)
+        K.vbd_sweep(x, el, adj, terms, offsets, nodes, r2, NEVER_STOP)
         it += 1
         res = float(np.sqrt(r2.sum()))
         if it == 1:
@@ -478,7 +485,7 @@ def implicit_step(em: ElementModel, state: ElementState, h: float, f_ext=None, g
 
 def local_step(em: ElementModel, state: ElementState, h: float, f_ext, r2, seeds, *,
                atol: float, max_iterations: int = DEFAULT_MAX_ITERATIONS, chebyshev=None,
-               should_stop=None) -> SolveInfo:
+               stop=None) -> SolveInfo:
     """One backward Euler step that moves only the nodes out of balance (and their neighbours).
 
     A node whose out-of-balance force stays below ``tau = atol / (2 sqrt(n))``
@@ -496,9 +503,13 @@ def local_step(em: ElementModel, state: ElementState, h: float, f_ext, r2, seeds
         Squared residual of every node at its last sweep, N^2; updated in place.
     seeds : (k,) int64
         Nodes to wake.
-    should_stop : callable() -> bool, optional
-        Asked after every sweep; True ends the step there, unconverged, with
-        the positions reached (a live session's cut waiting for the tissue).
+    stop : (1,) int64, optional
+        Read before every colour class of a sweep (in the kernel) and after
+        every sweep: non-zero ends the step there, unconverged, with the
+        positions reached (a live session's cut waiting for the tissue,
+        :class:`~cutkit.simulate.session.HandoverLock`).  Stopped within its
+        first sweep, the step is not taken: positions and time stay as they
+        were and the result has 0 iterations.
     """
     x, v = state.positions, state.velocities
     n = em.n_nodes
@@ -522,12 +533,16 @@ def local_step(em: ElementModel, state: ElementState, h: float, f_ext, r2, seeds
     prev2 = prev = None
     omega = 1.0
     updates = 0
+    stop = NEVER_STOP if stop is None else stop
     while it < max_iterations and awake.size:
         offsets, nodes = K.colour_classes_of(em.colour, awake, n_colours)
         updates += nodes.size
         if chebyshev is not None:
             prev2, prev = prev, x.copy()
-        K.vbd_sweep(x, em.elements, em.adjacency, terms, offsets, nodes, r2)
+        swept = K.vbd_sweep(x, em.elements, em.adjacency, terms, offsets, nodes, r2, stop)
+        if it == 0 and swept < offsets.size - 1:  # stopped within the first sweep: the step is not taken
+            x[:] = x0
+            return SolveInfo(0, 0.0, 0.0, False, 0, taken=False)
         it += 1
         if chebyshev is not None and prev2 is not None:  # as in iterate(); nodes that slept are unchanged
             rho2 = chebyshev * chebyshev
@@ -536,7 +551,7 @@ def local_step(em: ElementModel, state: ElementState, h: float, f_ext, r2, seeds
         res = float(np.sqrt(r2.sum()))
         if it == 1:
             r0 = res
-        if res <= atol or (should_stop is not None and should_stop()):
+        if res <= atol or stop[0]:
             break
         awake = K.awake_after_sweep(em.adjacency, em.tets, movable, r2, tau2, awake, mark)
     v[:] = np.where(em.fixed, 0.0, (x - x0) / h)

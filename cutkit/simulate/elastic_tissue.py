@@ -156,25 +156,28 @@ class ElasticTissue(TissueBase):
         return {"iterations": info.iterations, "relative_residual": info.residual / info.initial_residual
                 if info.initial_residual > 0 else 0.0, "converged": info.converged, "rtol": rtol}
 
-    def advance(self, f_ext: np.ndarray, until: float, should_stop=None) -> int:
+    def advance(self, f_ext: np.ndarray, until: float, stop=None) -> int:
         """Implicit steps of :attr:`step_s` up to ``until`` s; returns the sweeps made.
 
-        ``should_stop`` (callable() -> bool, live sessions only) is asked after
-        every sweep: True ends the step in flight there and the advance with it,
-        so a waiting cut never waits for more than one sweep.  Offline runs
-        pass none, and every step ends on its residual.
+        ``stop`` ((1,) int64, live sessions only, the
+        :class:`~cutkit.simulate.session.HandoverLock`'s flag) is read between
+        colour classes: non-zero ends the step in flight and the advance
+        with it, so a waiting cut waits for one colour class of one sweep.
+        Offline runs pass none, and every step ends on its residual.
         """
         n_steps = int(np.floor((until - self.state.time) / self.step_s + 1e-6))
         sweeps = 0
         loaded = np.flatnonzero(np.any(f_ext != 0.0, axis=1))
         for _ in range(max(n_steps, 0)):
-            if should_stop is not None and should_stop():
+            if stop is not None and stop[0]:
                 break
             seeds = np.concatenate([loaded, *self._seeds]) if self._seeds else loaded
-            self._seeds = []
             info = local_step(self.em, self.state, self.step_s, f_ext, self.r2, seeds,
                               atol=max(self.step_rtol * self.force_scale, DEFAULT_ATOL_N),
-                              max_iterations=self.step_max_iterations, should_stop=should_stop)
+                              max_iterations=self.step_max_iterations, stop=stop)
+            if not info.taken:
+                break  # stopped before its first sweep was done: its seeds stay for the next
+            self._seeds = []
             sweeps += info.iterations
             self.counts["steps"] += 1
             self.counts["sweeps"] += info.iterations
@@ -222,7 +225,8 @@ class ElasticTissue(TissueBase):
                             self.prestrain[orig], self.fibre[orig], ids=redo)
             placed = np.concatenate([old_moved, np.arange(n_old, n_new)])
             self._unfold(redo, placed, np.concatenate([x_before, self.state.positions[n_old:n_new]]))
-        self._hold_orphans()
+        self._hold_orphans(np.unique(np.concatenate([cm._tets[np.concatenate([removed, redo])].ravel(),
+                                                     np.arange(n_old, n_new)])))
         self._recolour(added, n_old)
         if self.r2.shape[0] < em.n_nodes:
             self.r2 = np.concatenate([self.r2, np.zeros(em.n_nodes - self.r2.shape[0])])
@@ -401,14 +405,15 @@ class ElasticTissue(TissueBase):
             x[p] = np.where(reach[:, None], np.einsum("pk,pkc->pc", bary[rows, best], xc[best]), x[p])
         return x
 
-    def _hold_orphans(self) -> None:
-        """Nodes no tet uses any more stay where they are; nodes with tets are free unless held by a condition."""
+    def _hold_orphans(self, nodes: np.ndarray) -> None:
+        """Of ``nodes`` (those whose tets a step changed), the ones no tet uses any more stay where
+        they are; those with tets are free unless held by a condition."""
         em = self.em
-        fixed = self.bc_fixed | (em.adj_degree == 0)
-        changed = np.flatnonzero(fixed != em.fixed.all(axis=1))
-        if changed.size:
-            em.fixed[changed] = fixed[changed, None]
-            self.state.velocities[changed[fixed[changed]]] = 0.0
+        fixed = self.bc_fixed[nodes] | (em.adj_degree[nodes] == 0)
+        changed = fixed != em.fixed[nodes].all(axis=1)
+        if changed.any():
+            em.fixed[nodes[changed]] = fixed[changed, None]
+            self.state.velocities[nodes[changed & fixed]] = 0.0
             em._classes = None
 
     def _recolour(self, added: np.ndarray, n_old: int) -> None:

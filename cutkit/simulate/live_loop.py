@@ -12,6 +12,10 @@ from cutkit.scalpel import FREE
 from cutkit.simulate.live import MAX_CATCH_UP_TICKS, MirroredForceModel, RelaxThread, TickMeter
 from cutkit.simulate.run import HAPTIC_DT, RATE_WARN_FRACTION, SimulateOptions
 
+#: The loop's pause when it has nothing to do, s: poses come at 1 kHz and each pass takes
+#: all that arrived, so a pose waits at most this long before its tick.
+LOOP_IDLE_S = 0.0005
+
 
 class OuterBoundary:
     """The tissue's outer boundary triangles (without the cut surface), recomputed only after a cut.
@@ -117,12 +121,17 @@ class LiveLoop:
         self.frame_s: list[float] = []
         self.faces = np.zeros((0, 3), np.int64), self.boundary.get(0)
         self.faces_version = 0
+        self.view_closed = False  # a window closed by its user ends the session (checked at frames)
 
     def run(self, max_seconds=None, idle_end_s: float = 0.5, stop=None, on_frame=None,
             until_idle_s: float | None = None, on_start=None) -> dict:
+        from cutkit.simulate.warmup import warm_up
+
         s = self.session
         chunk = getattr(s.tis, "step_s", 4 * self.opt.dt0)
-        # one step before the clock starts: kernels not yet compiled compile here, not in the session
+        # before the clock starts, kernels not yet loaded load (or compile) here, not in the
+        # middle of the first cut: a tiny cut with this material model, one step of this tissue
+        warm_up(outputs=False, material_model=s.material_model)
         s.relax.advance(np.zeros((s.tis.n_nodes, 3)), s.tis.time + chunk)
         self.t0 = time.perf_counter() - s.tis.time
         self._frame(None)  # views build their windows before the clock starts
@@ -158,7 +167,7 @@ class LiveLoop:
             now = self.now()
             if max_seconds is not None and now >= max_seconds:
                 break
-            if self.relax.error is not None or any(getattr(v, "closed", False) for v in self.views):
+            if self.relax.error is not None or self.view_closed:
                 break
             pose = self.source.poll()
             if pose is not None:
@@ -171,9 +180,13 @@ class LiveLoop:
             if not self.service and now >= next_geo:
                 self._geometry()
                 next_geo = max(next_geo + self.geo_period, now)
-            if now >= next_frame:
+            # a cut is drawn at once (a frame costs a few ms; waiting for the frame clock would
+            # add up to a frame period to the latency from the pose to the drawn cut)
+            if now >= next_frame or self.pending_cut:
+                due = now >= next_frame
                 self._frame(on_frame)
-                next_frame = max(next_frame + self.frame_period, self.now())
+                if due:  # a cut's extra frame leaves the frame clock as it is
+                    next_frame = max(next_frame + self.frame_period, self.now())
             # idle: the tissue has relaxed until_idle_s of its own time past the last pose (on a
             # slow machine the tissue lags the wall clock; the recording should not depend on it)
             idle = (until_idle_s is not None and self.pose is not None
@@ -183,7 +196,7 @@ class LiveLoop:
                 finished_at = now if finished_at is None else finished_at
                 if now - finished_at >= idle_end_s:
                     break
-            time.sleep(0.0002)
+            time.sleep(LOOP_IDLE_S)
 
     def _on_pose(self, pose) -> None:
         arrival = self.now()
@@ -248,6 +261,7 @@ class LiveLoop:
                           tets_cut=s.tets_cut, t=self.now())
         for view in self.views:
             view.show(frame)
+        self.view_closed = any(getattr(v, "closed", False) for v in self.views)
         drawn = self.now()
         self.latency.extend(drawn - t for t in self.pending_cut)
         self.pending_cut.clear()
@@ -266,7 +280,7 @@ class LiveLoop:
         wall = max(self.now(), 1e-9)
         recent = [t for t in self.frame_s[-31:]]
         fps = (len(recent) - 1) / (recent[-1] - recent[0]) if len(recent) > 1 and recent[-1] > recent[0] else 0.0
-        haptic = (self.meter.stats()["haptic_hz"] if self.meter is not None
+        haptic = (self.meter.rate() if self.meter is not None
                   else self.session.counts["haptic_ticks"] / wall)
         return {"haptic_hz": haptic, "relax_passes_per_s": self.session.counts["relax_passes"] / wall, "fps": fps}
 

@@ -30,6 +30,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from cutkit.cutting import surface_bvh
 from cutkit.scalpel import CUTTING, FREE, O_CUT, O_N, STATE_NAMES
 
 #: The blade has left the tissue once the hand's tip is this far outside the
@@ -43,38 +44,40 @@ class HandoverLock:
     Plain locks are not fair: a relaxation thread that releases the lock and
     takes it again at once could keep a cut waiting for many steps.  ``with
     lock.urgent():`` (the cut task, a rebase) makes ordinary acquirers (``with
-    lock:``, the relaxation) wait until it has had its turn, and
-    :meth:`waiting` tells the holder to end its step early.
+    lock:``, the relaxation) wait until it has had its turn, and raises
+    :attr:`flag`, which the holder's kernels read between colour classes to
+    end their step early.
+
+    Attributes
+    ----------
+    flag : (1,) int64
+        Topology changes waiting for the lock (non-zero: the holder should let go).
     """
 
     def __init__(self):
         self._lock = threading.Lock()
         self._cond = threading.Condition()
-        self._urgent = 0
+        self.flag = np.zeros(1, np.int64)
 
     def __enter__(self):
         with self._cond:
-            self._cond.wait_for(lambda: self._urgent == 0, timeout=1.0)
+            self._cond.wait_for(lambda: self.flag[0] == 0, timeout=1.0)
         self._lock.acquire()
         return self
 
     def __exit__(self, *exc):
         self._lock.release()
 
-    def waiting(self) -> bool:
-        """Whether a topology change waits for the lock (asked by the holder between sweeps)."""
-        return self._urgent > 0
-
     @contextmanager
     def urgent(self):
         with self._cond:
-            self._urgent += 1
+            self.flag[0] += 1
         try:
             with self._lock:
                 yield self
         finally:
             with self._cond:
-                self._urgent -= 1
+                self.flag[0] -= 1
                 self._cond.notify_all()
 
 
@@ -233,12 +236,12 @@ class RelaxTask:
 
     def advance(self, f_ext, until: float, yield_to_cut: bool = False) -> int:
         """Relax to ``until`` s under the lock; with ``yield_to_cut`` (live) a topology change
-        waiting for the lock ends the step in flight after its current sweep."""
+        waiting for the lock ends the step in flight at its next colour class."""
         t0 = time.perf_counter()
         with self.lock:
             if f_ext.shape[0] != self.tis.n_nodes:  # a cut added nodes since the forces were made
                 f_ext = np.concatenate([f_ext, np.zeros((self.tis.n_nodes - f_ext.shape[0], 3))])
-            passes = self.tis.advance(f_ext, until, self.lock.waiting if yield_to_cut else None)
+            passes = self.tis.advance(f_ext, until, self.lock.flag if yield_to_cut else None)
         self.counts["relax_passes"] += passes
         self.wall_s += time.perf_counter() - t0
         return passes
@@ -315,6 +318,7 @@ class Session:
         t1 = time.perf_counter()
         self.settle_info = settle(self.tis, self.material_model, opt, self.warnings)
         self.contact.refit()
+        surface_bvh(self.tis.cm)  # built now, not in the first cut step
         self.task_s["settle"] = time.perf_counter() - t1
 
     @property
@@ -416,6 +420,7 @@ class Session:
         old_of_new = cm.rebase()
         self.tis.rebase(old_of_new, old_orig[old_of_new])
         self.contact.rebase()
+        surface_bvh(cm)
         for hook in self.on_rebase:
             hook(old_of_new)
         return old_of_new

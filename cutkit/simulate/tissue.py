@@ -500,12 +500,12 @@ class Tissue(TissueBase):
         self.lists.list_time[:] = 0.0
         return {"iterations": int(iterations), "relative_residual": r / r0 if r0 > 0 else 0.0}
 
-    def advance(self, f_ext: np.ndarray, until: float, should_stop=None) -> int:
+    def advance(self, f_ext: np.ndarray, until: float, stop=None) -> int:
         """Process the node lists up to ``until`` s and bring every node there; returns list passes.
 
         Every node is brought to the same time at every call, whether a frame
         is written or not, so what is written never changes what is simulated.
-        ``should_stop`` is not asked: a pass of the springs is short.
+        ``stop`` is not read: a pass of the springs is short.
         """
         return self.lists.advance(Control(external_forces=f_ext), until, synchronise=True)
 

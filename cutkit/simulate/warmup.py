@@ -3,6 +3,8 @@
 ``cutkit demo`` runs this in a second process while the first one builds
 the model: on a fresh installation numba compiles each kernel once (then
 loads it from its cache), and this way the two cores compile side by side.
+A live session runs it in process before its clock starts, so that no
+kernel is first loaded (10-30 ms each) in the middle of a cut.
 
     python -m cutkit.simulate.warmup
 """
@@ -16,8 +18,16 @@ import tempfile
 import numpy as np
 
 
-def warm_up() -> None:
-    """Decimate and cut a small two-tissue slab (nothing is kept)."""
+def warm_up(outputs: bool = True, material_model: str | None = None) -> None:
+    """Decimate and cut a small two-tissue slab (nothing is kept).
+
+    Parameters
+    ----------
+    outputs : bool
+        Also write frames and the cut model (their kernels).
+    material_model : str, optional
+        The tissue model to cut (``SimulateOptions.material_model``); default the model's.
+    """
     from cutkit.assign.defaults import DEFAULT_MATERIALS
     from cutkit.cutting.trajectory import straight_incision
     from cutkit.decimate import decimate
@@ -30,8 +40,8 @@ def warm_up() -> None:
     labels = np.where(centre[:, 1] < 2.0, 1, 3).astype(np.int32)  # a skin layer over muscle
     rows = [dict(label=1, name="skin", **DEFAULT_MATERIALS["skin"]),
             dict(label=3, name="muscle", **DEFAULT_MATERIALS["muscle"])]
-    model = TetModel.from_arrays(points, tets, labels, materials=Materials.from_rows(rows))
-    decimate(model, ratio=0.7)
+    if outputs:
+        decimate(TetModel.from_arrays(points, tets, labels, materials=Materials.from_rows(rows)), ratio=0.7)
     ends = np.flatnonzero((points[:, 2] == 0) | (points[:, 2] == 12.0))
     model = TetModel.from_arrays(points, tets, labels, materials=Materials.from_rows(rows),
                                  boundary=BoundaryConditions(fixed_nodes=ends),
@@ -41,8 +51,8 @@ def warm_up() -> None:
     traj = straight_incision([4.0, 0.0, 6.3], [12.0, 0.0, 6.3], inward=[0, 1, 0], depth=3.0, approach=2.0,
                              press_time=0.2, cut_time=0.3, rate=100)
     with tempfile.TemporaryDirectory() as d:
-        simulate(model, traj, d, SimulateOptions(frames=True, fps=2, write_model=True, hold_s=0.05,
-                                                 settle_iterations=2))
+        simulate(model, traj, d, SimulateOptions(frames=outputs, fps=2, write_model=outputs, hold_s=0.05,
+                                                 settle_iterations=2, material_model=material_model))
 
 
 def start_background() -> subprocess.Popen | None:
