@@ -96,7 +96,7 @@ def element_sweep(tm) -> dict:
     r2 = np.zeros(em.n_nodes)
 
     def sweep():
-        EK.vbd_sweep(x, em.elements, em.adjacency, terms, offsets, nodes, r2, np.zeros(1, np.int64))
+        EK.vbd_sweep(x, em.adjacency, terms, offsets, nodes, r2, np.zeros(1, np.int64))
 
     sweep()
     return {"element_sweep_ms_1m_tets": best_of(sweep, 5) * 1e3, "element_colours": int(offsets.shape[0] - 1)}

@@ -174,7 +174,7 @@ def test_sweep_matches_the_twin_in_colour_order(deformed):
     offsets, nodes = em.colour_classes()
     terms = K.NodeTerms(inertia, np.zeros(n), em.fixed, target, x.copy(), force)
     xk = x.copy()
-    K.vbd_sweep(xk, em.elements, em.adjacency, terms, offsets, nodes, np.zeros(n), np.zeros(1, np.int64))
+    K.vbd_sweep(xk, em.adjacency, terms, offsets, nodes, np.zeros(n), np.zeros(1, np.int64))
     xt = T.vbd_sweep(x, *arrays(em), inertia, target, force, fixed, nodes)
     assert np.allclose(xk, xt, atol=1e-7)
     assert np.array_equal(xk[0], x[0]) and xk[4, 1] == x[4, 1]
@@ -236,7 +236,7 @@ def test_no_node_step_inverts_a_tet():
     terms = K.NodeTerms(np.zeros(4), np.zeros(4), em.fixed, x.copy(), x.copy(), force)
     offsets, nodes = em.colour_classes()
     for _ in range(20):
-        K.vbd_sweep(x, em.elements, em.adjacency, terms, offsets, nodes, np.zeros(4), np.zeros(1, np.int64))
+        K.vbd_sweep(x, em.adjacency, terms, offsets, nodes, np.zeros(4), np.zeros(1, np.int64))
         assert x[3, 2] > 0.0
     assert x[3, 2] < 1e-3  # squashed as far as it goes, never through
 

@@ -74,9 +74,9 @@ def test_the_sweep_kernel_reads_the_stop_flag_before_each_colour_class():
     f[:, 2] = 1.0
     terms = _node_terms(em, x, tis.step_s, f, None, x.copy())
     offsets, nodes = em.colour_classes()
-    assert K.vbd_sweep(x, em.elements, em.adjacency, terms, offsets, nodes, np.zeros(em.n_nodes),
+    assert K.vbd_sweep(x, em.adjacency, terms, offsets, nodes, np.zeros(em.n_nodes),
                        np.ones(1, np.int64)) == 0
     assert np.array_equal(x, tis.positions)
-    assert K.vbd_sweep(x, em.elements, em.adjacency, terms, offsets, nodes, np.zeros(em.n_nodes),
+    assert K.vbd_sweep(x, em.adjacency, terms, offsets, nodes, np.zeros(em.n_nodes),
                        np.zeros(1, np.int64)) == offsets.size - 1
     assert not np.array_equal(x, tis.positions)

@@ -12,9 +12,12 @@ convex quadratic in that vertex: its 3x3 Newton step (Chen et al. 2024,
 vertex block descent) is the exact minimiser, whatever the step size and
 even for an inverted tetrahedron.
 
-The kernels take three struct-like arguments: ``el`` (:class:`Elements`),
+The kernels take a few struct-like arguments: ``el`` (:class:`Elements`),
 ``adj`` (:class:`Adjacency`) and ``nt`` (:class:`NodeTerms`); they check
-nothing (:mod:`cutkit.relax.elastic` does).
+nothing (:mod:`cutkit.relax.elastic` does).  A node update reads only its
+own adjacency row (the three other corners of each of its tets and six
+constants, :data:`INCIDENCE_TERMS`) and the positions: contiguous reads
+in place of gathering each tet's corners and constants.
 """
 
 from __future__ import annotations
@@ -24,9 +27,8 @@ from collections import namedtuple
 import numpy as np
 from numba import njit, prange
 
-#: tets (m, 4) int64, Dminv (m, 3, 3) float64, volume (m,) float64 (0: inactive), mu, lam (m,) float64 MPa,
-#: node_terms (m, NODE_TERMS) float64: what a node update reads of a tet (:func:`node_term_rows`)
-Elements = namedtuple("Elements", ["tets", "Dminv", "volume", "mu", "lam", "node_terms"])
+#: tets (m, 4) int64, Dminv (m, 3, 3) float64, volume (m,) float64 (0: inactive), mu, lam (m,) float64 MPa
+Elements = namedtuple("Elements", ["tets", "Dminv", "volume", "mu", "lam"])
 
 #: Corner pairs (j, c) of a tet's six edges, in the order of the first six node-term columns.
 EDGE_PAIRS = ((0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3))
@@ -38,6 +40,12 @@ NODE_TERMS = 9
 OPPOSITE = np.array([[1, 3, 2], [0, 2, 3], [0, 3, 1], [0, 1, 2]], np.int64)
 #: Column of the edge (c, j) for corner c and each other corner j (-1 on the diagonal).
 EDGE_COLUMN = np.array([[-1, 0, 1, 2], [0, -1, 3, 4], [1, 3, -1, 5], [2, 4, 5, -1]], np.int64)
+#: What a node's adjacency row holds of each tet around it (``Adjacency.terms``): the edge
+#: weights to its three other corners (in :data:`OPPOSITE` order), 1 / det Dm, V (lam + mu), V mu.
+INCIDENCE_TERMS = 6
+#: A sweep splits each colour class into this many blocks (at most), each with its own scratch
+#: row: a fixed count, so the result does not depend on the number of threads.
+SWEEP_BLOCKS = 64
 
 
 def node_term_rows(Dminv, volume, mu, lam):
@@ -48,6 +56,7 @@ def node_term_rows(Dminv, volume, mu, lam):
     node's force is sum_j V mu (b_j . b_c) (x_j - x_c): six edge weights per
     tet (the cotangent Laplacian).  J = det Ds / det Dm and dJ/dx_c is the
     cross product of the opposite face's edges over det Dm (:data:`OPPOSITE`).
+    :func:`add_to_adjacency` hands each corner its part.
     """
     B = np.concatenate([-Dminv.sum(axis=1, keepdims=True), Dminv], axis=1)  # (m, 4, 3)
     L = np.einsum("mjd,mcd->mjc", B, B)
@@ -60,8 +69,10 @@ def node_term_rows(Dminv, volume, mu, lam):
     out[:, 8] = volume * mu
     return out
 
-#: tets (n, K) int32, corner (n, K) int8, degree (n,) int32: the tets around each node
-Adjacency = namedtuple("Adjacency", ["tets", "corner", "degree"])
+#: tets (n, K) int32, corner (n, K) int8, degree (n,) int32: the tets around each node;
+#: opposite (n, K, 3) int32 and terms (n, K, INCIDENCE_TERMS) float64: what a node update
+#: reads of each (its three other corners, and its part of the tet's node-term row)
+Adjacency = namedtuple("Adjacency", ["tets", "corner", "degree", "opposite", "terms"])
 #: inertia (n,) m/h^2, damping (n,) c m / h, fixed (n, 3) bool, target y (n, 3), previous x (n, 3),
 #: external force (n, 3) N (gravity included)
 NodeTerms = namedtuple("NodeTerms", ["inertia", "damping", "fixed", "target", "previous", "force"])
@@ -99,75 +110,56 @@ def barrier(J, k):
 
 
 @njit(cache=True, nogil=True)
-def _corner_row(D, c):
-    """Row c of the gradient operator: dF/dx_c = I (x) b (b_0 = -(b_1 + b_2 + b_3))."""
-    if c == 0:
-        return -(D[0, 0] + D[1, 0] + D[2, 0]), -(D[0, 1] + D[1, 1] + D[2, 1]), -(D[0, 2] + D[1, 2] + D[2, 2])
-    return D[c - 1, 0], D[c - 1, 1], D[c - 1, 2]
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _volume_ratio(i, c, t, x, el):
-    """J of tet t and dJ/dx_i (node i at its corner c): (J, g0, g1, g2), from the opposite face."""
-    aj = el.tets[t, OPPOSITE[c, 0]]
-    ak = el.tets[t, OPPOSITE[c, 1]]
-    al = el.tets[t, OPPOSITE[c, 2]]
-    p0, p1, p2 = x[ak, 0] - x[aj, 0], x[ak, 1] - x[aj, 1], x[ak, 2] - x[aj, 2]
-    q0, q1, q2 = x[al, 0] - x[aj, 0], x[al, 1] - x[aj, 1], x[al, 2] - x[aj, 2]
-    alpha = el.node_terms[t, 6]
-    g0 = (p1 * q2 - p2 * q1) * alpha
-    g1 = (p2 * q0 - p0 * q2) * alpha
-    g2 = (p0 * q1 - p1 * q0) * alpha
-    return (x[i, 0] - x[aj, 0]) * g0 + (x[i, 1] - x[aj, 1]) * g1 + (x[i, 2] - x[aj, 2]) * g2, g0, g1, g2
-
-
-@njit(cache=True, nogil=True)
-def _accumulate(i, x, el, adj):
+def _accumulate(i, x, adj, scratch):
     """-dW/dx_i (f0, f1, f2) and the upper triangle of d2W/dx_i^2 over the tets of node i.
 
-    Scalars only in the innermost loop, from the tet's node-term row
-    (:func:`node_term_rows`): W = V psi(F) + V b(J) with P = mu F + s cof F,
-    s = (lam + mu)(J - 1) - mu + b'(J), so
+    Scalars only in the innermost loop, from the node's adjacency row
+    (:func:`node_term_rows`, :data:`INCIDENCE_TERMS`): W = V psi(F) + V b(J)
+    with P = mu F + s cof F, s = (lam + mu)(J - 1) - mu + b'(J), so
 
         dW/dx_i = sum_j w_ij (x_j - x_i) + V s dJ/dx_i  (w_ij <= 0 on good tets),
         d2W/dx_i^2 = -(sum_j w_ij) I + V ((lam + mu) + b''(J)) dJ/dx_i dJ/dx_i^T
 
     (the J-Hessian term vanishes: J is affine in one vertex; b is the
-    :data:`BARRIER_J` barrier).
+    :data:`BARRIER_J` barrier).  ``scratch`` (K, 4) receives J and dJ/dx_i of
+    each tet (J = 0: no energy) for :func:`_max_step`.
     """
     f0 = f1 = f2 = 0.0
     h00 = h01 = h02 = h11 = h12 = h22 = 0.0
+    xi0, xi1, xi2 = x[i, 0], x[i, 1], x[i, 2]
     for k in range(adj.degree[i]):
-        t = adj.tets[i, k]
-        row = el.node_terms[t]
-        Vk = row[7]
+        Vk = adj.terms[i, k, 4]
         if Vk <= 0.0:
+            scratch[k, 0] = 0.0
             continue
-        c = adj.corner[i, k]
-        aj = el.tets[t, OPPOSITE[c, 0]]
-        ak = el.tets[t, OPPOSITE[c, 1]]
-        al = el.tets[t, OPPOSITE[c, 2]]
-        xi0, xi1, xi2 = x[i, 0], x[i, 1], x[i, 2]
-        e0, e1, e2 = xi0 - x[aj, 0], xi1 - x[aj, 1], xi2 - x[aj, 2]  # x_i - x_j
-        p0, p1, p2 = x[ak, 0] - x[aj, 0], x[ak, 1] - x[aj, 1], x[ak, 2] - x[aj, 2]  # x_k - x_j
-        q0, q1, q2 = x[al, 0] - x[aj, 0], x[al, 1] - x[aj, 1], x[al, 2] - x[aj, 2]  # x_l - x_j
+        aj = adj.opposite[i, k, 0]
+        ak = adj.opposite[i, k, 1]
+        al = adj.opposite[i, k, 2]
+        xj0, xj1, xj2 = x[aj, 0], x[aj, 1], x[aj, 2]
+        e0, e1, e2 = xi0 - xj0, xi1 - xj1, xi2 - xj2  # x_i - x_j
+        p0, p1, p2 = x[ak, 0] - xj0, x[ak, 1] - xj1, x[ak, 2] - xj2  # x_k - x_j
+        q0, q1, q2 = x[al, 0] - xj0, x[al, 1] - xj1, x[al, 2] - xj2  # x_l - x_j
         # the mu F b_c part: edge weights to the three other corners
-        wj = row[EDGE_COLUMN[c, OPPOSITE[c, 0]]]
-        wk = row[EDGE_COLUMN[c, OPPOSITE[c, 1]]]
-        wl = row[EDGE_COLUMN[c, OPPOSITE[c, 2]]]
+        wj = adj.terms[i, k, 0]
+        wk = adj.terms[i, k, 1]
+        wl = adj.terms[i, k, 2]
         wsum = wj + wk + wl
         # sum_m w_m (x_i - x_m) with x_i - x_k = e - p, x_i - x_l = e - q
         f0 += wsum * e0 - wk * p0 - wl * q0
         f1 += wsum * e1 - wk * p1 - wl * q1
         f2 += wsum * e2 - wk * p2 - wl * q2
-        # J and dJ/dx_i from the opposite face (as _volume_ratio)
-        alpha = row[6]
+        # J and dJ/dx_i from the opposite face
+        alpha = adj.terms[i, k, 3]
         gb0 = (p1 * q2 - p2 * q1) * alpha
         gb1 = (p2 * q0 - p0 * q2) * alpha
         gb2 = (p0 * q1 - p1 * q0) * alpha
         J = e0 * gb0 + e1 * gb1 + e2 * gb2
+        scratch[k, 0] = J
+        scratch[k, 1] = gb0
+        scratch[k, 2] = gb1
+        scratch[k, 3] = gb2
         _, db, ddb = barrier(J, Vk)
-        s = Vk * (J - 1.0) - row[8] + db  # V s
+        s = Vk * (J - 1.0) - adj.terms[i, k, 5] + db  # V s
         f0 -= s * gb0
         f1 -= s * gb1
         f2 -= s * gb2
@@ -183,9 +175,9 @@ def _accumulate(i, x, el, adj):
 
 
 @njit(cache=True, nogil=True)
-def _node_update(i, x, el, adj, nt):
+def _node_update(i, x, adj, nt, scratch):
     """Move x_i to the exact minimiser of the incremental potential in x_i; return the squared residual."""
-    f0, f1, f2, h00, h01, h02, h11, h12, h22 = _accumulate(i, x, el, adj)
+    f0, f1, f2, h00, h01, h02, h11, h12, h22 = _accumulate(i, x, adj, scratch)
     m, c = nt.inertia[i], nt.damping[i]
     f0 += m * (nt.target[i, 0] - x[i, 0]) - c * (x[i, 0] - nt.previous[i, 0]) + nt.force[i, 0]
     f1 += m * (nt.target[i, 1] - x[i, 1]) - c * (x[i, 1] - nt.previous[i, 1]) + nt.force[i, 1]
@@ -214,7 +206,7 @@ def _node_update(i, x, el, adj, nt):
     d0 = (i00 * f0 + i01 * f1 + i02 * f2) / det
     d1 = (i01 * f0 + i11 * f1 + i12 * f2) / det
     d2 = (i02 * f0 + i12 * f1 + i22 * f2) / det
-    a = _max_step(i, x, el, adj, d0, d1, d2)
+    a = _max_step(adj.degree[i], scratch, d0, d1, d2)
     x[i, 0] += a * d0
     x[i, 1] += a * d1
     x[i, 2] += a * d2
@@ -222,22 +214,18 @@ def _node_update(i, x, el, adj, nt):
 
 
 @njit(cache=True, nogil=True)
-def _max_step(i, x, el, adj, d0, d1, d2):
-    """The largest a in [0, 1] for which x_i + a d keeps every active tet of node i with J > 0 at
+def _max_step(degree, scratch, d0, d1, d2):
+    """The largest a in [0, 1] for which x_i + a d keeps every tet of node i with J > 0 at
     J >= KEEP_J_FRACTION of its present value (J is affine in x_i: J(a) = J + a (dJ/dx_i) . d).
 
-    J and its gradient are computed again here rather than kept from :func:`_accumulate`:
-    the tets are still in cache, and a per-node buffer would cost an allocation per update.
+    ``scratch`` holds J and dJ/dx_i of each tet as :func:`_accumulate` found them.
     """
     a = 1.0
-    for k in range(adj.degree[i]):
-        t = adj.tets[i, k]
-        if el.node_terms[t, 7] <= 0.0:
-            continue
-        J, g0, g1, g2 = _volume_ratio(i, adj.corner[i, k], t, x, el)
+    for k in range(degree):
+        J = scratch[k, 0]
         if J <= 0.0:
             continue
-        slope = g0 * d0 + g1 * d1 + g2 * d2
+        slope = scratch[k, 1] * d0 + scratch[k, 2] * d1 + scratch[k, 3] * d2
         if slope < 0.0:
             limit = (1.0 - KEEP_J_FRACTION) * J / -slope
             if limit < a:
@@ -246,7 +234,7 @@ def _max_step(i, x, el, adj, d0, d1, d2):
 
 
 @njit(cache=True, parallel=True, nogil=True)
-def vbd_sweep(x, el, adj, nt, colour_offsets, colour_nodes, r2, stop):
+def vbd_sweep(x, adj, nt, colour_offsets, colour_nodes, r2, stop):
     """One Gauss-Seidel sweep of vertex block descent, colour class by colour class.
 
     Nodes of one colour share no tet, so they update in parallel and the
@@ -258,24 +246,31 @@ def vbd_sweep(x, el, adj, nt, colour_offsets, colour_nodes, r2, stop):
     the colour classes swept.
     """
     n_classes = colour_offsets.shape[0] - 1
+    width = adj.opposite.shape[1]
     for c in range(n_classes):
         if stop[0] != 0:
             return c
         lo, hi = colour_offsets[c], colour_offsets[c + 1]
-        for q in prange(lo, hi):
-            i = colour_nodes[q]
-            r2[i] = _node_update(i, x, el, adj, nt)
+        blocks = min(SWEEP_BLOCKS, hi - lo)
+        for b in prange(blocks):
+            scratch = np.empty((width, 4))
+            for q in range(lo + (hi - lo) * b // blocks, lo + (hi - lo) * (b + 1) // blocks):
+                i = colour_nodes[q]
+                r2[i] = _node_update(i, x, adj, nt, scratch)
     return n_classes
 
 
 @njit(cache=True, parallel=True, nogil=True)
-def node_forces(x, el, adj, out):
+def node_forces(x, adj, out):
     """Elastic force -dW/dx on every node, N: ``out`` (n, 3)."""
-    for i in prange(x.shape[0]):
-        f0, f1, f2, h00, h01, h02, h11, h12, h22 = _accumulate(i, x, el, adj)
-        out[i, 0] = f0
-        out[i, 1] = f1
-        out[i, 2] = f2
+    width = adj.opposite.shape[1]
+    for b in prange(SWEEP_BLOCKS):
+        scratch = np.empty((width, 4))
+        for i in range(x.shape[0] * b // SWEEP_BLOCKS, x.shape[0] * (b + 1) // SWEEP_BLOCKS):
+            f0, f1, f2, h00, h01, h02, h11, h12, h22 = _accumulate(i, x, adj, scratch)
+            out[i, 0] = f0
+            out[i, 1] = f1
+            out[i, 2] = f2
 
 
 @njit(cache=True, nogil=True)
@@ -346,8 +341,9 @@ def colour_classes(colour, movable, n_colours):
 
 
 @njit(cache=True, nogil=True)
-def add_to_adjacency(adj, tets, ids):
-    """Append tets ``ids`` to the lists of their nodes (capacity checked by the caller)."""
+def add_to_adjacency(adj, tets, rows, ids):
+    """Append tets ``ids`` to the lists of their nodes (capacity checked by the caller), each with
+    its corner's part of the tet's node-term row (``rows`` (len(ids), NODE_TERMS), :func:`node_term_rows`)."""
     for q in range(ids.shape[0]):
         t = ids[q]
         for c in range(4):
@@ -355,6 +351,13 @@ def add_to_adjacency(adj, tets, ids):
             k = adj.degree[i]
             adj.tets[i, k] = t
             adj.corner[i, k] = c
+            for m in range(3):
+                j = OPPOSITE[c, m]
+                adj.opposite[i, k, m] = tets[t, j]
+                adj.terms[i, k, m] = rows[q, EDGE_COLUMN[c, j]]
+            adj.terms[i, k, 3] = rows[q, 6]
+            adj.terms[i, k, 4] = rows[q, 7]
+            adj.terms[i, k, 5] = rows[q, 8]
             adj.degree[i] = k + 1
 
 
@@ -368,8 +371,11 @@ def remove_from_adjacency(adj, tets, ids):
             k_out = 0
             for k in range(adj.degree[i]):
                 if adj.tets[i, k] != t:
-                    adj.tets[i, k_out] = adj.tets[i, k]
-                    adj.corner[i, k_out] = adj.corner[i, k]
+                    if k_out != k:
+                        adj.tets[i, k_out] = adj.tets[i, k]
+                        adj.corner[i, k_out] = adj.corner[i, k]
+                        adj.opposite[i, k_out] = adj.opposite[i, k]
+                        adj.terms[i, k_out] = adj.terms[i, k]
                     k_out += 1
             adj.degree[i] = k_out
 

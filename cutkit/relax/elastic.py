@@ -114,9 +114,6 @@ class ElementModel:
         Lame parameters, MPa.
     mass_share : (cap,) float64
         Mass each element gives each of its four nodes, t.
-    node_terms : (cap, NODE_TERMS) float64
-        What a node update reads of an element, derived from the four
-        arrays above when an element is added (``_elastic_kernels.node_term_rows``).
     masses : (n,) float64
         Lumped node masses, t.
     damping : (n,) float64
@@ -125,6 +122,11 @@ class ElementModel:
         Components held at their current value.
     adj_tets, adj_corner, adj_degree : the elements around each node
         ``(cap, K) int32, (cap, K) int8, (n,) int32`` (``cap >= n`` rows).
+    adj_opposite, adj_terms : what a node update reads of each of them
+        ``(cap, K, 3) int32, (cap, K, INCIDENCE_TERMS) float64``: the other
+        three corners and the corner's part of the element's node-term row,
+        derived from the arrays above when the element is added
+        (``_elastic_kernels.node_term_rows``, ``add_to_adjacency``).
     colour : (n,) int32
         No two nodes of one element share a colour: the parallel classes.
     """
@@ -135,7 +137,6 @@ class ElementModel:
     mu: np.ndarray
     lam: np.ndarray
     mass_share: np.ndarray
-    node_terms: np.ndarray
     n_elements: int
     masses: np.ndarray
     damping: np.ndarray
@@ -143,6 +144,8 @@ class ElementModel:
     adj_tets: np.ndarray = field(default=None)
     adj_corner: np.ndarray = field(default=None)
     adj_degree: np.ndarray = field(default=None)
+    adj_opposite: np.ndarray = field(default=None)
+    adj_terms: np.ndarray = field(default=None)
     colour: np.ndarray = field(default=None)
     _classes: tuple | None = None
 
@@ -152,11 +155,11 @@ class ElementModel:
 
     @property
     def elements(self) -> K.Elements:
-        return K.Elements(self.tets, self.Dminv, self.volume, self.mu, self.lam, self.node_terms)
+        return K.Elements(self.tets, self.Dminv, self.volume, self.mu, self.lam)
 
     @property
     def adjacency(self) -> K.Adjacency:
-        return K.Adjacency(self.adj_tets, self.adj_corner, self.adj_degree)
+        return K.Adjacency(self.adj_tets, self.adj_corner, self.adj_degree, self.adj_opposite, self.adj_terms)
 
     # ------------------------------------------------------------ building
     @classmethod
@@ -165,11 +168,14 @@ class ElementModel:
         return cls(
             tets=np.zeros((cap, 4), np.int64), Dminv=np.zeros((cap, 3, 3)), volume=np.zeros(cap),
             mu=np.zeros(cap), lam=np.zeros(cap), mass_share=np.zeros(cap),
-            node_terms=np.zeros((cap, K.NODE_TERMS)), n_elements=0,
+            n_elements=0,
             masses=np.zeros(n_nodes), damping=np.zeros(n_nodes), fixed=np.zeros((n_nodes, 3), bool),
             adj_tets=np.zeros((n_nodes, ADJACENCY_SLACK), np.int32),
             adj_corner=np.zeros((n_nodes, ADJACENCY_SLACK), np.int8),
-            adj_degree=np.zeros(n_nodes, np.int32), colour=np.full(n_nodes, -1, np.int32))
+            adj_degree=np.zeros(n_nodes, np.int32),
+            adj_opposite=np.zeros((n_nodes, ADJACENCY_SLACK, 3), np.int32),
+            adj_terms=np.zeros((n_nodes, ADJACENCY_SLACK, K.INCIDENCE_TERMS)),
+            colour=np.full(n_nodes, -1, np.int32))
 
     def add_nodes(self, count: int, damping=0.0, fixed=None) -> np.ndarray:
         """Append ``count`` nodes without elements (mass comes with their elements); returns their ids."""
@@ -183,8 +189,9 @@ class ElementModel:
             # the lists are K wide: they grow by doubling (a cut adds a few nodes at a time),
             # and rows past n_nodes are unused
             rows = max(n + p, 2 * self.adj_tets.shape[0]) - self.adj_tets.shape[0]
-            self.adj_tets = np.concatenate([self.adj_tets, np.zeros((rows, self.adj_tets.shape[1]), np.int32)])
-            self.adj_corner = np.concatenate([self.adj_corner, np.zeros((rows, self.adj_corner.shape[1]), np.int8)])
+            for name in ("adj_tets", "adj_corner", "adj_opposite", "adj_terms"):
+                old = getattr(self, name)
+                setattr(self, name, np.concatenate([old, np.zeros((rows,) + old.shape[1:], old.dtype)]))
         self.adj_degree = np.concatenate([self.adj_degree, np.zeros(p, np.int32)])
         self.colour = np.concatenate([self.colour, np.full(p, -1, np.int32)])
         self._classes = None
@@ -222,7 +229,6 @@ class ElementModel:
         self.volume[ids] = volume
         self.mu[ids] = mu
         self.lam[ids] = lam
-        self.node_terms[ids] = K.node_term_rows(Dminv, volume, self.mu[ids], self.lam[ids])
         share = np.asarray(density, np.float64) * np.maximum(rest_volume, 0.0) / 4.0
         self.mass_share[ids] = share
         np.add.at(self.masses, tets.ravel(), np.repeat(share, 4))
@@ -231,7 +237,8 @@ class ElementModel:
         need = int((self.adj_degree + deg[: self.n_nodes]).max())
         if need > self.adj_tets.shape[1]:
             self._widen(need + ADJACENCY_SLACK)
-        K.add_to_adjacency(self.adjacency, self.tets, ids)
+        K.add_to_adjacency(self.adjacency, self.tets, K.node_term_rows(Dminv, volume, self.mu[ids], self.lam[ids]),
+                           ids)
         self._classes = None
         return ids
 
@@ -244,7 +251,6 @@ class ElementModel:
         np.add.at(self.masses, self.tets[ids].ravel(), np.repeat(-self.mass_share[ids], 4))
         self.masses[self.adj_degree == 0] = 0.0  # exactly: what is left is rounding
         self.volume[ids] = 0.0
-        self.node_terms[ids] = 0.0
         self.mass_share[ids] = 0.0
         self._classes = None
 
@@ -256,14 +262,14 @@ class ElementModel:
         grow = new - old
         self.tets = np.concatenate([self.tets, np.zeros((grow, 4), np.int64)])
         self.Dminv = np.concatenate([self.Dminv, np.zeros((grow, 3, 3))])
-        self.node_terms = np.concatenate([self.node_terms, np.zeros((grow, K.NODE_TERMS))])
         for name in ("volume", "mu", "lam", "mass_share"):
             setattr(self, name, np.concatenate([getattr(self, name), np.zeros(grow)]))
 
     def _widen(self, width: int) -> None:
         n, old = self.adj_tets.shape
-        self.adj_tets = np.concatenate([self.adj_tets, np.zeros((n, width - old), np.int32)], axis=1)
-        self.adj_corner = np.concatenate([self.adj_corner, np.zeros((n, width - old), np.int8)], axis=1)
+        for name in ("adj_tets", "adj_corner", "adj_opposite", "adj_terms"):
+            a = getattr(self, name)
+            setattr(self, name, np.concatenate([a, np.zeros((n, width - old) + a.shape[2:], a.dtype)], axis=1))
 
     # ------------------------------------------------------------ colouring
     def recolour(self, nodes=None) -> None:
@@ -431,7 +437,7 @@ def iterate(em: ElementModel, x, terms, *, rtol=DEFAULT_RTOL, atol=DEFAULT_ATOL_
     """
     offsets, nodes = em.colour_classes()
     r2 = np.zeros(em.n_nodes)
-    el, adj = em.elements, em.adjacency
+    adj = em.adjacency
     r0 = res = 0.0
     it = 0
     prev2 = prev = None
@@ -439,7 +445,7 @@ def iterate(em: ElementModel, x, terms, *, rtol=DEFAULT_RTOL, atol=DEFAULT_ATOL_
     while it < max_iterations:
         if chebyshev is not None:
             prev2, prev = prev, x.copy()
-        K.vbd_sweep(x, el, adj, terms, offsets, nodes, r2, NEVER_STOP)
+        K.vbd_sweep(x, adj, terms, offsets, nodes, r2, NEVER_STOP)
         it += 1
         res = float(np.sqrt(r2.sum()))
         if it == 1:
@@ -539,7 +545,7 @@ def local_step(em: ElementModel, state: ElementState, h: float, f_ext, r2, seeds
         updates += nodes.size
         if chebyshev is not None:
             prev2, prev = prev, x.copy()
-        swept = K.vbd_sweep(x, em.elements, em.adjacency, terms, offsets, nodes, r2, stop)
+        swept = K.vbd_sweep(x, em.adjacency, terms, offsets, nodes, r2, stop)
         if it == 0 and swept < offsets.size - 1:  # stopped within the first sweep: the step is not taken
             x[:] = x0
             return SolveInfo(0, 0.0, 0.0, False, 0, taken=False)
@@ -567,7 +573,7 @@ def static_solve(em: ElementModel, positions, f_ext=None, gravity=None, **tolera
 def elastic_forces(em: ElementModel, positions) -> np.ndarray:
     """Elastic node forces -dW/dx, N: (n, 3) float64 (reaction forces at held nodes)."""
     out = np.zeros((em.n_nodes, 3))
-    K.node_forces(np.ascontiguousarray(positions, np.float64), em.elements, em.adjacency, out)
+    K.node_forces(np.ascontiguousarray(positions, np.float64), em.adjacency, out)
     return out
 
 
