@@ -398,9 +398,10 @@ def colour_classes_of(colour, nodes, n_colours):
 
 
 @njit(cache=True, nogil=True)
-def awake_after_sweep(adj, tets, movable, r2, tau2, nodes, mark):
+def awake_after_sweep(adj, movable, r2, tau2, nodes, mark):
     """The nodes the next sweep moves: those of ``nodes`` still out of balance by more than
-    sqrt(tau2), and every movable node sharing a tet with one of them.
+    sqrt(tau2), and every movable node sharing a tet with one of them (read from the nodes'
+    own adjacency rows, ``adj.opposite``).
 
     ``mark`` (n,) bool is all False on entry and on return.
     """
@@ -410,10 +411,9 @@ def awake_after_sweep(adj, tets, movable, r2, tau2, nodes, mark):
         i = nodes[q]
         if r2[i] <= tau2:
             continue
-        for d in range(adj.degree[i]):
-            t = adj.tets[i, d]
-            for c in range(4):
-                a = tets[t, c]
+        for d in range(-1, adj.degree[i]):
+            for m in range(3):
+                a = i if d < 0 else adj.opposite[i, d, m]
                 if movable[a] and not mark[a]:
                     mark[a] = True
                     if k == out.shape[0]:
