@@ -26,7 +26,7 @@ def test_lift_opens_a_folded_tet_and_keeps_the_others_open():
     tis = tissue()
     i = interior_node(tis)
     em = tis.em
-    around = em.tets[em.adj_tets[i, : em.adj_degree[i]]]
+    around = em.tets[em.tets_of(i)]
     rest = signed_volumes(tis.rest_positions, around)
     # push the node through the opposite face of one of its tets: that tet folds
     t = around[0]

@@ -69,10 +69,12 @@ def node_term_rows(Dminv, volume, mu, lam):
     out[:, 8] = volume * mu
     return out
 
-#: tets (n, K) int32, corner (n, K) int8, degree (n,) int32: the tets around each node;
-#: opposite (n, K, 3) int32 and terms (n, K, INCIDENCE_TERMS) float64: what a node update
-#: reads of each (its three other corners, and its part of the tet's node-term row)
-Adjacency = namedtuple("Adjacency", ["tets", "corner", "degree", "opposite", "terms"])
+#: The tets around each node, one row per node in a shared pool: node i's are the slots
+#: ``start[i] .. start[i] + degree[i] - 1``.  start (rows,) int64, degree (n,) int32; per slot
+#: tets (P,) int32, corner (P,) int8, and what a node update reads of the tet: opposite (P, 3)
+#: int32 (its three other corners) and terms (P, INCIDENCE_TERMS) float64 (its part of the
+#: tet's node-term row).
+Adjacency = namedtuple("Adjacency", ["start", "degree", "tets", "corner", "opposite", "terms"])
 #: inertia (n,) m/h^2, damping (n,) c m / h, fixed (n, 3) bool, target y (n, 3), previous x (n, 3),
 #: external force (n, 3) N (gravity included)
 NodeTerms = namedtuple("NodeTerms", ["inertia", "damping", "fixed", "target", "previous", "force"])
@@ -127,29 +129,31 @@ def _accumulate(i, x, adj, scratch):
     f0 = f1 = f2 = 0.0
     h00 = h01 = h02 = h11 = h12 = h22 = 0.0
     xi0, xi1, xi2 = x[i, 0], x[i, 1], x[i, 2]
+    s0 = adj.start[i]
     for k in range(adj.degree[i]):
-        Vk = adj.terms[i, k, 4]
+        r = s0 + k
+        Vk = adj.terms[r, 4]
         if Vk <= 0.0:
             scratch[k, 0] = 0.0
             continue
-        aj = adj.opposite[i, k, 0]
-        ak = adj.opposite[i, k, 1]
-        al = adj.opposite[i, k, 2]
+        aj = adj.opposite[r, 0]
+        ak = adj.opposite[r, 1]
+        al = adj.opposite[r, 2]
         xj0, xj1, xj2 = x[aj, 0], x[aj, 1], x[aj, 2]
         e0, e1, e2 = xi0 - xj0, xi1 - xj1, xi2 - xj2  # x_i - x_j
         p0, p1, p2 = x[ak, 0] - xj0, x[ak, 1] - xj1, x[ak, 2] - xj2  # x_k - x_j
         q0, q1, q2 = x[al, 0] - xj0, x[al, 1] - xj1, x[al, 2] - xj2  # x_l - x_j
         # the mu F b_c part: edge weights to the three other corners
-        wj = adj.terms[i, k, 0]
-        wk = adj.terms[i, k, 1]
-        wl = adj.terms[i, k, 2]
+        wj = adj.terms[r, 0]
+        wk = adj.terms[r, 1]
+        wl = adj.terms[r, 2]
         wsum = wj + wk + wl
         # sum_m w_m (x_i - x_m) with x_i - x_k = e - p, x_i - x_l = e - q
         f0 += wsum * e0 - wk * p0 - wl * q0
         f1 += wsum * e1 - wk * p1 - wl * q1
         f2 += wsum * e2 - wk * p2 - wl * q2
         # J and dJ/dx_i from the opposite face
-        alpha = adj.terms[i, k, 3]
+        alpha = adj.terms[r, 3]
         gb0 = (p1 * q2 - p2 * q1) * alpha
         gb1 = (p2 * q0 - p0 * q2) * alpha
         gb2 = (p0 * q1 - p1 * q0) * alpha
@@ -159,7 +163,7 @@ def _accumulate(i, x, adj, scratch):
         scratch[k, 2] = gb1
         scratch[k, 3] = gb2
         _, db, ddb = barrier(J, Vk)
-        s = Vk * (J - 1.0) - adj.terms[i, k, 5] + db  # V s
+        s = Vk * (J - 1.0) - adj.terms[r, 5] + db  # V s
         f0 -= s * gb0
         f1 -= s * gb1
         f2 -= s * gb2
@@ -246,27 +250,39 @@ def vbd_sweep(x, adj, nt, colour_offsets, colour_nodes, r2, stop):
     the colour classes swept.
     """
     n_classes = colour_offsets.shape[0] - 1
-    width = adj.opposite.shape[1]
     for c in range(n_classes):
         if stop[0] != 0:
             return c
         lo, hi = colour_offsets[c], colour_offsets[c + 1]
         blocks = min(SWEEP_BLOCKS, hi - lo)
         for b in prange(blocks):
-            scratch = np.empty((width, 4))
-            for q in range(lo + (hi - lo) * b // blocks, lo + (hi - lo) * (b + 1) // blocks):
+            first, end = lo + (hi - lo) * b // blocks, lo + (hi - lo) * (b + 1) // blocks
+            scratch = np.empty((_max_degree(adj, colour_nodes[first:end]), 4))
+            for q in range(first, end):
                 i = colour_nodes[q]
                 r2[i] = _node_update(i, x, adj, nt, scratch)
     return n_classes
 
 
+@njit(cache=True, nogil=True)
+def _max_degree(adj, nodes):
+    """The most tets any of ``nodes`` has (the rows a block's scratch needs)."""
+    most = 0
+    for q in range(nodes.shape[0]):
+        most = max(most, adj.degree[nodes[q]])
+    return most
+
+
 @njit(cache=True, parallel=True, nogil=True)
 def node_forces(x, adj, out):
     """Elastic force -dW/dx on every node, N: ``out`` (n, 3)."""
-    width = adj.opposite.shape[1]
+    n = x.shape[0]
     for b in prange(SWEEP_BLOCKS):
-        scratch = np.empty((width, 4))
-        for i in range(x.shape[0] * b // SWEEP_BLOCKS, x.shape[0] * (b + 1) // SWEEP_BLOCKS):
+        most = 0
+        for i in range(n * b // SWEEP_BLOCKS, n * (b + 1) // SWEEP_BLOCKS):
+            most = max(most, adj.degree[i])
+        scratch = np.empty((most, 4))
+        for i in range(n * b // SWEEP_BLOCKS, n * (b + 1) // SWEEP_BLOCKS):
             f0, f1, f2, h00, h01, h02, h11, h12, h22 = _accumulate(i, x, adj, scratch)
             out[i, 0] = f0
             out[i, 1] = f1
@@ -311,7 +327,7 @@ def colour_nodes_greedy(adj, tets, colour, nodes):
         i = nodes[q]
         used = np.zeros(256, np.bool_)
         for k in range(adj.degree[i]):
-            t = adj.tets[i, k]
+            t = adj.tets[adj.start[i] + k]
             for j in range(4):
                 a = tets[t, j]
                 if a != i and colour[a] >= 0 and colour[a] < 256:
@@ -342,23 +358,23 @@ def colour_classes(colour, movable, n_colours):
 
 @njit(cache=True, nogil=True)
 def add_to_adjacency(adj, tets, rows, ids):
-    """Append tets ``ids`` to the lists of their nodes (capacity checked by the caller), each with
+    """Append tets ``ids`` to the rows of their nodes (row capacity made by the caller), each with
     its corner's part of the tet's node-term row (``rows`` (len(ids), NODE_TERMS), :func:`node_term_rows`)."""
     for q in range(ids.shape[0]):
         t = ids[q]
         for c in range(4):
             i = tets[t, c]
-            k = adj.degree[i]
-            adj.tets[i, k] = t
-            adj.corner[i, k] = c
+            r = adj.start[i] + adj.degree[i]
+            adj.tets[r] = t
+            adj.corner[r] = c
             for m in range(3):
                 j = OPPOSITE[c, m]
-                adj.opposite[i, k, m] = tets[t, j]
-                adj.terms[i, k, m] = rows[q, EDGE_COLUMN[c, j]]
-            adj.terms[i, k, 3] = rows[q, 6]
-            adj.terms[i, k, 4] = rows[q, 7]
-            adj.terms[i, k, 5] = rows[q, 8]
-            adj.degree[i] = k + 1
+                adj.opposite[r, m] = tets[t, j]
+                adj.terms[r, m] = rows[q, EDGE_COLUMN[c, j]]
+            adj.terms[r, 3] = rows[q, 6]
+            adj.terms[r, 4] = rows[q, 7]
+            adj.terms[r, 5] = rows[q, 8]
+            adj.degree[i] += 1
 
 
 @njit(cache=True, nogil=True)
@@ -368,14 +384,15 @@ def remove_from_adjacency(adj, tets, ids):
         t = ids[q]
         for c in range(4):
             i = tets[t, c]
+            s0 = adj.start[i]
             k_out = 0
             for k in range(adj.degree[i]):
-                if adj.tets[i, k] != t:
+                if adj.tets[s0 + k] != t:
                     if k_out != k:
-                        adj.tets[i, k_out] = adj.tets[i, k]
-                        adj.corner[i, k_out] = adj.corner[i, k]
-                        adj.opposite[i, k_out] = adj.opposite[i, k]
-                        adj.terms[i, k_out] = adj.terms[i, k]
+                        adj.tets[s0 + k_out] = adj.tets[s0 + k]
+                        adj.corner[s0 + k_out] = adj.corner[s0 + k]
+                        adj.opposite[s0 + k_out] = adj.opposite[s0 + k]
+                        adj.terms[s0 + k_out] = adj.terms[s0 + k]
                     k_out += 1
             adj.degree[i] = k_out
 
@@ -411,9 +428,10 @@ def awake_after_sweep(adj, movable, r2, tau2, nodes, mark):
         i = nodes[q]
         if r2[i] <= tau2:
             continue
+        s0 = adj.start[i]
         for d in range(-1, adj.degree[i]):
             for m in range(3):
-                a = i if d < 0 else adj.opposite[i, d, m]
+                a = i if d < 0 else adj.opposite[s0 + d, m]
                 if movable[a] and not mark[a]:
                     mark[a] = True
                     if k == out.shape[0]:

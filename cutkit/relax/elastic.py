@@ -40,8 +40,12 @@ DEFAULT_MAX_ITERATIONS = 10000
 #: amplify rounding errors past any use.  A cut makes such a tet only where
 #: the blade passes within about 1e-6 of an edge length from a node.
 MIN_ELEMENT_QUALITY = 1e-6
-#: Spare tets per node in the adjacency table when it is (re)allocated.
-ADJACENCY_SLACK = 16
+#: Spare slots in a node's adjacency row when it is (re)allocated; a row that fills up moves
+#: to the end of the pool with twice the room (the old slots stay unused until a rebuild).
+ADJACENCY_SLACK = 8
+#: Pool slots kept spare beyond those the elements and the rows' slack take, as a fraction:
+#: cuts move rows to the pool's end, and growing the pool copies it (a stall in a live session).
+ADJACENCY_POOL_SPARE = 0.25
 
 #: The stop flag of solves nothing interrupts (see :func:`local_step`); never written.
 NEVER_STOP = np.zeros(1, np.int64)
@@ -120,13 +124,18 @@ class ElementModel:
         Mass-proportional damping per node, 1/s.
     fixed : (n, 3) bool
         Components held at their current value.
-    adj_tets, adj_corner, adj_degree : the elements around each node
-        ``(cap, K) int32, (cap, K) int8, (n,) int32`` (``cap >= n`` rows).
-    adj_opposite, adj_terms : what a node update reads of each of them
-        ``(cap, K, 3) int32, (cap, K, INCIDENCE_TERMS) float64``: the other
-        three corners and the corner's part of the element's node-term row,
-        derived from the arrays above when the element is added
+    adj_start, adj_capacity, adj_degree : each node's row of the adjacency pool
+        ``(rows,) int64, (rows,) int64, (n,) int32`` (``rows >= n``): its slots
+        ``adj_start[i] .. + adj_degree[i] - 1``, room for ``adj_capacity[i]``.
+    adj_tets, adj_corner : the element and the node's corner in it, per slot
+        ``(P,) int32, (P,) int8``.
+    adj_opposite, adj_terms : what a node update reads of the element, per slot
+        ``(P, 3) int32, (P, INCIDENCE_TERMS) float64``: the other three
+        corners and the corner's part of the element's node-term row, derived
+        from the arrays above when the element is added
         (``_elastic_kernels.node_term_rows``, ``add_to_adjacency``).
+    adj_used : int
+        Pool slots handed out to rows.
     colour : (n,) int32
         No two nodes of one element share a colour: the parallel classes.
     """
@@ -141,11 +150,14 @@ class ElementModel:
     masses: np.ndarray
     damping: np.ndarray
     fixed: np.ndarray
+    adj_start: np.ndarray = field(default=None)
+    adj_capacity: np.ndarray = field(default=None)
+    adj_degree: np.ndarray = field(default=None)
     adj_tets: np.ndarray = field(default=None)
     adj_corner: np.ndarray = field(default=None)
-    adj_degree: np.ndarray = field(default=None)
     adj_opposite: np.ndarray = field(default=None)
     adj_terms: np.ndarray = field(default=None)
+    adj_used: int = 0
     colour: np.ndarray = field(default=None)
     _classes: tuple | None = None
 
@@ -159,22 +171,31 @@ class ElementModel:
 
     @property
     def adjacency(self) -> K.Adjacency:
-        return K.Adjacency(self.adj_tets, self.adj_corner, self.adj_degree, self.adj_opposite, self.adj_terms)
+        return K.Adjacency(self.adj_start, self.adj_degree, self.adj_tets, self.adj_corner, self.adj_opposite,
+                           self.adj_terms)
+
+    def tets_of(self, node: int) -> np.ndarray:
+        """(d,) int32 the elements around ``node``."""
+        s = self.adj_start[node]
+        return self.adj_tets[s:s + self.adj_degree[node]]
 
     # ------------------------------------------------------------ building
     @classmethod
     def empty(cls, n_nodes: int, capacity: int) -> "ElementModel":
+        """No elements yet: room for ``capacity`` elements and their adjacency slots, with a
+        quarter to spare for rows that move (:data:`ADJACENCY_POOL_SPARE`)."""
         cap = max(int(capacity), 1)
+        rows = int(n_nodes)
+        pool = int((1.0 + ADJACENCY_POOL_SPARE) * (4 * cap + ADJACENCY_SLACK * rows))
         return cls(
             tets=np.zeros((cap, 4), np.int64), Dminv=np.zeros((cap, 3, 3)), volume=np.zeros(cap),
             mu=np.zeros(cap), lam=np.zeros(cap), mass_share=np.zeros(cap),
             n_elements=0,
             masses=np.zeros(n_nodes), damping=np.zeros(n_nodes), fixed=np.zeros((n_nodes, 3), bool),
-            adj_tets=np.zeros((n_nodes, ADJACENCY_SLACK), np.int32),
-            adj_corner=np.zeros((n_nodes, ADJACENCY_SLACK), np.int8),
+            adj_start=np.zeros(rows, np.int64), adj_capacity=np.zeros(rows, np.int64),
             adj_degree=np.zeros(n_nodes, np.int32),
-            adj_opposite=np.zeros((n_nodes, ADJACENCY_SLACK, 3), np.int32),
-            adj_terms=np.zeros((n_nodes, ADJACENCY_SLACK, K.INCIDENCE_TERMS)),
+            adj_tets=np.zeros(pool, np.int32), adj_corner=np.zeros(pool, np.int8),
+            adj_opposite=np.zeros((pool, 3), np.int32), adj_terms=np.zeros((pool, K.INCIDENCE_TERMS)),
             colour=np.full(n_nodes, -1, np.int32))
 
     def add_nodes(self, count: int, damping=0.0, fixed=None) -> np.ndarray:
@@ -185,13 +206,11 @@ class ElementModel:
         fx = np.zeros((p, 3), bool) if fixed is None else np.broadcast_to(np.asarray(fixed, bool).reshape(p, -1),
                                                                              (p, 3))
         self.fixed = np.concatenate([self.fixed, fx])
-        if n + p > self.adj_tets.shape[0]:
-            # the lists are K wide: they grow by doubling (a cut adds a few nodes at a time),
-            # and rows past n_nodes are unused
-            rows = max(n + p, 2 * self.adj_tets.shape[0]) - self.adj_tets.shape[0]
-            for name in ("adj_tets", "adj_corner", "adj_opposite", "adj_terms"):
-                old = getattr(self, name)
-                setattr(self, name, np.concatenate([old, np.zeros((rows,) + old.shape[1:], old.dtype)]))
+        if n + p > self.adj_start.shape[0]:
+            # rows grow by doubling (a cut adds a few nodes at a time); rows past n_nodes are unused
+            rows = max(n + p, 2 * self.adj_start.shape[0]) - self.adj_start.shape[0]
+            self.adj_start = np.concatenate([self.adj_start, np.zeros(rows, np.int64)])
+            self.adj_capacity = np.concatenate([self.adj_capacity, np.zeros(rows, np.int64)])
         self.adj_degree = np.concatenate([self.adj_degree, np.zeros(p, np.int32)])
         self.colour = np.concatenate([self.colour, np.full(p, -1, np.int32)])
         self._classes = None
@@ -233,10 +252,7 @@ class ElementModel:
         self.mass_share[ids] = share
         np.add.at(self.masses, tets.ravel(), np.repeat(share, 4))
         self.n_elements = max(self.n_elements, int(ids.max()) + 1)
-        deg = np.bincount(tets.ravel(), minlength=self.n_nodes)
-        need = int((self.adj_degree + deg[: self.n_nodes]).max())
-        if need > self.adj_tets.shape[1]:
-            self._widen(need + ADJACENCY_SLACK)
+        self._make_room(np.bincount(tets.ravel(), minlength=self.n_nodes))
         K.add_to_adjacency(self.adjacency, self.tets, K.node_term_rows(Dminv, volume, self.mu[ids], self.lam[ids]),
                            ids)
         self._classes = None
@@ -265,11 +281,33 @@ class ElementModel:
         for name in ("volume", "mu", "lam", "mass_share"):
             setattr(self, name, np.concatenate([getattr(self, name), np.zeros(grow)]))
 
-    def _widen(self, width: int) -> None:
-        n, old = self.adj_tets.shape
-        for name in ("adj_tets", "adj_corner", "adj_opposite", "adj_terms"):
-            a = getattr(self, name)
-            setattr(self, name, np.concatenate([a, np.zeros((n, width - old) + a.shape[2:], a.dtype)], axis=1))
+    def _make_room(self, more: np.ndarray) -> None:
+        """Rows with room for ``more`` (n,) slots each: a row too small moves to the pool's end."""
+        n = self.n_nodes
+        need = self.adj_degree + more[:n]
+        short = np.flatnonzero(need > self.adj_capacity[:n])
+        if short.size == 0:
+            return
+        cap = np.maximum(2 * self.adj_capacity[short], need[short] + ADJACENCY_SLACK)
+        start = self.adj_used + np.concatenate([[0], np.cumsum(cap)[:-1]])
+        end = self.adj_used + int(cap.sum())
+        if end > self.adj_tets.shape[0]:  # the pool grows by doubling
+            size = max(end, 2 * self.adj_tets.shape[0])
+            for name in ("adj_tets", "adj_corner", "adj_opposite", "adj_terms"):
+                old = getattr(self, name)
+                grown = np.zeros((size,) + old.shape[1:], old.dtype)
+                grown[:self.adj_used] = old[:self.adj_used]
+                setattr(self, name, grown)
+        deg = self.adj_degree[short].astype(np.int64)
+        if deg.sum():  # carry the rows' slots over
+            src = np.repeat(self.adj_start[short], deg) + _ranges(deg)
+            dst = np.repeat(start, deg) + _ranges(deg)
+            for name in ("adj_tets", "adj_corner", "adj_opposite", "adj_terms"):
+                a = getattr(self, name)
+                a[dst] = a[src]
+        self.adj_start[short] = start
+        self.adj_capacity[short] = cap
+        self.adj_used = end
 
     # ------------------------------------------------------------ colouring
     def recolour(self, nodes=None) -> None:
@@ -325,6 +363,12 @@ class SolveInfo:
     converged: bool
     node_updates: int = 0
     taken: bool = True
+
+
+def _ranges(counts: np.ndarray) -> np.ndarray:
+    """0 .. c-1 for each c of ``counts``, concatenated: (sum(counts),) int64."""
+    counts = np.asarray(counts, np.int64)
+    return np.arange(int(counts.sum())) - np.repeat(np.cumsum(counts) - counts, counts)
 
 
 def build_element_model(model, *, poisson_ratio=None) -> ElementModel:

@@ -202,7 +202,7 @@ class ElasticTissue(TissueBase):
         added, removed = np.setdiff1d(added, both), np.setdiff1d(removed, both)
         moved = np.asarray(res.moved_nodes, np.int64)
         old_moved = moved[moved < n_old]
-        around = (np.unique(np.concatenate([em.adj_tets[k, : em.adj_degree[k]] for k in old_moved]).astype(np.int64))
+        around = (np.unique(np.concatenate([em.tets_of(k) for k in old_moved]).astype(np.int64))
                   if old_moved.size else np.zeros(0, np.int64))
         # the tissue as it was before the step, piecewise affine over the removed tets and those
         # around moved nodes: new and moved nodes are placed in it (see _through_old_shape)
@@ -282,7 +282,7 @@ class ElasticTissue(TissueBase):
         interp = self.interpolate_positions(placed)
         for k in np.flatnonzero(np.isin(placed, q[folded])):
             i = placed[k]
-            around = em.tets[em.adj_tets[i, : em.adj_degree[i]]]
+            around = em.tets[em.tets_of(i)]
             rest = signed_volumes(X, around)
             now = x[i].copy()
             best, best_j = now, -np.inf
@@ -299,7 +299,7 @@ class ElasticTissue(TissueBase):
         # what one node could not open, the other corners of the tet may
         for i in np.unique(q[signed_volumes(x, q) <= 0.0]):
             if not em.fixed[i].any():
-                around = em.tets[em.adj_tets[i, : em.adj_degree[i]]]
+                around = em.tets[em.tets_of(i)]
                 self._lift(i, around, signed_volumes(X, around))
 
     def _lift(self, i: int, around: np.ndarray, rest: np.ndarray) -> None:
