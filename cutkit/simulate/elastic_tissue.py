@@ -97,6 +97,7 @@ class ElasticTissue(TissueBase):
         self.bc_fixed = fixed_nodes_mask(model)
         em.fixed[:] = self.bc_fixed[:, None]
         em.recolour()
+        em.lay_out_rows()
         self.state: ElementState = initial_element_state(model)
         self.counts = {"steps": 0, "sweeps": 0, "node_updates": 0, "steps_not_converged": 0}
         self.force_scale = self._force_scale()
@@ -460,4 +461,5 @@ class ElasticTissue(TissueBase):
         em.damping[:] = old.damping
         em.fixed[:] = old.fixed
         em.colour[:] = old.colour  # the same tets on the same nodes: the colouring stays valid
+        em.lay_out_rows()
         self.em = em
