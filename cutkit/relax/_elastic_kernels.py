@@ -277,10 +277,8 @@ def _max_degree(adj, nodes):
 def node_forces(x, adj, out):
     """Elastic force -dW/dx on every node, N: ``out`` (n, 3)."""
     n = x.shape[0]
+    most = adj.degree[:n].max() if n else 0
     for b in prange(SWEEP_BLOCKS):
-        most = 0
-        for i in range(n * b // SWEEP_BLOCKS, n * (b + 1) // SWEEP_BLOCKS):
-            most = max(most, adj.degree[i])
         scratch = np.empty((most, 4))
         for i in range(n * b // SWEEP_BLOCKS, n * (b + 1) // SWEEP_BLOCKS):
             f0, f1, f2, h00, h01, h02, h11, h12, h22 = _accumulate(i, x, adj, scratch)

@@ -189,8 +189,7 @@ class ElementModel:
         pool = int((1.0 + ADJACENCY_POOL_SPARE) * (4 * cap + ADJACENCY_SLACK * rows))
         return cls(
             tets=np.zeros((cap, 4), np.int64), Dminv=np.zeros((cap, 3, 3)), volume=np.zeros(cap),
-            mu=np.zeros(cap), lam=np.zeros(cap), mass_share=np.zeros(cap),
-            n_elements=0,
+            mu=np.zeros(cap), lam=np.zeros(cap), mass_share=np.zeros(cap), n_elements=0,
             masses=np.zeros(n_nodes), damping=np.zeros(n_nodes), fixed=np.zeros((n_nodes, 3), bool),
             adj_start=np.zeros(rows, np.int64), adj_capacity=np.zeros(rows, np.int64),
             adj_degree=np.zeros(n_nodes, np.int32),
@@ -291,22 +290,10 @@ class ElementModel:
         cap = np.maximum(2 * self.adj_capacity[short], need[short] + ADJACENCY_SLACK)
         start = self.adj_used + np.concatenate([[0], np.cumsum(cap)[:-1]])
         end = self.adj_used + int(cap.sum())
-        if end > self.adj_tets.shape[0]:  # the pool grows by doubling
-            size = max(end, 2 * self.adj_tets.shape[0])
-            for name in ("adj_tets", "adj_corner", "adj_opposite", "adj_terms"):
-                old = getattr(self, name)
-                grown = np.zeros((size,) + old.shape[1:], old.dtype)
-                grown[:self.adj_used] = old[:self.adj_used]
-                setattr(self, name, grown)
-        deg = self.adj_degree[short].astype(np.int64)
-        if deg.sum():  # carry the rows' slots over
-            src = np.repeat(self.adj_start[short], deg) + _ranges(deg)
-            dst = np.repeat(start, deg) + _ranges(deg)
-            for name in ("adj_tets", "adj_corner", "adj_opposite", "adj_terms"):
-                a = getattr(self, name)
-                a[dst] = a[src]
-        self.adj_start[short] = start
-        self.adj_capacity[short] = cap
+        size = self.adj_tets.shape[0]
+        if end > size:  # the pool grows by doubling
+            size = max(end, 2 * size)
+        self._move_rows(short, start, cap, size)
         self.adj_used = end
 
     def lay_out_rows(self) -> None:
@@ -322,21 +309,31 @@ class ElementModel:
         rest = np.ones(self.n_nodes, bool)
         rest[nodes] = False
         order = np.concatenate([nodes, np.flatnonzero(rest)])
-        deg = self.adj_degree[order].astype(np.int64)
-        cap = deg + ADJACENCY_SLACK
+        cap = self.adj_degree[order].astype(np.int64) + ADJACENCY_SLACK
         start = np.concatenate([[0], np.cumsum(cap)[:-1]]).astype(np.int64)
         used = int(cap.sum())
-        size = max(self.adj_tets.shape[0], int((1.0 + ADJACENCY_POOL_SPARE) * used))
-        src = np.repeat(self.adj_start[order], deg) + _ranges(deg)
+        # every row moves, into a fresh pool
+        self._move_rows(order, start, cap, max(self.adj_tets.shape[0], int((1.0 + ADJACENCY_POOL_SPARE) * used)),
+                        fresh=True)
+        self.adj_used = used
+
+    def _move_rows(self, nodes, start, cap, size: int, fresh: bool = False) -> None:
+        """Give ``nodes`` the rows at ``start`` with room ``cap``, their slots carried over, in a pool
+        of ``size`` slots (grown by copying the slots in use, or ``fresh``: nothing else kept)."""
+        deg = self.adj_degree[nodes].astype(np.int64)
+        src = np.repeat(self.adj_start[nodes], deg) + _ranges(deg)
         dst = np.repeat(start, deg) + _ranges(deg)
         for name in ("adj_tets", "adj_corner", "adj_opposite", "adj_terms"):
             old = getattr(self, name)
-            new = np.zeros((size,) + old.shape[1:], old.dtype)
+            new = old
+            if fresh or size != old.shape[0]:
+                new = np.zeros((size,) + old.shape[1:], old.dtype)
+                if not fresh:
+                    new[:self.adj_used] = old[:self.adj_used]
             new[dst] = old[src]
             setattr(self, name, new)
-        self.adj_start[order] = start
-        self.adj_capacity[order] = cap
-        self.adj_used = used
+        self.adj_start[nodes] = start
+        self.adj_capacity[nodes] = cap
 
     # ------------------------------------------------------------ colouring
     def recolour(self, nodes=None) -> None:
