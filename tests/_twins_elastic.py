@@ -55,11 +55,13 @@ def node_hessian_fd(x, i, tets, Dminv, volume, mu, lam, h=1e-6):
     return H
 
 
-def vbd_sweep(x, tets, Dminv, volume, mu, lam, inertia, target, force, fixed, order, newton_steps=1):
+def vbd_sweep(x, tets, Dminv, volume, mu, lam, inertia, target, force, fixed, order, newton_steps=1,
+              line_search=True):
     """Gauss-Seidel over ``order``: each node moves by Newton steps on its own incremental potential.
 
     Uses finite-difference Hessians of the twin's forces, so it shares no
-    formula with the kernel.
+    formula with the kernel.  Each step goes to the minimum of the node's
+    potential along it (``line_search``), else as far as the step limit lets it.
     """
     x = x.copy()
     for i in order:
@@ -73,8 +75,37 @@ def vbd_sweep(x, tets, Dminv, volume, mu, lam, inertia, target, force, fixed, or
                     H[:, c] = 0.0
                     H[c, c] = 1.0
             d = np.linalg.solve(H, f)
-            x[i] += step_limit(x, i, d, tets, volume) * d
+            a_max = step_limit(x, i, d, tets, volume)
+            args = (tets, Dminv, volume, mu, lam, inertia, target, force, fixed)
+            x[i] += (line_minimum(x, i, d, a_max, *args) if line_search else a_max) * d
     return x
+
+
+def node_slope(x, i, d, a, tets, Dminv, volume, mu, lam, inertia, target, force, fixed):
+    """d/da of node i's incremental potential at x_i + a d: -(its out-of-balance force) . d."""
+    y = x.copy()
+    y[i] += a * d
+    f = forces(y, tets, Dminv, volume, mu, lam)[i] + inertia[i] * (target[i] - y[i]) + force[i]
+    f[fixed[i]] = 0.0
+    return -float(f @ d)
+
+
+def line_minimum(x, i, d, a_max, *args):
+    """The a in [0, a_max] minimising node i's potential along d: bisection
+    on its slope (increasing: the potential is convex along d), from the twin's forces."""
+    if node_slope(x, i, d, a_max, *args) <= 0.0:
+        return a_max
+    lo, hi = 0.0, a_max
+    for _ in range(80):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if node_slope(x, i, d, mid, *args) < 0.0 else (lo, mid)
+    return 0.5 * (lo + hi)
+
+
+def potential(x, tets, Dminv, volume, mu, lam, inertia, target, force):
+    """The incremental potential a sweep lowers: W + sum m/(2 h^2) |x - y|^2 - f . x."""
+    return (energy(x, tets, Dminv, volume, mu, lam) + 0.5 * float(np.sum(inertia[:, None] * (x - target) ** 2))
+            - float(np.sum(force * x)))
 
 
 def step_limit(x, i, d, tets, volume, keep=0.1):

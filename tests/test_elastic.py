@@ -140,6 +140,39 @@ def test_barrier_energy_grows_without_bound_as_a_tet_is_crushed():
     assert W[4] - W[3] > 1.3 * (W[3] - W[2])
 
 
+def test_a_node_step_into_the_barrier_goes_to_the_minimum_along_it():
+    """A corner pressed into its tet, already in the barrier band (J = 0.09): the Newton step, whose
+    model is taken at the present J, runs to the step limit (J = 0.009) where the barrier is far
+    steeper, and raises the node's potential; the kernel stops at the minimum along the step."""
+    model = block()
+    em = build_element_model(model)
+    x, t = crushed(model, em, 0.09)
+    p = x[t]
+    inward = np.cross(p[2] - p[1], p[3] - p[1])
+    inward /= np.linalg.norm(inward)
+    n = em.n_nodes
+    inertia = np.full(n, 1e-4)
+    force = np.zeros((n, 3))
+    force[t[0]] = 0.05 * inward
+    fixed = np.zeros((n, 3), bool)
+    fixed[t[1:]] = True
+    em.fixed[:] = fixed
+    em._classes = None
+    order = np.array([t[0]])
+    args, node = arrays(em), (inertia, x.copy(), force)
+    newton = T.vbd_sweep(x, *args, *node, fixed, order, line_search=False)
+    twin = T.vbd_sweep(x, *args, *node, fixed, order)
+    xk = x.copy()
+    K.vbd_sweep(xk, em.adjacency, K.NodeTerms(inertia, np.zeros(n), em.fixed, x.copy(), x.copy(), force),
+                np.array([0, 1]), order, np.zeros(n), np.zeros(1, np.int64))
+    J0 = np.linalg.det(T.deformation_gradients(model.points, em.tets[:1], em.Dminv[:1]))[0]
+    J = lambda y: np.linalg.det(T.deformation_gradients(y, em.tets[:1], em.Dminv[:1]))[0] / J0  # noqa: E731
+    P = lambda y: T.potential(y, *args, *node)  # noqa: E731
+    assert J(newton) == pytest.approx(0.009) and P(newton) > P(x)  # the plain Newton step goes uphill
+    assert np.allclose(xk, twin, atol=1e-9)
+    assert P(xk) < P(x) and 0.009 < J(xk) < 0.09
+
+
 def test_a_point_load_does_not_crush_a_tet():
     """A node pressed into the fixed base by a load far above what the tissue can carry (the blade
     before it enters): every tet keeps a volume ratio well above rounding after 200 steps."""

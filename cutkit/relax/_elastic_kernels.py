@@ -10,7 +10,10 @@ elasticity with Lame parameters mu, lam).  ``J`` is affine in any single
 vertex position, so the energy of the tets around one vertex is an exact
 convex quadratic in that vertex: its 3x3 Newton step (Chen et al. 2024,
 vertex block descent) is the exact minimiser, whatever the step size and
-even for an inverted tetrahedron.
+even for an inverted tetrahedron.  Where a tet around the vertex is in the
+band of the :data:`BARRIER_J` barrier, the vertex's energy is convex but
+no longer quadratic, and a line search along the Newton step finds its
+minimiser (:func:`_barrier_line_minimum`).
 
 The kernels take a few struct-like arguments: ``el`` (:class:`Elements`),
 ``adj`` (:class:`Adjacency`) and ``nt`` (:class:`NodeTerms`); they check
@@ -210,7 +213,9 @@ def _node_update(i, x, adj, nt, scratch):
     d0 = (i00 * f0 + i01 * f1 + i02 * f2) / det
     d1 = (i01 * f0 + i11 * f1 + i12 * f2) / det
     d2 = (i02 * f0 + i12 * f1 + i22 * f2) / det
-    a = _max_step(adj.degree[i], scratch, d0, d1, d2)
+    a, near_barrier = _max_step(adj.degree[i], scratch, d0, d1, d2)
+    if near_barrier:
+        a = _barrier_line_minimum(i, adj, scratch, d0, d1, d2, f0 * d0 + f1 * d1 + f2 * d2, a)
     x[i, 0] += a * d0
     x[i, 1] += a * d1
     x[i, 2] += a * d2
@@ -220,21 +225,97 @@ def _node_update(i, x, adj, nt, scratch):
 @njit(cache=True, nogil=True)
 def _max_step(degree, scratch, d0, d1, d2):
     """The largest a in [0, 1] for which x_i + a d keeps every tet of node i with J > 0 at
-    J >= KEEP_J_FRACTION of its present value (J is affine in x_i: J(a) = J + a (dJ/dx_i) . d).
+    J >= KEEP_J_FRACTION of its present value (J is affine in x_i: J(a) = J + a (dJ/dx_i) . d),
+    and whether a tet is in the :data:`BARRIER_J` band at a = 0 or a = 1 (then possibly along
+    the step: :func:`_barrier_line_minimum` decides).
 
     ``scratch`` holds J and dJ/dx_i of each tet as :func:`_accumulate` found them.
     """
     a = 1.0
+    near_barrier = False
     for k in range(degree):
         J = scratch[k, 0]
         if J <= 0.0:
             continue
         slope = scratch[k, 1] * d0 + scratch[k, 2] * d1 + scratch[k, 3] * d2
         if slope < 0.0:
+            near_barrier |= J + slope < BARRIER_J  # J falls along the step: into the band by a = 1?
             limit = (1.0 - KEEP_J_FRACTION) * J / -slope
             if limit < a:
                 a = limit
-    return a
+        else:
+            near_barrier |= J < BARRIER_J
+    return a, near_barrier
+
+
+#: The line search along a node's Newton step (:func:`_barrier_line_minimum`) stops once the
+#: potential's slope along the step is this fraction of its slope at the start ...
+LINE_SEARCH_TOLERANCE = 1e-10
+#: ... or after this many safeguarded Newton iterations in the step length.
+LINE_SEARCH_ITERATIONS = 50
+
+
+@njit(cache=True, nogil=True)
+def _barrier_line_minimum(i, adj, scratch, d0, d1, d2, fd, a_max):
+    """The step length in [0, a_max] that minimises node i's incremental potential along d.
+
+    Without a tet in the :data:`BARRIER_J` band along the step, the node's
+    potential is an exact quadratic in x_i, the Newton step a = 1 is its
+    minimiser, and the minimiser on [0, a_max] is min(1, a_max).  A barrier
+    term is not quadratic: its Newton model, taken at the present J, can
+    overshoot to a J where the barrier is far steeper, and the next update
+    overshoots back; two nodes of a crushed tet then push each other ever
+    further from balance (the residual grew ten-fold over 400 sweeps on the
+    knee).  So along d, whose potential is convex (the barrier is convex in J
+    and J is affine in x_i), the step length is the root of
+
+        phi'(a) = -fd + a (fd - sum V b''(J_t) s_t^2) + sum V (b'(J_t + a s_t) - b'(J_t)) s_t
+
+    with s_t = dJ_t/dx_i . d and fd = f . d = d^T H d, found by Newton's
+    method safeguarded by bisection.  ``scratch`` holds J and dJ/dx_i of each
+    tet (:func:`_accumulate`).
+    """
+    s0 = adj.start[i]
+    active = False
+    curvature = fd  # d^T H d without the barrier terms
+    for k in range(adj.degree[i]):
+        J = scratch[k, 0]
+        if J <= 0.0:
+            continue
+        s = scratch[k, 1] * d0 + scratch[k, 2] * d1 + scratch[k, 3] * d2
+        if J < BARRIER_J or J + a_max * s < BARRIER_J:
+            active = True
+            curvature -= barrier(J, adj.terms[s0 + k, 4])[2] * s * s
+    if not active or fd <= 0.0:
+        return min(1.0, a_max)
+    lo, hi = 0.0, a_max
+    a = min(1.0, a_max)
+    for _ in range(LINE_SEARCH_ITERATIONS):
+        slope = -fd + a * curvature
+        bend = curvature
+        for k in range(adj.degree[i]):
+            J = scratch[k, 0]
+            if J <= 0.0:
+                continue
+            s = scratch[k, 1] * d0 + scratch[k, 2] * d1 + scratch[k, 3] * d2
+            if s == 0.0:
+                continue
+            Vk = adj.terms[s0 + k, 4]
+            _, db_a, ddb_a = barrier(J + a * s, Vk)
+            _, db_0, _ = barrier(J, Vk)
+            slope += (db_a - db_0) * s
+            bend += ddb_a * s * s
+        if a == a_max and slope <= 0.0:
+            return a_max  # the potential still falls at the step limit
+        if abs(slope) <= LINE_SEARCH_TOLERANCE * fd:
+            return a  # at the minimiser (to rounding): below the potential at a = 0
+        if slope < 0.0:
+            lo = a
+        else:
+            hi = a
+        step = a - slope / bend if bend > 0.0 else -1.0
+        a = step if lo < step < hi else 0.5 * (lo + hi)
+    return lo  # phi' < 0 on [0, lo]: the potential there is below its value at a = 0
 
 
 @njit(cache=True, parallel=True, nogil=True)
