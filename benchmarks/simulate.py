@@ -92,6 +92,11 @@ def main(argv=None):
     args = ap.parse_args(argv)
     import numba
 
+    from cutkit.simulate.warmup import warm_up
+
+    # every kernel loaded (compiled, on a fresh cache) before any clock starts: steady-state figures
+    for material_model in ("neohookean", "springs"):
+        warm_up(outputs=False, material_model=material_model)
     result = {"machine": {"cpus": os.cpu_count(), "numba_threads": numba.get_num_threads()}, "runs": {}}
     for size in args.sizes.split(","):
         if size == "knee":
