@@ -272,12 +272,15 @@ def _barrier_line_minimum(i, adj, scratch, d0, d1, d2, fd, a_max):
         phi'(a) = -fd + a (fd - sum V b''(J_t) s_t^2) + sum V (b'(J_t + a s_t) - b'(J_t)) s_t
 
     with s_t = dJ_t/dx_i . d and fd = f . d = d^T H d, found by Newton's
-    method safeguarded by bisection.  ``scratch`` holds J and dJ/dx_i of each
-    tet (:func:`_accumulate`).
+    method safeguarded by bisection.  The terms at a = 0 are summed once:
+    phi'(a) = offset + a curvature + sum V b'(J_t + a s_t) s_t.  ``scratch``
+    holds J and dJ/dx_i of each tet (:func:`_accumulate`); a tet outside the
+    band all along the step adds nothing.
     """
     s0 = adj.start[i]
     active = False
     curvature = fd  # d^T H d without the barrier terms
+    offset = -fd  # phi'(0) without the barrier terms
     for k in range(adj.degree[i]):
         J = scratch[k, 0]
         if J <= 0.0:
@@ -285,13 +288,15 @@ def _barrier_line_minimum(i, adj, scratch, d0, d1, d2, fd, a_max):
         s = scratch[k, 1] * d0 + scratch[k, 2] * d1 + scratch[k, 3] * d2
         if J < BARRIER_J or J + a_max * s < BARRIER_J:
             active = True
-            curvature -= barrier(J, adj.terms[s0 + k, 4])[2] * s * s
+            _, db, ddb = barrier(J, adj.terms[s0 + k, 4])
+            curvature -= ddb * s * s
+            offset -= db * s
     if not active or fd <= 0.0:
         return min(1.0, a_max)
     lo, hi = 0.0, a_max
     a = min(1.0, a_max)
     for _ in range(LINE_SEARCH_ITERATIONS):
-        slope = -fd + a * curvature
+        slope = offset + a * curvature
         bend = curvature
         for k in range(adj.degree[i]):
             J = scratch[k, 0]
@@ -300,11 +305,9 @@ def _barrier_line_minimum(i, adj, scratch, d0, d1, d2, fd, a_max):
             s = scratch[k, 1] * d0 + scratch[k, 2] * d1 + scratch[k, 3] * d2
             if s == 0.0:
                 continue
-            Vk = adj.terms[s0 + k, 4]
-            _, db_a, ddb_a = barrier(J + a * s, Vk)
-            _, db_0, _ = barrier(J, Vk)
-            slope += (db_a - db_0) * s
-            bend += ddb_a * s * s
+            _, db, ddb = barrier(J + a * s, adj.terms[s0 + k, 4])
+            slope += db * s
+            bend += ddb * s * s
         if a == a_max and slope <= 0.0:
             return a_max  # the potential still falls at the step limit
         if abs(slope) <= LINE_SEARCH_TOLERANCE * fd:
