@@ -265,7 +265,7 @@ def _barrier_line_minimum(i, adj, scratch, d0, d1, d2, fd, a_max):
     term is not quadratic: its Newton model, taken at the present J, can
     overshoot to a J where the barrier is far steeper, and the next update
     overshoots back; two nodes of a crushed tet then push each other ever
-    further from balance (the residual grew ten-fold over 400 sweeps on the
+    further from balance (the residual grew twenty-fold over 400 sweeps on the
     knee).  So along d, whose potential is convex (the barrier is convex in J
     and J is affine in x_i), the step length is the root of
 
