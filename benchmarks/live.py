@@ -142,7 +142,8 @@ def session_rate(model_path: str, priority: str, window: bool) -> dict:
             "haptic_period_p99_ms": live.get("period_p99_ms"), "haptic_periods_over_2ms": live.get("periods_over_2ms"),
             "fps": live["fps"], "relax_passes_per_s": live["relax_passes_per_s"],
             "relax_steps_per_s": live["relax_steps_per_s"], "latency_p50_ms": lat.get("p50"),
-            "latency_p95_ms": lat.get("p95"), "device_rate_hz": device.get("rate_hz"), "window": window,
+            "latency_p95_ms": lat.get("p95"), "geometry_updates_skipped": live.get("geometry_updates_skipped"),
+            "device_rate_hz": device.get("rate_hz"), "window": window,
             "recording": str(out)}
 
 

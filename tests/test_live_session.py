@@ -199,3 +199,34 @@ def _live_session(spawned_server, knee, incision, out) -> dict:
                 live.kill()
         assert live.returncode == 0, err
     return json.loads((out / "summary.json").read_text())
+
+
+def test_a_backlog_of_device_poses_cuts_on_the_newest_due_pose():
+    """Every queued pose is ticked; of the due poses in a backlog, only the newest is cut on."""
+    from collections import deque
+    from types import SimpleNamespace
+
+    from cutkit.simulate.live_loop import LiveLoop
+
+    ticked, cut_on = [], []
+    loop = LiveLoop.__new__(LiveLoop)  # the tick loop alone: a stand-in session and meter
+    loop.session = SimpleNamespace(haptic_tick=lambda tip, a, n: ticked.append(tip[0]) or np.zeros(3),
+                                   code=0, scalpel=SimpleNamespace(proxy=None))
+    loop.forces = SimpleNamespace(add=lambda *args: None)
+    loop.geo_every, loop.ticks, loop.geometry_skipped, loop.t0 = 20, 0, 0, 0.0
+    loop._geometry = lambda: cut_on.append(loop.pose[0][0])
+
+    def queue_poses(first, count):
+        loop.meter = SimpleNamespace(queue=deque(
+            (i * 1e-3, np.array([float(i), 0.0, 0.0]), np.zeros(3), np.zeros(3), 0.0)
+            for i in range(first, first + count)))
+
+    queue_poses(0, 15)  # no backlog: the due pose 0 is cut on
+    loop._device_ticks()
+    queue_poses(15, 50)  # a backlog holding due poses 20, 40 and 60: 60 alone is cut on
+    loop._device_ticks()
+    queue_poses(65, 20)  # in step again: 80
+    loop._device_ticks()
+    assert ticked == list(range(85))
+    assert cut_on == [0.0, 60.0, 80.0]
+    assert loop.geometry_skipped == 2

@@ -108,6 +108,7 @@ class LiveLoop:
             s.out = s.scalpel.out
         self.geo_every = max(1, int(round(1.0 / (self.opt.geometry_rate_hz * HAPTIC_DT))))
         self.ticks = 0
+        self.geometry_skipped = 0
         self.forces = ForceRecorder(1 << 14)
         self.colours = NodeColours(model, s.tis.cm)
         self.boundary = OuterBoundary(s.tis.cm, s.contact.faces, s.contact.face_tet)
@@ -205,15 +206,26 @@ class LiveLoop:
             self.poses.add(arrival, pose.tip, pose.a, pose.n)
 
     def _device_ticks(self) -> None:
-        """Every device pose the service forwarded, in order: one tick each; the cut every ``geo_every``."""
+        """Every device pose the service forwarded, in order: one tick each; the cut every ``geo_every``.
+
+        Every pose gets its force tick (the 1 kHz loop never skips one), but a
+        geometry update falls behind the device when a cut takes longer than
+        ``geo_every`` ticks: a due pose with a newer due pose already queued
+        behind it gets no geometry update of its own, and the newer one's sweeps
+        the blade from the last pose cut to it (the paper's Fig. 1: geometry at
+        the rate it can, on the current pose; counted in ``geometry_updates_skipped``).
+        """
         s, queue = self.session, self.meter.queue
         while queue:
             t, tip, a, n, arrival = queue.popleft()
             out = s.haptic_tick(tip, a, n)
             self.forces.add(t, s.code, out, tip, s.scalpel.proxy)
             if self.ticks % self.geo_every == 0:
-                self.pose = (tip, a, n, arrival - self.t0)
-                self._geometry()
+                if len(queue) < self.geo_every:
+                    self.pose = (tip, a, n, arrival - self.t0)
+                    self._geometry()
+                else:  # a newer due pose already waits behind this one: the cut acts on the newest
+                    self.geometry_skipped += 1
             self.ticks += 1
 
     def _ticks(self, now: float, next_tick: float) -> float:
@@ -314,6 +326,7 @@ class LiveLoop:
         f = np.diff(np.array(self.frame_s))
         stats = {"source": type(self.source).__name__, "wall_s": self.loop_wall, "poses": len(self.poses.rows),
                  "trajectory_recorded": recorded, "frames": self.frames,
+                 "geometry_updates_skipped": self.geometry_skipped,
                  "fps": float(1.0 / f.mean()) if f.size else 0.0,
                  "relax_passes_per_s": self.session.counts["relax_passes"] / wall,
                  "relax_steps_per_s": self.relax.steps / wall,
