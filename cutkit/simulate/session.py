@@ -36,6 +36,8 @@ from cutkit.scalpel import CUTTING, FREE, O_CUT, O_N, STATE_NAMES
 #: The blade has left the tissue once the hand's tip is this far outside the
 #: entry face's plane, mm (a small margin so surface noise does not flicker).
 LEAVE_MARGIN_MM = 0.5
+#: A stroke's first cut sweeps from this far behind the entry pose, against the blade's motion (mm).
+ENTRY_SWEEP_MARGIN_MM = 0.5
 
 
 class HandoverLock:
@@ -168,6 +170,19 @@ class ContactTask:
         self.row_of_tet = self.materials.row_of(cm.labels)
 
 
+def _segment_meets_tets(points, tets, p, q) -> bool:
+    """Whether segment p-q meets one of the tets (k, 4) over ``points`` (either orientation)."""
+    from cutkit.cutting._geometry import segment_hits_tet
+
+    for t in tets:
+        x = points[t]
+        if np.dot(np.cross(x[1] - x[0], x[2] - x[0]), x[3] - x[0]) < 0.0:
+            x = x[[0, 2, 1, 3]]
+        if segment_hits_tet(p, q, x):
+            return True
+    return False
+
+
 class CutTask:
     """Volume collision and subdivision (sections 3, 4.2) at the geometry rate.
 
@@ -182,6 +197,38 @@ class CutTask:
         self.lock = lock
         self.counts = counts
         self.pending = False
+        self.inside = False  # the blade has been in a tet since it entered (this stroke)
+        self.through = False  # ... and the last cut step left it in none: out through the far side
+        self.last_proxy = np.zeros(3)  # the proxy at the previous geometry update
+
+    def _start_outside(self, blade_tip) -> None:
+        """Begin the stroke's sweep :data:`ENTRY_SWEEP_MARGIN_MM` behind the entry pose, against the motion.
+
+        The blade entered at the surface, and the edges of the faces it went in
+        through lie in that surface: a sweep from the entry pose would meet
+        them at its very start, where the cut refuses them (too close to the
+        blade's previous pose), and the tissue would stay joined at the entry.
+        """
+        cm = self.tis.cm
+        p0, q0 = cm.prev_pose
+        motion = blade_tip - p0
+        length = float(np.linalg.norm(motion))
+        if length > 0.0:
+            back = ENTRY_SWEEP_MARGIN_MM / length * motion
+            cm.prev_pose = (p0 - back, q0 - back)
+
+    def _in_tissue(self, blade_tip, axis, proxy) -> tuple[bool, bool]:
+        """Whether the blade at its new pose meets one of the step's active tets: in the rest
+        configuration (where it cut) and, at the proxy, in the deformed one.
+
+        The active tets are those the swept quad met, whose last edge is the
+        blade at its new pose: a tet the blade is in now is among them.
+        """
+        cm = self.tis.cm
+        corners = cm.orig_tets[cm.active_tets]
+        length = cm.blade_length
+        return (_segment_meets_tets(cm._x, corners, blade_tip - length * axis, blade_tip),
+                _segment_meets_tets(self.tis.positions, corners, proxy - length * axis, proxy))
 
     def _apply(self, result) -> None:
         """Hand a cut step's topology change over to the tissue."""
@@ -204,11 +251,22 @@ class CutTask:
         near = np.unique(cm.orig_tets[cm.active_tets]) if cm.active_tets.size else contact.face_nodes
         blade_tip = self.tis.blade_to_rest(proxy, near)
         if self.pending:
+            if not self.inside and cm.prev_pose is not None:
+                self._start_outside(blade_tip)
+            before = cm.prev_pose
             self._apply(cut_step(cm, blade_tip, axis))
             self.pending = False
+            in_rest, in_deformed = self._in_tissue(blade_tip, axis, proxy)
+            # out through the far side only when out in both configurations, moving on: where
+            # the blade drags the tissue along, its rest pose lags behind the hand's and can
+            # fall back out through the entry face just after it went in
+            onwards = before is not None and float(np.dot(blade_tip - before[0], proxy - self.last_proxy)) > 0.0
+            self.through = self.inside and onwards and not (in_rest or in_deformed)
+            self.inside |= in_rest
         elif code != FREE:
             # in tissue but not cutting: the blade rests or backs out, the sweep restarts here
             cm.prev_pose = (blade_tip, blade_tip - cm.blade_length * axis)
+        self.last_proxy = np.array(proxy, np.float64)
         f_ext = np.zeros((self.tis.n_nodes, 3))
         if code == CUTTING and cm.active_tets.size:
             # the tissue along the blade feels the reaction of the cut force (eqs. 16-18);
@@ -223,6 +281,7 @@ class CutTask:
         cm.prev_pose = None
         cm.tip_tet = -1
         cm.active_tets = np.zeros(0, np.int64)
+        self.inside = self.through = False
 
 
 class RelaxTask:
@@ -338,14 +397,18 @@ class Session:
             self.contact.prev = (np.array(tip, np.float64), np.array(a, np.float64))
         self.out = sc.tick(tip, a, n)
         if sc.code != FREE and self.contact.left(tip):
-            sc.leave()
-            self.cut.leave()
-            self.rebase_due = True  # at the next geometry update (see rebase_if_left)
+            self.leave()
         self.note_state(sc.code)
         self.cut.note(sc.code)
         self.counts["haptic_ticks"] += 1
         self.task_s["haptics"] += time.perf_counter() - th
         return self.out
+
+    def leave(self) -> None:
+        """The blade left the tissue: the force model goes free, the cut's sweep ends, a rebase is due."""
+        self.scalpel.leave()
+        self.cut.leave()
+        self.rebase_due = True  # at the next geometry update (see rebase_if_left)
 
     def note_state(self, code: int) -> None:
         name = STATE_NAMES[code]
@@ -356,6 +419,9 @@ class Session:
         """Collision and cut at the proxy; returns the forces on the tissue for the relaxation."""
         tg = time.perf_counter()
         f_ext = self.cut.step(self.scalpel.proxy, self.out, self.scalpel.code, self.contact.contact)
+        if self.scalpel.code != FREE and self.cut.through:
+            self.leave()  # out through the far side: the entry plane's test would never see it
+            f_ext[:] = 0.0
         self.rebase_if_left()
         self.counts["geometry_updates"] += 1
         self.task_s["collision_and_cut"] += time.perf_counter() - tg
