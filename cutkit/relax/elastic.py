@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from cutkit.errors import InputError
+from cutkit.relax import _adjacency_kernels as KA
 from cutkit.relax import _elastic_kernels as K
 from cutkit.relax.model import KG_M3_TO_T_MM3, MAX_PRESTRAIN, PA_TO_MPA
 
@@ -252,7 +253,7 @@ class ElementModel:
         np.add.at(self.masses, tets.ravel(), np.repeat(share, 4))
         self.n_elements = max(self.n_elements, int(ids.max()) + 1)
         self._make_room(np.bincount(tets.ravel(), minlength=self.n_nodes))
-        K.add_to_adjacency(self.adjacency, self.tets, K.node_term_rows(Dminv, volume, self.mu[ids], self.lam[ids]),
+        KA.add_to_adjacency(self.adjacency, self.tets, K.node_term_rows(Dminv, volume, self.mu[ids], self.lam[ids]),
                            ids)
         self._classes = None
         return ids
@@ -262,7 +263,7 @@ class ElementModel:
         ids = np.asarray(ids, np.int64)
         if ids.size == 0:
             return
-        K.remove_from_adjacency(self.adjacency, self.tets, ids)
+        KA.remove_from_adjacency(self.adjacency, self.tets, ids)
         np.add.at(self.masses, self.tets[ids].ravel(), np.repeat(-self.mass_share[ids], 4))
         self.masses[self.adj_degree == 0] = 0.0  # exactly: what is left is rounding
         self.volume[ids] = 0.0
@@ -343,7 +344,7 @@ class ElementModel:
             nodes = np.arange(self.n_nodes)
         nodes = np.asarray(nodes, np.int64)
         self.colour[nodes] = -1
-        K.colour_nodes_greedy(self.adjacency, self.tets, self.colour, nodes)
+        KA.colour_nodes_greedy(self.adjacency, self.tets, self.colour, nodes)
         self._classes = None
 
     def colour_classes(self) -> tuple[np.ndarray, np.ndarray]:
@@ -353,7 +354,7 @@ class ElementModel:
             if np.any(self.colour[movable] < 0):
                 self.recolour(np.flatnonzero(movable & (self.colour < 0)))
             n_colours = int(self.colour.max(initial=-1)) + 1
-            self._classes = K.colour_classes(self.colour, movable, n_colours)
+            self._classes = KA.colour_classes(self.colour, movable, n_colours)
         return self._classes
 
 
@@ -584,7 +585,7 @@ def local_step(em: ElementModel, state: ElementState, h: float, f_ext, r2, seeds
         Read before every colour class of a sweep (in the kernel) and after
         every sweep: non-zero ends the step there, unconverged, with the
         positions reached (a live session's cut waiting for the tissue,
-        :class:`~cutkit.simulate.session.HandoverLock`).  Stopped within its
+        :class:`~cutkit.simulate.tasks.HandoverLock`).  Stopped within its
         first sweep, the step is not taken: positions and time stay as they
         were and the result has 0 iterations.
     """
@@ -599,7 +600,7 @@ def local_step(em: ElementModel, state: ElementState, h: float, f_ext, r2, seeds
     seeds = np.unique(np.concatenate([np.asarray(seeds, np.int64), np.flatnonzero(moving),
                                       np.flatnonzero(movable & (r2 > tau2))]))
     mark = np.zeros(n, bool)
-    awake = K.awake_after_sweep(em.adjacency, movable, r2, -1.0, seeds, mark)
+    awake = KA.awake_after_sweep(em.adjacency, movable, r2, -1.0, seeds, mark)
     x0 = x.copy()
     y = x0.copy()
     y[awake] += h * np.where(em.fixed[awake], 0.0, v[awake])
@@ -615,7 +616,7 @@ def local_step(em: ElementModel, state: ElementState, h: float, f_ext, r2, seeds
     updates = 0
     stop = NEVER_STOP if stop is None else stop
     while it < max_iterations and awake.size:
-        offsets, nodes = K.colour_classes_of(em.colour, awake, n_colours)
+        offsets, nodes = KA.colour_classes_of(em.colour, awake, n_colours)
         updates += nodes.size
         if chebyshev is not None:
             prev2, prev = prev, x.copy()
@@ -633,7 +634,7 @@ def local_step(em: ElementModel, state: ElementState, h: float, f_ext, r2, seeds
             r0 = res
         if res <= atol or stop[0]:
             break
-        awake = K.awake_after_sweep(em.adjacency, movable, r2, tau2, awake, mark)
+        awake = KA.awake_after_sweep(em.adjacency, movable, r2, tau2, awake, mark)
     v[:] = np.where(em.fixed, 0.0, (x - x0) / h)
     state.time += h
     return SolveInfo(it, r0, res, res <= atol, updates)

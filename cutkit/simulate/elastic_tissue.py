@@ -161,7 +161,7 @@ class ElasticTissue(TissueBase):
         """Implicit steps of :attr:`step_s` up to ``until`` s; returns the sweeps made.
 
         ``stop`` ((1,) int64, live sessions only, the
-        :class:`~cutkit.simulate.session.HandoverLock`'s flag) is read between
+        :class:`~cutkit.simulate.tasks.HandoverLock`'s flag) is read between
         colour classes: non-zero ends the step in flight and the advance
         with it, so a waiting cut waits for one colour class of one sweep.
         Offline runs pass none, and every step ends on its residual.

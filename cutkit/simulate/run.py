@@ -330,4 +330,5 @@ def cut_model(tis, model, summary: dict | None = None):
 
 
 # kept importable from here
-from cutkit.simulate.session import LEAVE_MARGIN_MM, cut_opening as _cut_opening  # noqa: E402,F401
+from cutkit.simulate.session import cut_opening as _cut_opening  # noqa: E402,F401
+from cutkit.simulate.tasks import LEAVE_MARGIN_MM  # noqa: E402,F401

@@ -1,0 +1,149 @@
+"""Numba kernels that keep the element model's node table: adjacency rows and colour classes.
+
+A node's adjacency row (:class:`~cutkit.relax._elastic_kernels.Adjacency`)
+holds, for each tet around it, the tet, the node's corner, the three other
+corners and the node's part of the tet's node-term row; the sweep kernels of
+:mod:`cutkit.relax._elastic_kernels` read nothing else.  Colour classes group
+nodes that share no tet, so a sweep updates each class in parallel.  The
+kernels check nothing (:mod:`cutkit.relax.elastic` does).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from cutkit.relax._elastic_kernels import EDGE_COLUMN, OPPOSITE
+
+
+@njit(cache=True, nogil=True)
+def colour_nodes_greedy(adj, tets, colour, nodes):
+    """Give each node of ``nodes`` the smallest colour no node sharing a tet with it has.
+
+    Only ``nodes`` change; the others keep theirs (-1 = none yet).
+    """
+    for q in range(nodes.shape[0]):
+        i = nodes[q]
+        used = np.zeros(256, np.bool_)
+        for k in range(adj.degree[i]):
+            t = adj.tets[adj.start[i] + k]
+            for j in range(4):
+                a = tets[t, j]
+                if a != i and colour[a] >= 0 and colour[a] < 256:
+                    used[colour[a]] = True
+        c = 0
+        while c < 255 and used[c]:
+            c += 1
+        colour[i] = c
+
+
+@njit(cache=True, nogil=True)
+def colour_classes(colour, movable, n_colours):
+    """Counting sort of the movable nodes by colour: ``offsets`` (n_colours + 1,), ``nodes``."""
+    counts = np.zeros(n_colours + 1, np.int64)
+    for i in range(colour.shape[0]):
+        if movable[i]:
+            counts[colour[i] + 1] += 1
+    for c in range(n_colours):
+        counts[c + 1] += counts[c]
+    nodes = np.empty(counts[n_colours], np.int64)
+    fill = counts[:-1].copy()
+    for i in range(colour.shape[0]):
+        if movable[i]:
+            nodes[fill[colour[i]]] = i
+            fill[colour[i]] += 1
+    return counts, nodes
+
+
+@njit(cache=True, nogil=True)
+def add_to_adjacency(adj, tets, rows, ids):
+    """Append tets ``ids`` to the rows of their nodes (row capacity made by the caller), each with
+    its corner's part of the tet's node-term row (``rows`` (len(ids), NODE_TERMS), :func:`node_term_rows`)."""
+    for q in range(ids.shape[0]):
+        t = ids[q]
+        for c in range(4):
+            i = tets[t, c]
+            r = adj.start[i] + adj.degree[i]
+            adj.tets[r] = t
+            adj.corner[r] = c
+            for m in range(3):
+                j = OPPOSITE[c, m]
+                adj.opposite[r, m] = tets[t, j]
+                adj.terms[r, m] = rows[q, EDGE_COLUMN[c, j]]
+            adj.terms[r, 3] = rows[q, 6]
+            adj.terms[r, 4] = rows[q, 7]
+            adj.terms[r, 5] = rows[q, 8]
+            adj.degree[i] += 1
+
+
+@njit(cache=True, nogil=True)
+def remove_from_adjacency(adj, tets, ids):
+    """Remove tets ``ids`` from the lists of their nodes (order of the rest kept)."""
+    for q in range(ids.shape[0]):
+        t = ids[q]
+        for c in range(4):
+            i = tets[t, c]
+            s0 = adj.start[i]
+            k_out = 0
+            for k in range(adj.degree[i]):
+                if adj.tets[s0 + k] != t:
+                    if k_out != k:
+                        adj.tets[s0 + k_out] = adj.tets[s0 + k]
+                        adj.corner[s0 + k_out] = adj.corner[s0 + k]
+                        adj.opposite[s0 + k_out] = adj.opposite[s0 + k]
+                        adj.terms[s0 + k_out] = adj.terms[s0 + k]
+                    k_out += 1
+            adj.degree[i] = k_out
+
+
+@njit(cache=True, nogil=True)
+def colour_classes_of(colour, nodes, n_colours):
+    """Counting sort of ``nodes`` by colour: ``offsets`` (n_colours + 1,), ``sorted`` (k,) int64."""
+    counts = np.zeros(n_colours + 1, np.int64)
+    for q in range(nodes.shape[0]):
+        counts[colour[nodes[q]] + 1] += 1
+    for c in range(n_colours):
+        counts[c + 1] += counts[c]
+    out = np.empty(nodes.shape[0], np.int64)
+    fill = counts[:-1].copy()
+    for q in range(nodes.shape[0]):
+        c = colour[nodes[q]]
+        out[fill[c]] = nodes[q]
+        fill[c] += 1
+    return counts, out
+
+
+@njit(cache=True, nogil=True)
+def awake_after_sweep(adj, movable, r2, tau2, nodes, mark):
+    """The nodes the next sweep moves, in ascending order: those of ``nodes`` still out of
+    balance by more than sqrt(tau2), and every movable node sharing a tet with one of them
+    (read from the nodes' own adjacency rows, ``adj.opposite``).
+
+    Marks first, then one pass over ``mark`` (n,) bool collects and clears them
+    (all False on entry and on return): a third of the time of collecting
+    while marking, whose branch on every visit cost more than the pass.
+    """
+    for q in range(nodes.shape[0]):
+        i = nodes[q]
+        if r2[i] <= tau2:
+            continue
+        if movable[i]:
+            mark[i] = True
+        s0 = adj.start[i]
+        for r in range(s0, s0 + adj.degree[i]):
+            for m in range(3):
+                a = adj.opposite[r, m]
+                if movable[a]:
+                    mark[a] = True
+    k = 0
+    for i in range(mark.shape[0]):
+        if mark[i]:
+            k += 1
+    out = np.empty(k, np.int64)
+    k = 0
+    for i in range(mark.shape[0]):
+        if mark[i]:
+            out[k] = i
+            k += 1
+            mark[i] = False
+    return out
