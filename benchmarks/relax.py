@@ -86,7 +86,8 @@ def best_of(fn, repeats):
 def element_sweep(tm) -> dict:
     """One vertex block descent sweep of the element model over all free nodes, ms (best of 5)."""
     from cutkit.relax import _elastic_kernels as EK
-    from cutkit.relax.elastic import _node_terms, build_element_model
+    from cutkit.relax.elastic import build_element_model
+    from cutkit.relax.vbd import _node_terms
 
     em = build_element_model(tm, poisson_ratio=0.45)
     rng = np.random.default_rng(0)
@@ -125,7 +126,8 @@ def knee_simulate(model) -> dict:
 def knee_to_residual(model, rtol: float) -> dict:
     """Wall time and work to bring the settle problem to ``rtol`` with each model and schedule."""
     from cutkit.relax import spring_forces
-    from cutkit.relax.elastic import build_element_model, elastic_forces, initial_element_state, static_solve
+    from cutkit.relax.elastic import build_element_model, initial_element_state
+    from cutkit.relax.vbd import elastic_forces, static_solve
     from cutkit.relax.settle import settle_static
 
     res = {"tets": model.n_tets, "rtol": rtol}

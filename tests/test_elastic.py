@@ -8,17 +8,9 @@ import _twins_elastic as T
 from cutkit.mesh.generate import box_mesh
 from cutkit.model.tetmodel import Materials, Prestress, TetModel
 from cutkit.relax import _elastic_kernels as K
-from cutkit.relax.elastic import (
-    ElementState,
-    build_element_model,
-    elastic_energy,
-    elastic_forces,
-    implicit_step,
-    lame,
-    local_step,
-    rest_shape,
-    static_solve,
-)
+from cutkit.relax.materials import lame
+from cutkit.relax.elastic import ElementState, build_element_model, rest_shape
+from cutkit.relax.vbd import elastic_energy, elastic_forces, implicit_step, local_step, static_solve
 
 
 def block(nu=0.45, prestrain=0.0, shape=(3, 2, 2)):

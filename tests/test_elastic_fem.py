@@ -11,7 +11,8 @@ import pytest
 
 from cutkit.mesh.quality import signed_volumes
 from cutkit.model.tetmodel import Materials, TetModel
-from cutkit.relax.elastic import build_element_model, elastic_forces, static_solve
+from cutkit.relax.elastic import build_element_model
+from cutkit.relax.vbd import elastic_forces, static_solve
 from _fem_reference import delaunay_box, kuhn_box, linear_fem
 
 E_PA = 1.0e6  # 1 MPa

@@ -65,7 +65,7 @@ def test_a_raised_stop_flag_leaves_the_step_untaken():
 
 def test_the_sweep_kernel_reads_the_stop_flag_before_each_colour_class():
     from cutkit.relax import _elastic_kernels as K
-    from cutkit.relax.elastic import _node_terms
+    from cutkit.relax.vbd import _node_terms
 
     tis = tissue()
     em = tis.em
@@ -88,7 +88,7 @@ def test_a_held_node_keeps_no_residual_from_before():
     Its last residual stayed in the sum: on the demo knee one orphan kept 1.4 N
     (the step tolerance 0.28 N) and every later step ran to the sweep cap.
     """
-    from cutkit.relax.elastic import local_step
+    from cutkit.relax.vbd import local_step
 
     tis = tissue()
     em = tis.em
@@ -105,7 +105,8 @@ def test_a_held_node_keeps_no_residual_from_before():
 def test_laying_out_the_rows_in_sweep_order_changes_no_result():
     """The pool written again colour by colour: the rows follow the sweep order and a sweep gives the same bits."""
     from cutkit.relax import _elastic_kernels as K
-    from cutkit.relax.elastic import ElementModel, _node_terms
+    from cutkit.relax.elastic import ElementModel
+    from cutkit.relax.vbd import _node_terms
 
     tis = tissue()
     cm = tis.cm

@@ -13,7 +13,7 @@ exact minimiser of G in its own position (a 3x3 solve, exact because the
 stable neo-Hookean energy is quadratic in one vertex,
 :mod:`cutkit.relax._elastic_kernels`).  ``h = None`` drops the inertia and
 damping: the sweeps then relax to static equilibrium.  Iterations stop at a
-residual, never after a fixed count (:data:`DEFAULT_RTOL`).
+residual, never after a fixed count (the solves are in :mod:`cutkit.relax.vbd`).
 
 Units as the spring model's (mm, t, s, N, MPa; :mod:`cutkit.relax.model`).
 """
@@ -24,18 +24,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from cutkit.errors import InputError
 from cutkit.relax import _adjacency_kernels as KA
 from cutkit.relax import _elastic_kernels as K
-from cutkit.relax.model import KG_M3_TO_T_MM3, MAX_PRESTRAIN, PA_TO_MPA
+from cutkit.relax.materials import material_of_tets, prestress_of_tets
 
-#: The iterations of a solve stop once the residual (the 2-norm of the
-#: out-of-balance node forces, N) has fallen to this fraction of its first value...
-DEFAULT_RTOL = 1e-4
-#: ... or below this absolute value, N (a strain of about 1e-7 on a soft-tissue tet of 3 mm).
-DEFAULT_ATOL_N = 1e-7
-#: The most sweeps one solve makes before it reports that it did not converge.
-DEFAULT_MAX_ITERATIONS = 10000
 #: A tet whose normalised rest volume 6 sqrt(2) V / l_rms^3 (1 for a regular
 #: tet) is below this carries mass but no energy: its inverse rest shape would
 #: amplify rounding errors past any use.  A cut makes such a tet only where
@@ -47,17 +39,6 @@ ADJACENCY_SLACK = 8
 #: Pool slots kept spare beyond those the elements and the rows' slack take, as a fraction:
 #: cuts move rows to the pool's end, and growing the pool copies it (a stall in a live session).
 ADJACENCY_POOL_SPARE = 0.25
-
-#: The stop flag of solves nothing interrupts (see :func:`local_step`); never written.
-NEVER_STOP = np.zeros(1, np.int64)
-
-
-def lame(E, nu):
-    """Lame parameters (mu, lam) of Young's modulus E and Poisson ratio nu (same units as E)."""
-    E = np.asarray(E, np.float64)
-    nu = np.asarray(nu, np.float64)
-    return E / (2.0 * (1.0 + nu)), E * nu / ((1.0 + nu) * (1.0 - 2.0 * nu))
-
 
 def rest_shape(X, tets, prestrain=None, fibre=None):
     """Inverse rest shapes and volumes of tetrahedra, with an optional prestrain along a fibre.
@@ -377,21 +358,6 @@ class ElementState:
     time: float = 0.0
 
 
-@dataclass
-class SolveInfo:
-    """How a solve ended: sweeps made, residual before the first and after the last (N), node updates.
-
-    ``taken`` is False for a :func:`local_step` stopped within its first sweep (nothing changed).
-    """
-
-    iterations: int
-    initial_residual: float
-    residual: float
-    converged: bool
-    node_updates: int = 0
-    taken: bool = True
-
-
 def _ranges(counts: np.ndarray) -> np.ndarray:
     """0 .. c-1 for each c of ``counts``, concatenated: (sum(counts),) int64."""
     counts = np.asarray(counts, np.int64)
@@ -423,43 +389,6 @@ def build_element_model(model, *, poisson_ratio=None) -> ElementModel:
     return em
 
 
-def material_of_tets(model, labels, poisson_ratio=None) -> dict:
-    """Per-tet material in solver units: ``mu``, ``lam`` (MPa), ``density`` (t/mm^3), ``damping`` (1/s), ``E`` (MPa).
-
-    Raises
-    ------
-    InputError
-        A label has no row in the materials table, or a Poisson ratio lies outside [0, 0.5).
-    """
-    rows = model.materials.row_of(labels)
-    if np.any(rows < 0):
-        bad = int(np.asarray(labels)[np.argmax(rows < 0)])
-        raise InputError(f"label {bad} has no row in the materials table")
-    nu = model.materials["poisson_ratio"][rows] if poisson_ratio is None else np.full(rows.shape, poisson_ratio)
-    if np.any(~np.isfinite(nu) | (nu < 0.0) | (nu >= 0.5)):
-        raise InputError(f"Poisson ratio must lie in [0, 0.5), got {float(nu[np.argmax((nu < 0) | (nu >= 0.5))])}")
-    E = model.materials["E"][rows] * PA_TO_MPA
-    mu, lam = lame(E, nu)
-    return {"E": E, "mu": mu, "lam": lam, "density": model.materials["density"][rows] * KG_M3_TO_T_MM3,
-            "damping": model.materials["damping"][rows]}
-
-
-def prestress_of_tets(model, labels):
-    """Prestrain (m,) and unit fibre direction (m, 3) of each tet from the model's prestress table."""
-    labels = np.asarray(labels)
-    prestrain = np.zeros(labels.shape[0])
-    fibre = np.zeros((labels.shape[0], 3))
-    ps = model.prestress
-    for lab, f, eps in zip(ps.label, np.asarray(ps.fibre_direction, np.float64).reshape(-1, 3),
-                           np.asarray(ps.prestrain, np.float64)):
-        if not abs(eps) < MAX_PRESTRAIN:
-            raise InputError(f"prestrain of label {int(lab)} must lie in (-{MAX_PRESTRAIN}, {MAX_PRESTRAIN}), got {eps}")
-        sel = labels == lab
-        prestrain[sel] = eps
-        fibre[sel] = f / np.linalg.norm(f)
-    return prestrain, fibre
-
-
 def node_damping(n: int, tets, damping) -> np.ndarray:
     """Damping per node: the mean over its tets of their material's (1/s), (n,) float64."""
     tets = np.asarray(tets, np.int64)
@@ -486,172 +415,3 @@ def initial_element_state(model) -> ElementState:
 
 
 # ---------------------------------------------------------------- solving
-def _node_terms(em: ElementModel, x, h, f_ext, gravity, y=None):
-    n = em.n_nodes
-    force = np.zeros((n, 3)) if f_ext is None else np.array(f_ext, np.float64, copy=True)
-    if gravity is not None and np.any(gravity):
-        force += em.masses[:, None] * np.asarray(gravity, np.float64)[None, :]
-    if h is None:
-        zero = np.zeros(n)
-        return K.NodeTerms(zero, zero, em.fixed, x, x, force)
-    inertia = em.masses / (h * h)
-    damping = em.damping * em.masses / h
-    return K.NodeTerms(inertia, damping, em.fixed, y, x.copy(), force)
-
-
-def iterate(em: ElementModel, x, terms, *, rtol=DEFAULT_RTOL, atol=DEFAULT_ATOL_N,
-            max_iterations=DEFAULT_MAX_ITERATIONS, min_iterations=1, chebyshev=None) -> SolveInfo:
-    """Vertex block descent sweeps on ``x`` (in place) until the residual criterion holds.
-
-    ``chebyshev`` (a spectral radius estimate in (0, 1)) turns on the
-    Chebyshev semi-iterative acceleration that vertex block descent uses
-    (Wang 2015): ``x = w (x_sweep - x_prev2) + x_prev2``.
-    """
-    offsets, nodes = em.colour_classes()
-    r2 = np.zeros(em.n_nodes)
-    adj = em.adjacency
-    r0 = res = 0.0
-    it = 0
-    prev2 = prev = None
-    omega = 1.0
-    while it < max_iterations:
-        if chebyshev is not None:
-            prev2, prev = prev, x.copy()
-        K.vbd_sweep(x, adj, terms, offsets, nodes, r2, NEVER_STOP)
-        it += 1
-        res = float(np.sqrt(r2.sum()))
-        if it == 1:
-            r0 = res
-        if it >= min_iterations and (res <= rtol * r0 or res <= atol):
-            return SolveInfo(it, r0, res, True)
-        if chebyshev is not None and prev2 is not None:
-            rho2 = chebyshev * chebyshev
-            omega = 2.0 / (2.0 - rho2) if omega == 1.0 else 4.0 / (4.0 - rho2 * omega)
-            x[:] = omega * (x - prev2) + prev2
-    return SolveInfo(it, r0, res, False)
-
-
-def implicit_step(em: ElementModel, state: ElementState, h: float, f_ext=None, gravity=None,
-                  **tolerances) -> SolveInfo:
-    """Advance ``state`` by one backward Euler step of ``h`` seconds.
-
-    Parameters
-    ----------
-    em : ElementModel
-    state : ElementState
-        Changed in place.
-    h : float
-        s.
-    f_ext : (n, 3) float64, optional
-        External node forces, N.
-    gravity : (3,) float64, optional
-        mm/s^2.
-    **tolerances
-        ``rtol``, ``atol``, ``max_iterations`` of :func:`iterate`.
-    """
-    chebyshev = tolerances.pop("chebyshev", None)
-    x0 = state.positions.copy()
-    free = ~em.fixed
-    y = np.where(free, x0 + h * state.velocities, x0)
-    state.positions[:] = y  # the inertial prediction is the first guess
-    terms = _node_terms(em, x0, h, f_ext, gravity, y)
-    info = iterate(em, state.positions, terms, chebyshev=chebyshev, **tolerances)
-    state.velocities[:] = np.where(free, (state.positions - x0) / h, 0.0)
-    state.time += h
-    return info
-
-
-def local_step(em: ElementModel, state: ElementState, h: float, f_ext, r2, seeds, *,
-               atol: float, max_iterations: int = DEFAULT_MAX_ITERATIONS, chebyshev=None,
-               stop=None) -> SolveInfo:
-    """One backward Euler step that moves only the nodes out of balance (and their neighbours).
-
-    A node whose out-of-balance force stays below ``tau = atol / (2 sqrt(n))``
-    and that does not move (its inertial force ``m |v| / h`` below tau)
-    sleeps: it keeps its position and its last residual ``r2``.  The nodes of
-    ``seeds`` (touched by a cut, loaded) are awake, and so is every neighbour
-    of a node still out of balance after a sweep, so a disturbance spreads
-    exactly as far as it is felt.  The step ends when the residual of all
-    nodes, sleeping ones with their last value, is at most ``atol``; with
-    every node awake this is :func:`implicit_step`.
-
-    Parameters
-    ----------
-    r2 : (n,) float64
-        Squared residual of every node at its last sweep, N^2; updated in place.
-    seeds : (k,) int64
-        Nodes to wake.
-    stop : (1,) int64, optional
-        Read before every colour class of a sweep (in the kernel) and after
-        every sweep: non-zero ends the step there, unconverged, with the
-        positions reached (a live session's cut waiting for the tissue,
-        :class:`~cutkit.simulate.tasks.HandoverLock`).  Stopped within its
-        first sweep, the step is not taken: positions and time stay as they
-        were and the result has 0 iterations.
-    """
-    x, v = state.positions, state.velocities
-    n = em.n_nodes
-    tau2 = (0.5 * atol) ** 2 / max(n, 1)
-    movable = ~em.fixed.all(axis=1) & (em.adj_degree > 0)
-    # a node held or left without tets (a cut's orphan) has no residual: its last one would
-    # otherwise stay in the sum and keep every later step from converging
-    r2[~movable] = 0.0
-    moving = movable & (em.masses * np.linalg.norm(v, axis=1) / h > np.sqrt(tau2))
-    seeds = np.unique(np.concatenate([np.asarray(seeds, np.int64), np.flatnonzero(moving),
-                                      np.flatnonzero(movable & (r2 > tau2))]))
-    mark = np.zeros(n, bool)
-    awake = KA.awake_after_sweep(em.adjacency, movable, r2, -1.0, seeds, mark)
-    x0 = x.copy()
-    y = x0.copy()
-    y[awake] += h * np.where(em.fixed[awake], 0.0, v[awake])
-    # the sweeps start from x^n, not from the inertial prediction y: from a state
-    # without inverted tets no sweep makes one (_elastic_kernels.KEEP_J_FRACTION),
-    # while y itself could fold a tet over
-    terms = _node_terms(em, x0, h, f_ext, None, y)
-    n_colours = int(em.colour.max(initial=-1)) + 1
-    r0 = res = 0.0
-    it = 0
-    prev2 = prev = None
-    omega = 1.0
-    updates = 0
-    stop = NEVER_STOP if stop is None else stop
-    while it < max_iterations and awake.size:
-        offsets, nodes = KA.colour_classes_of(em.colour, awake, n_colours)
-        updates += nodes.size
-        if chebyshev is not None:
-            prev2, prev = prev, x.copy()
-        swept = K.vbd_sweep(x, em.adjacency, terms, offsets, nodes, r2, stop)
-        if it == 0 and swept < offsets.size - 1:  # stopped within the first sweep: the step is not taken
-            x[:] = x0
-            return SolveInfo(0, 0.0, 0.0, False, 0, taken=False)
-        it += 1
-        if chebyshev is not None and prev2 is not None:  # as in iterate(); nodes that slept are unchanged
-            rho2 = chebyshev * chebyshev
-            omega = 2.0 / (2.0 - rho2) if omega == 1.0 else 4.0 / (4.0 - rho2 * omega)
-            x[:] = omega * (x - prev2) + prev2
-        res = float(np.sqrt(r2.sum()))
-        if it == 1:
-            r0 = res
-        if res <= atol or stop[0]:
-            break
-        awake = KA.awake_after_sweep(em.adjacency, movable, r2, tau2, awake, mark)
-    v[:] = np.where(em.fixed, 0.0, (x - x0) / h)
-    state.time += h
-    return SolveInfo(it, r0, res, res <= atol, updates)
-
-
-def static_solve(em: ElementModel, positions, f_ext=None, gravity=None, **tolerances) -> SolveInfo:
-    """Relax ``positions`` (in place) to static equilibrium under the external forces."""
-    return iterate(em, positions, _node_terms(em, positions, None, f_ext, gravity), **tolerances)
-
-
-def elastic_forces(em: ElementModel, positions) -> np.ndarray:
-    """Elastic node forces -dW/dx, N: (n, 3) float64 (reaction forces at held nodes)."""
-    out = np.zeros((em.n_nodes, 3))
-    K.node_forces(np.ascontiguousarray(positions, np.float64), em.adjacency, out)
-    return out
-
-
-def elastic_energy(em: ElementModel, positions) -> float:
-    """Total stored energy, N mm."""
-    return float(K.element_energy(np.ascontiguousarray(positions, np.float64), em.elements))

@@ -20,11 +20,14 @@ import numpy as np
 
 from cutkit.errors import InputError, MeshError
 from cutkit.relax._kernels import greedy_colouring, spring_csr
+from cutkit.relax.materials import (  # noqa: F401 (the unit constants are re-exported)
+    KG_M3_TO_T_MM3,
+    MAX_PRESTRAIN,
+    PA_TO_MPA,
+    material_of_tets,
+    prestress_of_tets,
+)
 
-#: E [Pa] -> [N/mm^2].
-PA_TO_MPA = 1e-6
-#: density [kg/m^3] -> [t/mm^3].
-KG_M3_TO_T_MM3 = 1e-12
 #: Standard gravity as a vector in mm/s^2 (pass ``Control(gravity=...)``).
 STANDARD_GRAVITY_MM_S2 = 9806.65
 #: Calibration constant c of k_e = sum_t E V_t / (c l_e^2).  c = 1 makes an
@@ -33,8 +36,6 @@ STANDARD_GRAVITY_MM_S2 = 9806.65
 STIFFNESS_CALIBRATION = 1.0
 #: Number of past updates averaged for the node-list assignment (section 5.2).
 ACCEL_WINDOW = 4
-#: |prestrain| at or above this would give springs nearly zero (or doubled) rest lengths.
-MAX_PRESTRAIN = 0.9
 
 
 @dataclass
@@ -269,13 +270,8 @@ def build_spring_model(
     if np.any(vol <= 0):
         bad = int(np.flatnonzero(vol <= 0)[0])
         raise MeshError(f"tet {bad} has non-positive volume {vol[bad]:.3g} mm^3 (inverted or degenerate)")
-    rows = model.materials.row_of(model.labels)
-    if np.any(rows < 0):
-        missing = int(model.labels[np.flatnonzero(rows < 0)[0]])
-        raise InputError(f"tet label {missing} has no row in the materials table")
-    E = model.materials["E"][rows] * PA_TO_MPA
-    rho = model.materials["density"][rows] * KG_M3_TO_T_MM3
-    damp_t = model.materials["damping"][rows]
+    mat = material_of_tets(model, model.labels, poisson_ratio=0.0)  # the springs have no Poisson ratio
+    E, rho, damp_t = mat["E"], mat["density"], mat["damping"]
 
     tet_mass = rho * vol
     masses = np.bincount(tets.ravel(), np.repeat(tet_mass / 4.0, 4), minlength=n)
@@ -290,24 +286,17 @@ def build_spring_model(
     stiffness = ev / (calibration * length**2)
 
     rest = length.copy()
-    ps = model.prestress
-    if prestress and len(ps.label):
+    if prestress and len(model.prestress.label):
         strain = np.zeros(len(edges))
-        weight = np.zeros(len(edges))
-        fibre = np.asarray(ps.fibre_direction, np.float64)
-        fibre = fibre / np.linalg.norm(fibre, axis=1, keepdims=True)
-        prestrain = np.asarray(ps.prestrain, np.float64)
-        if np.any(np.abs(prestrain) >= MAX_PRESTRAIN):
-            raise InputError(f"prestrain must lie in (-{MAX_PRESTRAIN}, {MAX_PRESTRAIN}), got {prestrain.tolist()}")
-        for lab, f, eps in zip(ps.label, fibre, prestrain):
+        prestrain, fibre = prestress_of_tets(model, model.labels)
+        for lab in model.prestress.label:
             in_lab = model.labels == lab
             if not in_lab.any():
                 continue
             e_ids = tet_edge[in_lab].ravel()
+            f, eps = fibre[in_lab][0], prestrain[in_lab][0]  # one fibre and prestrain per label
             cos2 = (d[e_ids] @ f / length[e_ids]) ** 2
-            w = np.repeat(vol[in_lab], 6)
-            np.add.at(strain, e_ids, w * eps * cos2)
-            np.add.at(weight, e_ids, w)
+            np.add.at(strain, e_ids, np.repeat(vol[in_lab], 6) * eps * cos2)
         # an edge shared by prestressed and plain tets: volume-weighted mean over all its tets
         all_w = np.bincount(tet_edge.ravel(), np.repeat(vol, 6), minlength=len(edges))
         rest = length * (1.0 - strain / all_w)

@@ -21,7 +21,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from cutkit.relax.elastic import ElementModel, SolveInfo, elastic_energy, elastic_forces
+from cutkit.relax.elastic import ElementModel
+from cutkit.relax.vbd import SolveInfo, elastic_energy, elastic_forces
 
 #: Relative tolerance of each inner linear solve (inexact Newton: the outer
 #: iteration corrects what the inner one leaves).

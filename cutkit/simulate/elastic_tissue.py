@@ -25,17 +25,15 @@ import numpy as np
 
 from cutkit.cutting import CutMesh
 from cutkit.relax.elastic import (
-    DEFAULT_ATOL_N,
     ElementModel,
     ElementState,
     fixed_nodes_mask,
-    local_step,
     initial_element_state,
-    material_of_tets,
     node_damping,
-    prestress_of_tets,
 )
-from cutkit.simulate.tissue import TissueBase
+from cutkit.relax.vbd import DEFAULT_ATOL_N, local_step
+from cutkit.relax.materials import material_of_tets, prestress_of_tets
+from cutkit.simulate.tissue_base import TissueBase
 
 #: Each implicit step of a simulation is solved until its residual is below
 #: this fraction of the model's force scale (the out-of-balance force of the
@@ -101,14 +99,14 @@ class ElasticTissue(TissueBase):
         self.state: ElementState = initial_element_state(model)
         self.counts = {"steps": 0, "sweeps": 0, "node_updates": 0, "steps_not_converged": 0}
         self.force_scale = self._force_scale()
-        # last squared residual of every node and the nodes a cut or a load wakes (elastic.local_step)
+        # last squared residual of every node and the nodes a cut or a load wakes (vbd.local_step)
         self.r2 = np.zeros(em.n_nodes)
         self._seeds: list[np.ndarray] = []
 
     def _force_scale(self) -> float:
         """N: the out-of-balance force of the model as built (prestress, prescribed
         displacements), or, without either, that of a 1 % strain of every tet."""
-        from cutkit.relax.elastic import elastic_forces
+        from cutkit.relax.vbd import elastic_forces
 
         free = ~self.em.fixed
         r = float(np.linalg.norm(elastic_forces(self.em, self.state.positions)[free]))
@@ -446,7 +444,7 @@ class ElasticTissue(TissueBase):
         masses summed again from them).  Node data stay: damping, fixed
         flags, colours, positions, velocities (node ids do not change).
 
-        Parameters as :meth:`TissueBase.rebase <cutkit.simulate.tissue.TissueBase.rebase>`.
+        Parameters as :meth:`TissueBase.rebase <cutkit.simulate.tissue_base.TissueBase.rebase>`.
         """
         cm, old = self.cm, self.em
         old_orig = np.asarray(old_orig, np.int64)

@@ -31,9 +31,11 @@ import numpy as np
 from cutkit.cutting import CutMesh
 from cutkit.mesh.topology import TET_EDGES, unique_edges
 from cutkit.relax import Control, NodeLists, build_spring_model, initial_state
-from cutkit.relax.model import KG_M3_TO_T_MM3, PA_TO_MPA, STIFFNESS_CALIBRATION
+from cutkit.relax.materials import material_of_tets, prestress_of_tets
+from cutkit.relax.model import STIFFNESS_CALIBRATION
 from cutkit.relax.topology import _recolour
 from cutkit.simulate._kernels import lookup_springs
+from cutkit.simulate.tissue_base import TissueBase
 
 
 def _rest_volumes(X: np.ndarray, tets: np.ndarray) -> np.ndarray:
@@ -58,85 +60,6 @@ def _shape_quality(X: np.ndarray, tets: np.ndarray, V: np.ndarray) -> np.ndarray
         l2 += np.einsum("ij,ij->i", d, d)
     l_rms = np.sqrt(l2 / 6.0)
     return 6.0 * np.sqrt(2.0) * V / np.maximum(l_rms, 1e-300) ** 3
-
-
-class TissueBase:
-    """What both tissue kinds share: the cut mesh, node interpolation, the live tets.
-
-    Subclasses set ``cm`` (:class:`~cutkit.cutting.CutMesh`) and provide
-    ``positions``, ``rest_positions``, ``velocities``, ``fixed``, ``time``,
-    :meth:`settle`, :meth:`advance` and :meth:`apply_cut`.
-    """
-
-    cm: CutMesh
-
-    def rebase(self, old_of_new: np.ndarray, old_orig: np.ndarray) -> None:
-        """Follow :meth:`CutMesh.rebase <cutkit.cutting.CutMesh.rebase>` (called after it, between strokes).
-
-        Parameters
-        ----------
-        old_of_new : (m,) int64
-            Old CutMesh tet id of each new original tet.
-        old_orig : (m,) int64
-            Old original tet of each (``old _tet_orig[old_of_new]``).
-        """
-        raise NotImplementedError
-
-    def interpolate_positions(self, nodes: np.ndarray) -> np.ndarray:
-        """Current positions of cut nodes from their defining nodes, (p, 3) float64.
-
-        The cut mesh works in the rest configuration; a cut node's weights
-        over its defining original nodes carry over to the deformed ones.
-        """
-        cm = self.cm
-        par = cm._def_nodes[nodes]
-        w = np.where(par >= 0, cm._def_w[nodes], 0.0)
-        return np.einsum("pq,pqc->pc", w, self.positions[np.where(par >= 0, par, 0)])
-
-    def _interpolation_weights(self, nodes: np.ndarray):
-        """Defining nodes (p, q) and their normalised weights (p, q) of cut nodes (invalid slots weigh 0)."""
-        cm = self.cm
-        par = cm._def_nodes[nodes]
-        valid = par >= 0
-        wz = np.where(valid, cm._def_w[nodes], 0.0)
-        wsum = wz.sum(axis=1, keepdims=True)
-        return np.where(valid, par, 0), wz / np.where(wsum > 0, wsum, 1.0), valid
-
-    def blade_to_rest(self, point, near_nodes: np.ndarray) -> np.ndarray:
-        """Carry a point of the deformed tissue into the rest configuration.
-
-        The cut is made in the rest configuration, where no original
-        tetrahedron is ever inverted, so the cut's topology does not depend
-        on how far the tissue has moved.  The blade is moved back by the mean
-        displacement of the nodes around it (first order: the local
-        rotation and stretch are neglected).
-
-        Parameters
-        ----------
-        point : (3,) float64
-        near_nodes : (k,) int64
-            Nodes around the blade.
-        """
-        if len(near_nodes) == 0:
-            return np.asarray(point, np.float64).copy()
-        u = self.positions[near_nodes] - self.rest_positions[near_nodes]
-        return np.asarray(point, np.float64) - u.mean(axis=0)
-
-
-    def alive_tets(self) -> tuple[np.ndarray, np.ndarray]:
-        """(k, 4) int64 current tets and (k,) int64 their CutMesh ids."""
-        cm = self.cm
-        ids = np.flatnonzero(cm._alive[:cm.n_tets_total])
-        return cm._tets[ids], ids
-
-    @property
-    def displacement(self) -> np.ndarray:
-        """(n, 3) float64 positions minus rest positions, mm."""
-        return self.positions - self.rest_positions
-
-    def point_data(self) -> dict:
-        """Further per-node arrays for the frames."""
-        return {}
 
 
 class Tissue(TissueBase):
@@ -181,17 +104,10 @@ class Tissue(TissueBase):
         self.bc_fixed = sm.fixed.copy()
 
         # material of each original tet (a sub-tet has its original's)
-        rows = model.materials.row_of(cm.labels)
-        self.E = model.materials["E"][rows] * PA_TO_MPA
-        self.rho = model.materials["density"][rows] * KG_M3_TO_T_MM3
-        self.prestrain = np.zeros(self.n_orig_tets)
-        self.fibre = np.zeros((self.n_orig_tets, 3))
-        ps = model.prestress
-        for lab, f, eps in zip(ps.label, np.asarray(ps.fibre_direction, np.float64).reshape(-1, 3),
-                               np.asarray(ps.prestrain, np.float64)):
-            sel = cm.labels == lab
-            self.prestrain[sel] = eps
-            self.fibre[sel] = f / np.linalg.norm(f)
+        # (the springs have no Poisson ratio: the table's is not read)
+        mat = material_of_tets(model, cm.labels, poisson_ratio=0.0)
+        self.E, self.rho = mat["E"], mat["density"]
+        self.prestrain, self.fibre = prestress_of_tets(model, cm.labels)
 
         # per-tet records (indexed by CutMesh tet id), per-spring sums
         tets = cm.orig_tets

@@ -1,0 +1,92 @@
+"""What both tissue models of a session share (:class:`TissueBase`): the cut mesh and its nodes.
+
+The springs (:class:`cutkit.simulate.tissue.Tissue`, the paper's) and the
+elements (:class:`cutkit.simulate.elastic_tissue.ElasticTissue`) keep their
+nodes on the cut mesh's numbering; this base class interpolates cut nodes
+over their defining nodes, carries the blade into the rest configuration
+and lists the live tetrahedra.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from cutkit.cutting import CutMesh
+
+
+class TissueBase:
+    """What both tissue kinds share: the cut mesh, node interpolation, the live tets.
+
+    Subclasses set ``cm`` (:class:`~cutkit.cutting.CutMesh`) and provide
+    ``positions``, ``rest_positions``, ``velocities``, ``fixed``, ``time``,
+    :meth:`settle`, :meth:`advance` and :meth:`apply_cut`.
+    """
+
+    cm: CutMesh
+
+    def rebase(self, old_of_new: np.ndarray, old_orig: np.ndarray) -> None:
+        """Follow :meth:`CutMesh.rebase <cutkit.cutting.CutMesh.rebase>` (called after it, between strokes).
+
+        Parameters
+        ----------
+        old_of_new : (m,) int64
+            Old CutMesh tet id of each new original tet.
+        old_orig : (m,) int64
+            Old original tet of each (``old _tet_orig[old_of_new]``).
+        """
+        raise NotImplementedError
+
+    def interpolate_positions(self, nodes: np.ndarray) -> np.ndarray:
+        """Current positions of cut nodes from their defining nodes, (p, 3) float64.
+
+        The cut mesh works in the rest configuration; a cut node's weights
+        over its defining original nodes carry over to the deformed ones.
+        """
+        cm = self.cm
+        par = cm._def_nodes[nodes]
+        w = np.where(par >= 0, cm._def_w[nodes], 0.0)
+        return np.einsum("pq,pqc->pc", w, self.positions[np.where(par >= 0, par, 0)])
+
+    def _interpolation_weights(self, nodes: np.ndarray):
+        """Defining nodes (p, q) and their normalised weights (p, q) of cut nodes (invalid slots weigh 0)."""
+        cm = self.cm
+        par = cm._def_nodes[nodes]
+        valid = par >= 0
+        wz = np.where(valid, cm._def_w[nodes], 0.0)
+        wsum = wz.sum(axis=1, keepdims=True)
+        return np.where(valid, par, 0), wz / np.where(wsum > 0, wsum, 1.0), valid
+
+    def blade_to_rest(self, point, near_nodes: np.ndarray) -> np.ndarray:
+        """Carry a point of the deformed tissue into the rest configuration.
+
+        The cut is made in the rest configuration, where no original
+        tetrahedron is ever inverted, so the cut's topology does not depend
+        on how far the tissue has moved.  The blade is moved back by the mean
+        displacement of the nodes around it (first order: the local
+        rotation and stretch are neglected).
+
+        Parameters
+        ----------
+        point : (3,) float64
+        near_nodes : (k,) int64
+            Nodes around the blade.
+        """
+        if len(near_nodes) == 0:
+            return np.asarray(point, np.float64).copy()
+        u = self.positions[near_nodes] - self.rest_positions[near_nodes]
+        return np.asarray(point, np.float64) - u.mean(axis=0)
+
+    def alive_tets(self) -> tuple[np.ndarray, np.ndarray]:
+        """(k, 4) int64 current tets and (k,) int64 their CutMesh ids."""
+        cm = self.cm
+        ids = np.flatnonzero(cm._alive[:cm.n_tets_total])
+        return cm._tets[ids], ids
+
+    @property
+    def displacement(self) -> np.ndarray:
+        """(n, 3) float64 positions minus rest positions, mm."""
+        return self.positions - self.rest_positions
+
+    def point_data(self) -> dict:
+        """Further per-node arrays for the frames."""
+        return {}
