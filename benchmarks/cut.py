@@ -4,11 +4,17 @@ Box meshes of about 10k, 100k and 1M tetrahedra are cut along a straight
 incision with a slight wobble; the per-step cost should not depend on the
 model size (all work is local to the blade).
 
-    python benchmarks/cut.py [--json] [--sizes 10k,100k,1M] [--steps 200] [--model knee.h5]
+    python benchmarks/cut.py [--json] [--sizes 10k,100k,1M] [--steps 200] [--model knee.h5] [--simulate knee.h5]
 
 ``--model`` also cuts a model file (e.g. the demo's ``knee.h5``) along the
 shipped incision (``sample_volumes/incision.csv``) and reports its step
 times and whether the written mesh passes ``cutkit check``.
+
+``--simulate`` runs ``cutkit simulate`` on a model file with the shipped
+incision (no frames, the default element model; a first run loads the
+kernels) and reports the summary's ``cut_step_ms``: the cut step inside
+``simulate`` (volume collision and subdivision at the proxy, then the hand-over
+of the topology change to the tissue), median and p90, and the hand-over alone.
 """
 
 import argparse
@@ -66,6 +72,24 @@ def bench_model(path, trajectory):
             "check_passed": bool(check_mesh(w.points, w.tets, w.labels).passed)}
 
 
+def bench_simulate(path, trajectory):
+    import tempfile
+    from pathlib import Path
+
+    from cutkit.cutting.trajectory import read_trajectory
+    from cutkit.io.model_h5 import read_model
+    from cutkit.simulate import SimulateOptions, simulate
+
+    model, traj = read_model(path), read_trajectory(trajectory)
+    for _ in range(2):  # the first run loads the kernels
+        with tempfile.TemporaryDirectory() as d:
+            s = simulate(model, traj, Path(d), SimulateOptions(fps=10, frames=False, write_model=False))
+    c = s["cut_step_ms"]
+    return {"tets": int(s["tets_initial"]), "cut_tets": int(s["cut_tets"]), "cut_steps": c["n"],
+            "median_step_ms": c["median"], "p90_step_ms": c["p90"], "handover_median_ms": c["handover_median"],
+            "handover_p90_ms": c["handover_p90"], "new_tets_per_cut_tet": s["new_tets"] / max(s["cut_tets"], 1)}
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--json", action="store_true")
@@ -73,10 +97,13 @@ def main():
     ap.add_argument("--steps", type=int, default=110)
     ap.add_argument("--model", default=None, help="also cut this model file along --trajectory")
     ap.add_argument("--trajectory", default="sample_volumes/incision.csv")
+    ap.add_argument("--simulate", default=None, help="also time the cut steps of `cutkit simulate` on this model")
     args = ap.parse_args()
     res = {s: bench(SIZES[s], args.steps) for s in args.sizes.split(",") if s}
     if args.model:
         res[args.model] = bench_model(args.model, args.trajectory)
+    if args.simulate:
+        res["simulate " + args.simulate] = bench_simulate(args.simulate, args.trajectory)
     if args.json:
         print(json.dumps(res, indent=2))
     else:

@@ -186,6 +186,7 @@ def summary(session, *, model_path, loop_wall: float, t_traj_end, opening_at_tra
         "simulated_per_wall": simulated / loop_wall,
         "simulated_per_wall_without_output": simulated / max(work, 1e-12),
         "time_per_task_s": dict(task_s),
+        "cut_step_ms": _cut_step_ms(session.cut),
         "counts": dict(counts),
         "cut_opening_mm": {
             "at_trajectory_end": opening_at_traj_end,
@@ -209,6 +210,16 @@ def summary(session, *, model_path, loop_wall: float, t_traj_end, opening_at_tra
             "frames": frames / loop_wall,
         }
     return out
+
+
+def _cut_step_ms(cut) -> dict | None:
+    """Median and p90 wall time of the cut steps (volume collision, subdivision and the hand-over
+    to the tissue), and of the hand-over alone, ms; None without a cut step."""
+    if not cut.step_s:
+        return None
+    step, handover = np.array(cut.step_s) * 1e3, np.array(cut.handover_s) * 1e3
+    return {"n": int(step.size), "median": float(np.median(step)), "p90": float(np.percentile(step, 90)),
+            "handover_median": float(np.median(handover)), "handover_p90": float(np.percentile(handover, 90))}
 
 
 def closing_warnings(session) -> None:

@@ -189,6 +189,8 @@ class CutTask:
         self.inside = False  # the blade has been in a tet since it entered (this stroke)
         self.through = False  # ... and the last cut step left it in none: out through the far side
         self.last_proxy = np.zeros(3)  # the proxy at the previous geometry update
+        self.step_s: list[float] = []  # wall time of each cut step with its hand-over, s
+        self.handover_s: list[float] = []  # ... of its hand-over to the tissue alone
 
     def _start_outside(self, blade_tip) -> None:
         """Begin the stroke's sweep :data:`ENTRY_SWEEP_MARGIN_MM` behind the entry pose, against the motion.
@@ -243,7 +245,12 @@ class CutTask:
             if not self.inside and cm.prev_pose is not None:
                 self._start_outside(blade_tip)
             before = cm.prev_pose
-            self._apply(cut_step(cm, blade_tip, axis))
+            t0 = time.perf_counter()
+            result = cut_step(cm, blade_tip, axis)
+            t1 = time.perf_counter()
+            self._apply(result)
+            self.step_s.append(time.perf_counter() - t0)
+            self.handover_s.append(time.perf_counter() - t1)
             self.pending = False
             in_rest, in_deformed = self._in_tissue(blade_tip, axis, proxy)
             # out through the far side only when out in both configurations, moving on: where
