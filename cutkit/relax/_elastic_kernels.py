@@ -97,6 +97,11 @@ KEEP_J_FRACTION = 0.1
 #: The barrier makes the crushed state cost what it physically would; it
 #: acts only far outside the strains of the reference tests (J > 0.7).
 BARRIER_J = 0.1
+#: Floating-point licences of the kernels that sum over a node's tets: reassociation and
+#: contraction (fused multiply-add) let the compiler schedule the sums; no assumption about
+#: NaN or infinity is made.  The sums then differ from a left-to-right sum by rounding only
+#: (the NumPy twins agree to 1e-10), and are the same whatever the number of threads.
+SUM_FASTMATH = {"reassoc", "contract", "nsz", "arcp"}
 #: A node whose 3x3 block has |det| below this times its trace cubed is left where it is
 #: (no tet and no mass: an orphan the cut left behind).
 SINGULAR_BLOCK = 1e-14
@@ -114,7 +119,7 @@ def barrier(J, k):
             -k * (2.0 * ln + 4.0 * d / J - d * d / (J * J)))
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy", fastmath=SUM_FASTMATH)
 def _accumulate(i, x, adj, scratch):
     """-dW/dx_i (f0, f1, f2) and the upper triangle of d2W/dx_i^2 over the tets of node i.
 
@@ -128,17 +133,21 @@ def _accumulate(i, x, adj, scratch):
     (the J-Hessian term vanishes: J is affine in one vertex; b is the
     :data:`BARRIER_J` barrier).  ``scratch`` (K, 4) receives J and dJ/dx_i of
     each tet (J = 0: no energy) for :func:`_max_step`.
+
+    The loop over the tets has no branch: a removed tet's row is all zeros
+    (:func:`node_term_rows`), so it adds nothing and gets J = 0.  The barrier,
+    which only a tet with J < BARRIER_J feels, is added by a second loop over
+    the scratch row when one does.
     """
     f0 = f1 = f2 = 0.0
     h00 = h01 = h02 = h11 = h12 = h22 = 0.0
+    diagonal = 0.0  # sum of the rows' edge weights: minus V mu |b_c|^2 summed
+    lowest = np.inf  # the smallest J of a live tet
     xi0, xi1, xi2 = x[i, 0], x[i, 1], x[i, 2]
     s0 = adj.start[i]
-    for k in range(adj.degree[i]):
+    degree = adj.degree[i]
+    for k in range(degree):
         r = s0 + k
-        Vk = adj.terms[r, 4]
-        if Vk <= 0.0:
-            scratch[k, 0] = 0.0
-            continue
         aj = adj.opposite[r, 0]
         ak = adj.opposite[r, 1]
         al = adj.opposite[r, 2]
@@ -147,16 +156,12 @@ def _accumulate(i, x, adj, scratch):
         p0, p1, p2 = x[ak, 0] - xj0, x[ak, 1] - xj1, x[ak, 2] - xj2  # x_k - x_j
         q0, q1, q2 = x[al, 0] - xj0, x[al, 1] - xj1, x[al, 2] - xj2  # x_l - x_j
         # the mu F b_c part: edge weights to the three other corners
-        wj = adj.terms[r, 0]
         wk = adj.terms[r, 1]
         wl = adj.terms[r, 2]
-        wsum = wj + wk + wl
-        # sum_m w_m (x_i - x_m) with x_i - x_k = e - p, x_i - x_l = e - q
-        f0 += wsum * e0 - wk * p0 - wl * q0
-        f1 += wsum * e1 - wk * p1 - wl * q1
-        f2 += wsum * e2 - wk * p2 - wl * q2
+        wsum = adj.terms[r, 0] + wk + wl
         # J and dJ/dx_i from the opposite face
         alpha = adj.terms[r, 3]
+        Vk = adj.terms[r, 4]
         gb0 = (p1 * q2 - p2 * q1) * alpha
         gb1 = (p2 * q0 - p0 * q2) * alpha
         gb2 = (p0 * q1 - p1 * q0) * alpha
@@ -165,23 +170,36 @@ def _accumulate(i, x, adj, scratch):
         scratch[k, 1] = gb0
         scratch[k, 2] = gb1
         scratch[k, 3] = gb2
-        _, db, ddb = barrier(J, Vk)
-        s = Vk * (J - 1.0) - adj.terms[r, 5] + db  # V s
-        f0 -= s * gb0
-        f1 -= s * gb1
-        f2 -= s * gb2
-        d = -wsum  # V mu |b_c|^2: the weights of a row sum to minus the diagonal
-        w = Vk + ddb
-        h00 += d + w * gb0 * gb0
-        h11 += d + w * gb1 * gb1
-        h22 += d + w * gb2 * gb2
-        h01 += w * gb0 * gb1
-        h02 += w * gb0 * gb2
-        h12 += w * gb1 * gb2
-    return f0, f1, f2, h00, h01, h02, h11, h12, h22
+        s = Vk * (J - 1.0) - adj.terms[r, 5]  # V s without the barrier
+        # sum_m w_m (x_i - x_m) with x_i - x_k = e - p, x_i - x_l = e - q
+        f0 += wsum * e0 - wk * p0 - wl * q0 - s * gb0
+        f1 += wsum * e1 - wk * p1 - wl * q1 - s * gb1
+        f2 += wsum * e2 - wk * p2 - wl * q2 - s * gb2
+        diagonal += wsum
+        h00 += Vk * gb0 * gb0
+        h11 += Vk * gb1 * gb1
+        h22 += Vk * gb2 * gb2
+        h01 += Vk * gb0 * gb1
+        h02 += Vk * gb0 * gb2
+        h12 += Vk * gb1 * gb2
+        lowest = min(lowest, J if Vk > 0.0 else np.inf)
+    if lowest < BARRIER_J:
+        for k in range(degree):
+            _, db, ddb = barrier(scratch[k, 0], adj.terms[s0 + k, 4])
+            gb0, gb1, gb2 = scratch[k, 1], scratch[k, 2], scratch[k, 3]
+            f0 -= db * gb0
+            f1 -= db * gb1
+            f2 -= db * gb2
+            h00 += ddb * gb0 * gb0
+            h11 += ddb * gb1 * gb1
+            h22 += ddb * gb2 * gb2
+            h01 += ddb * gb0 * gb1
+            h02 += ddb * gb0 * gb2
+            h12 += ddb * gb1 * gb2
+    return f0, f1, f2, h00 - diagonal, h01, h02, h11 - diagonal, h12, h22 - diagonal
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _node_update(i, x, adj, nt, scratch):
     """Move x_i to the exact minimiser of the incremental potential in x_i; return the squared residual."""
     f0, f1, f2, h00, h01, h02, h11, h12, h22 = _accumulate(i, x, adj, scratch)
@@ -222,30 +240,26 @@ def _node_update(i, x, adj, nt, scratch):
     return r2
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy", fastmath=SUM_FASTMATH)
 def _max_step(degree, scratch, d0, d1, d2):
     """The largest a in [0, 1] for which x_i + a d keeps every tet of node i with J > 0 at
     J >= KEEP_J_FRACTION of its present value (J is affine in x_i: J(a) = J + a (dJ/dx_i) . d),
     and whether a tet is in the :data:`BARRIER_J` band at a = 0 or a = 1 (then possibly along
     the step: :func:`_barrier_line_minimum` decides).
 
-    ``scratch`` holds J and dJ/dx_i of each tet as :func:`_accumulate` found them.
+    ``scratch`` holds J and dJ/dx_i of each tet as :func:`_accumulate` found them.  Without a
+    branch: the fastest rate -slope / ((1 - KEEP_J_FRACTION) J) at which a tet with J > 0 loses
+    its allowance gives a = 1 / rate.
     """
-    a = 1.0
-    near_barrier = False
+    rate = 0.0
+    lowest = np.inf  # the smallest J along the step (at a = 0 or a = 1) of a tet with J > 0
     for k in range(degree):
         J = scratch[k, 0]
-        if J <= 0.0:
-            continue
         slope = scratch[k, 1] * d0 + scratch[k, 2] * d1 + scratch[k, 3] * d2
-        if slope < 0.0:
-            near_barrier |= J + slope < BARRIER_J  # J falls along the step: into the band by a = 1?
-            limit = (1.0 - KEEP_J_FRACTION) * J / -slope
-            if limit < a:
-                a = limit
-        else:
-            near_barrier |= J < BARRIER_J
-    return a, near_barrier
+        live = J > 0.0
+        lowest = min(lowest, J + min(slope, 0.0) if live else np.inf)
+        rate = max(rate, -slope / ((1.0 - KEEP_J_FRACTION) * J) if live else 0.0)
+    return (1.0 / rate if rate > 1.0 else 1.0), lowest < BARRIER_J
 
 
 #: The line search along a node's Newton step (:func:`_barrier_line_minimum`) stops once the
@@ -321,7 +335,7 @@ def _barrier_line_minimum(i, adj, scratch, d0, d1, d2, fd, a_max):
     return lo  # phi' < 0 on [0, lo]: the potential there is below its value at a = 0
 
 
-@njit(cache=True, parallel=True, nogil=True)
+@njit(cache=True, parallel=True, nogil=True, error_model="numpy")
 def vbd_sweep(x, adj, nt, colour_offsets, colour_nodes, r2, stop):
     """One Gauss-Seidel sweep of vertex block descent, colour class by colour class.
 
