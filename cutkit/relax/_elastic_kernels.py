@@ -97,11 +97,10 @@ KEEP_J_FRACTION = 0.1
 #: The barrier makes the crushed state cost what it physically would; it
 #: acts only far outside the strains of the reference tests (J > 0.7).
 BARRIER_J = 0.1
-#: Floating-point licences of the kernels that sum over a node's tets: reassociation and
-#: contraction (fused multiply-add) let the compiler schedule the sums; no assumption about
-#: NaN or infinity is made.  The sums then differ from a left-to-right sum by rounding only
-#: (the NumPy twins agree to 1e-10), and are the same whatever the number of threads.
-SUM_FASTMATH = {"reassoc", "contract", "nsz", "arcp"}
+# The kernels take no fast-math licence.  Letting the compiler reassociate the sums over a
+# node's tets and fuse multiply-adds saved 6-10 % of a sweep, but the rounding then depended on
+# how the kernel was inlined, which differed between two compilations of the same source: the
+# knee's incision took 1,704 or 1,843 sweeps depending on which kernel was compiled first.
 #: A node whose 3x3 block has |det| below this times its trace cubed is left where it is
 #: (no tet and no mass: an orphan the cut left behind).
 SINGULAR_BLOCK = 1e-14
@@ -119,7 +118,7 @@ def barrier(J, k):
             -k * (2.0 * ln + 4.0 * d / J - d * d / (J * J)))
 
 
-@njit(cache=True, nogil=True, error_model="numpy", fastmath=SUM_FASTMATH)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _accumulate(i, x, adj, scratch):
     """-dW/dx_i (f0, f1, f2) and the upper triangle of d2W/dx_i^2 over the tets of node i.
 
@@ -240,7 +239,7 @@ def _node_update(i, x, adj, nt, scratch):
     return r2
 
 
-@njit(cache=True, nogil=True, error_model="numpy", fastmath=SUM_FASTMATH)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _max_step(degree, scratch, d0, d1, d2):
     """The largest a in [0, 1] for which x_i + a d keeps every tet of node i with J > 0 at
     J >= KEEP_J_FRACTION of its present value (J is affine in x_i: J(a) = J + a (dJ/dx_i) . d),
