@@ -118,6 +118,13 @@ def barrier(J, k):
             -k * (2.0 * ln + 4.0 * d / J - d * d / (J * J)))
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _add_outer(h00, h01, h02, h11, h12, h22, w, g0, g1, g2):
+    """The upper triangle of h + w g g^T."""
+    return (h00 + w * g0 * g0, h01 + w * g0 * g1, h02 + w * g0 * g2,
+            h11 + w * g1 * g1, h12 + w * g1 * g2, h22 + w * g2 * g2)
+
+
 @njit(cache=True, nogil=True, error_model="numpy")
 def _accumulate(i, x, adj, scratch):
     """-dW/dx_i (f0, f1, f2) and the upper triangle of d2W/dx_i^2 over the tets of node i.
@@ -177,12 +184,7 @@ def _accumulate(i, x, adj, scratch):
         f1 += wsum * e1 - wk * p1 - wl * q1 - s * gb1
         f2 += wsum * e2 - wk * p2 - wl * q2 - s * gb2
         diagonal += wsum
-        h00 += Vk * gb0 * gb0
-        h11 += Vk * gb1 * gb1
-        h22 += Vk * gb2 * gb2
-        h01 += Vk * gb0 * gb1
-        h02 += Vk * gb0 * gb2
-        h12 += Vk * gb1 * gb2
+        h00, h01, h02, h11, h12, h22 = _add_outer(h00, h01, h02, h11, h12, h22, Vk, gb0, gb1, gb2)
         lowest = min(lowest, J if Vk > 0.0 else np.inf)
     if lowest < BARRIER_J:
         for k in range(degree):
@@ -191,12 +193,7 @@ def _accumulate(i, x, adj, scratch):
             f0 -= db * gb0
             f1 -= db * gb1
             f2 -= db * gb2
-            h00 += ddb * gb0 * gb0
-            h11 += ddb * gb1 * gb1
-            h22 += ddb * gb2 * gb2
-            h01 += ddb * gb0 * gb1
-            h02 += ddb * gb0 * gb2
-            h12 += ddb * gb1 * gb2
+            h00, h01, h02, h11, h12, h22 = _add_outer(h00, h01, h02, h11, h12, h22, ddb, gb0, gb1, gb2)
     return f0, f1, f2, h00 - diagonal, h01, h02, h11 - diagonal, h12, h22 - diagonal
 
 
