@@ -196,9 +196,9 @@ class CutTask:
         """Begin the stroke's sweep :data:`ENTRY_SWEEP_MARGIN_MM` behind the entry pose, against the motion.
 
         The blade entered at the surface, and the edges of the faces it went in
-        through lie in that surface: a sweep from the entry pose would meet
-        them at its very start, where the cut refuses them (too close to the
-        blade's previous pose), and the tissue would stay joined at the entry.
+        through lie in that surface: a sweep from the entry pose meets them on
+        its boundary, not strictly inside, so they stayed uncut and the tissue
+        stayed joined at the entry (measured on a side entry, docs/simulate.md).
         """
         cm = self.tis.cm
         p0, q0 = cm.prev_pose
@@ -233,32 +233,38 @@ class CutTask:
         """Record one haptic tick's scalpel state."""
         self.pending |= code == CUTTING
 
-    def step(self, proxy, out, code: int, contact: Contact) -> np.ndarray:
-        """One geometry update; returns the (n, 3) forces on the tissue's nodes, N."""
+    def _cut(self, blade_tip, axis, proxy) -> None:
+        """Cut with the blade at ``blade_tip`` (rest configuration), hand the change over, and tell
+        whether the blade went out through the far side (:attr:`through`)."""
         from cutkit.cutting import cut_step
 
+        cm = self.tis.cm
+        if not self.inside and cm.prev_pose is not None:
+            self._start_outside(blade_tip)
+        before = cm.prev_pose
+        t0 = time.perf_counter()
+        result = cut_step(cm, blade_tip, axis)
+        t1 = time.perf_counter()
+        self._apply(result)
+        self.step_s.append(time.perf_counter() - t0)
+        self.handover_s.append(time.perf_counter() - t1)
+        self.pending = False
+        in_rest, in_deformed = self._in_tissue(blade_tip, axis, proxy)
+        # out through the far side only when out in both configurations, moving on: where the
+        # blade drags the tissue along, its rest pose lags behind the hand's and can fall back
+        # out through the entry face just after it went in
+        onwards = before is not None and float(np.dot(blade_tip - before[0], proxy - self.last_proxy)) > 0.0
+        self.through = self.inside and onwards and not (in_rest or in_deformed)
+        self.inside |= in_rest
+
+    def step(self, proxy, out, code: int, contact: Contact) -> np.ndarray:
+        """One geometry update; returns the (n, 3) forces on the tissue's nodes, N."""
         cm = self.tis.cm
         axis = out[O_N:O_N + 3].copy()
         near = np.unique(cm.orig_tets[cm.active_tets]) if cm.active_tets.size else contact.face_nodes
         blade_tip = self.tis.blade_to_rest(proxy, near)
         if self.pending:
-            if not self.inside and cm.prev_pose is not None:
-                self._start_outside(blade_tip)
-            before = cm.prev_pose
-            t0 = time.perf_counter()
-            result = cut_step(cm, blade_tip, axis)
-            t1 = time.perf_counter()
-            self._apply(result)
-            self.step_s.append(time.perf_counter() - t0)
-            self.handover_s.append(time.perf_counter() - t1)
-            self.pending = False
-            in_rest, in_deformed = self._in_tissue(blade_tip, axis, proxy)
-            # out through the far side only when out in both configurations, moving on: where
-            # the blade drags the tissue along, its rest pose lags behind the hand's and can
-            # fall back out through the entry face just after it went in
-            onwards = before is not None and float(np.dot(blade_tip - before[0], proxy - self.last_proxy)) > 0.0
-            self.through = self.inside and onwards and not (in_rest or in_deformed)
-            self.inside |= in_rest
+            self._cut(blade_tip, axis, proxy)
         elif code != FREE:
             # in tissue but not cutting: the blade rests or backs out, the sweep restarts here
             cm.prev_pose = (blade_tip, blade_tip - cm.blade_length * axis)
