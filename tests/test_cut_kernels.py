@@ -149,3 +149,24 @@ def test_serial_dihedral_kernel_matches_the_mesh_core():
 
     p, t = _jittered_box(4)
     np.testing.assert_array_equal(Q.dihedral_angles_serial(p, t), dihedral_angles(p, t))
+
+
+def test_segment_against_several_tets_matches_the_twin_in_either_orientation():
+    """``seg_meets_any_tet`` (the blade against a step's active tets) is any() of the twin, whatever the corner order."""
+    rng = np.random.default_rng(7)
+    x = rng.uniform(0.0, 1.0, (12, 3))
+    tets = np.array([[0, 1, 2, 3], [4, 5, 6, 7], [8, 9, 10, 11]])
+    hits = 0
+    for _ in range(300):
+        p0, p1 = rng.uniform(-0.2, 1.2, (2, 3))
+        want = False
+        for tv in tets:
+            pts = x[tv]
+            if np.dot(np.cross(pts[1] - pts[0], pts[2] - pts[0]), pts[3] - pts[0]) < 0:
+                pts = pts[[0, 2, 1, 3]]  # the twin needs positive orientation
+            want |= segment_hits_tet(p0, p1, pts)
+        assert K.seg_meets_any_tet(p0, p1, x, tets) == want
+        assert K.seg_meets_any_tet(p0, p1, x, tets[:, [1, 0, 2, 3]]) == want
+        hits += want
+    assert 20 < hits < 280
+    assert not K.seg_meets_any_tet(np.zeros(3), np.ones(3), x, np.zeros((0, 4), np.int64))

@@ -143,3 +143,12 @@ def seg_tet(p0, p1, x, tv):
         if lo > hi:
             return False
     return True
+
+
+@njit(cache=True, nogil=True)
+def seg_meets_any_tet(p0, p1, x, tets):
+    """Whether segment p0-p1 meets one of ``tets`` (k, 4) over ``x`` (either orientation: :func:`seg_tet`)."""
+    for t in range(tets.shape[0]):
+        if seg_tet(p0, p1, x, tets[t]):
+            return True
+    return False

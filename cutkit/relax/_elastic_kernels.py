@@ -140,8 +140,9 @@ def _accumulate(i, x, adj, scratch):
     :data:`BARRIER_J` barrier).  ``scratch`` (K, 4) receives J and dJ/dx_i of
     each tet (J = 0: no energy) for :func:`_max_step`.
 
-    The loop over the tets has no branch: a removed tet's row is all zeros
-    (:func:`node_term_rows`), so it adds nothing and gets J = 0.  The barrier,
+    The loop over the tets has no branch: an inactive tet (no volume, below
+    MIN_ELEMENT_QUALITY) has an all-zero row (:func:`node_term_rows`), so it adds
+    nothing and gets J = 0; removed tets are not in the rows at all.  The barrier,
     which only a tet with J < BARRIER_J feels, is added by a second loop over
     the scratch row when one does.
     """

@@ -9,7 +9,7 @@ Units (one consistent system, that of many FE codes): length mm, mass
 tonne (1 t = 1000 kg), time s, force N, stress MPa = N/mm^2, stiffness
 N/mm, density t/mm^3, acceleration mm/s^2.  The model file stores E in Pa
 and density in kg/m^3; :func:`build_spring_model` converts them
-(:data:`PA_TO_MPA`, :data:`KG_M3_TO_T_MM3`).
+(:data:`~cutkit.relax.materials.PA_TO_MPA`, :data:`~cutkit.relax.materials.KG_M3_TO_T_MM3`).
 """
 
 from __future__ import annotations
@@ -20,13 +20,7 @@ import numpy as np
 
 from cutkit.errors import InputError, MeshError
 from cutkit.relax._kernels import greedy_colouring, spring_csr
-from cutkit.relax.materials import (  # noqa: F401 (the unit constants are re-exported)
-    KG_M3_TO_T_MM3,
-    MAX_PRESTRAIN,
-    PA_TO_MPA,
-    material_of_tets,
-    prestress_of_tets,
-)
+from cutkit.relax.materials import material_of_tets, prestress_of_tets
 
 #: Standard gravity as a vector in mm/s^2 (pass ``Control(gravity=...)``).
 STANDARD_GRAVITY_MM_S2 = 9806.65

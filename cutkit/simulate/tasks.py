@@ -159,19 +159,6 @@ class ContactTask:
         self.row_of_tet = self.materials.row_of(cm.labels)
 
 
-def _segment_meets_tets(points, tets, p, q) -> bool:
-    """Whether segment p-q meets one of the tets (k, 4) over ``points`` (either orientation)."""
-    from cutkit.cutting._geometry import segment_hits_tet
-
-    for t in tets:
-        x = points[t]
-        if np.dot(np.cross(x[1] - x[0], x[2] - x[0]), x[3] - x[0]) < 0.0:
-            x = x[[0, 2, 1, 3]]
-        if segment_hits_tet(p, q, x):
-            return True
-    return False
-
-
 class CutTask:
     """Volume collision and subdivision (sections 3, 4.2) at the geometry rate.
 
@@ -215,11 +202,13 @@ class CutTask:
         The active tets are those the swept quad met, whose last edge is the
         blade at its new pose: a tet the blade is in now is among them.
         """
+        from cutkit.cutting._kernels import seg_meets_any_tet
+
         cm = self.tis.cm
-        corners = cm.orig_tets[cm.active_tets]
+        corners = np.ascontiguousarray(cm.orig_tets[cm.active_tets])
         length = cm.blade_length
-        return (_segment_meets_tets(cm._x, corners, blade_tip - length * axis, blade_tip),
-                _segment_meets_tets(self.tis.positions, corners, proxy - length * axis, proxy))
+        return (seg_meets_any_tet(blade_tip - length * axis, blade_tip, cm._x, corners),
+                seg_meets_any_tet(proxy - length * axis, proxy, self.tis.positions, corners))
 
     def _apply(self, result) -> None:
         """Hand a cut step's topology change over to the tissue."""
