@@ -122,3 +122,23 @@ def step_limit(x, i, d, tets, volume, keep=0.1):
         if d0 > 0 and d1 - d0 < 0:
             a = min(a, (1 - keep) * d0 / (d0 - d1))
     return a
+
+
+def awake_after_sweep(tets, movable, r2, tau2, nodes):
+    """Of ``nodes``, those with r2 > tau2, with every node sharing a tet: the movable ones, ascending."""
+    hot = [i for i in np.asarray(nodes) if r2[i] > tau2]
+    near = set(int(i) for i in hot)
+    for t in np.asarray(tets):
+        if any(int(i) in t for i in hot):
+            near.update(int(c) for c in t)
+    return np.array(sorted(i for i in near if movable[i]), np.int64)
+
+
+def step_seeds(masses, fixed, degree, velocities, r2, h, tau2, seeds):
+    """(movable, r2 with the immovable zeroed, the first nodes to wake) of a local step."""
+    movable = ~fixed.all(axis=1) & (degree > 0)
+    r2 = np.where(movable, r2, 0.0)
+    moving = movable & (masses * np.linalg.norm(velocities, axis=1) / h > np.sqrt(tau2))
+    wake = np.unique(np.concatenate([np.asarray(seeds, np.int64), np.flatnonzero(moving),
+                                     np.flatnonzero(movable & (r2 > tau2))]))
+    return movable, r2, wake

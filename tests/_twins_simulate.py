@@ -10,3 +10,15 @@ def lookup_springs_twin(springs, n, a, b):
         index.setdefault((int(u), int(w)), s)
         index.setdefault((int(w), int(u)), s)
     return np.array([index.get((int(u), int(w)), -1) if u < n and w < n else -1 for u, w in zip(a, b)], np.int64)
+
+
+def place_through_old_shape_twin(rest, X, x, Tinv, reach, fallback):
+    """Each node through the affine map of the tet with the largest smallest barycentric weight
+    (first on a tie) when that weight is >= -reach, else ``fallback``: all pairs at once."""
+    lam = np.einsum("rij,prj->pri", Tinv, rest[:, None, :] - X[None, :, 0])
+    bary = np.concatenate([1.0 - lam.sum(axis=2, keepdims=True), lam], axis=2)  # (p, r, 4)
+    worst = bary.min(axis=2)
+    best = np.argmax(worst, axis=1)
+    rows = np.arange(best.size)
+    inside = worst[rows, best] >= -reach
+    return np.where(inside[:, None], np.einsum("pk,pkc->pc", bary[rows, best], x[best]), fallback)

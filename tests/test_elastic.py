@@ -273,3 +273,42 @@ def test_inverted_tet_is_pushed_back():
     x[3, 2] = -0.5  # inverted
     static_solve(em, x, rtol=1e-10, atol=0.0)
     assert x[3] == pytest.approx([0.0, 0.0, 1.0], abs=1e-6)
+
+
+def test_local_step_bookkeeping_matches_the_twins(deformed):
+    """Which nodes a local step wakes first and after a sweep, its velocities and the loaded
+    nodes, against NumPy: a held node, a half-held one, an orphan, a moving one, a loaded one."""
+    from cutkit.relax import _adjacency_kernels as KA
+
+    model, em, x = deformed
+    n = em.n_nodes
+    rng = np.random.default_rng(7)
+    em.fixed[0] = True
+    em.fixed[1, 2] = True
+    degree = em.adj_degree.copy()
+    degree[2] = 0  # an orphan: no tets
+    v = np.zeros((n, 3))
+    v[5] = [0.0, 3.0, 0.0]
+    r2 = rng.uniform(0.0, 2e-6, n)
+    r2[[0, 2, 9]] = 1.0  # out of balance, but held / orphaned / free
+    h, tau2 = 0.02, 1e-6
+    seeds = np.array([11, 11, 0], np.int64)
+    movable_t, r2_t, wake_t = T.step_seeds(em.masses, em.fixed, degree, v, r2, h, tau2, seeds)
+    movable, mark, r2_k = np.empty(n, bool), np.zeros(n, bool), r2.copy()
+    wake = KA.step_seeds(em.masses, em.fixed, degree, v, r2_k, h, tau2, seeds, movable, mark)
+    np.testing.assert_array_equal(movable, movable_t)
+    np.testing.assert_array_equal(r2_k, r2_t)
+    np.testing.assert_array_equal(wake, wake_t)
+    assert not mark.any() and {5, 9, 11} <= set(wake.tolist()) and 2 not in wake
+    tets = em.tets[:em.n_elements]
+    for t2 in (-1.0, tau2):
+        got = KA.awake_after_sweep(em.adjacency, movable, r2_k, t2, wake, mark)
+        np.testing.assert_array_equal(got, T.awake_after_sweep(tets, movable, r2_k, t2, wake))
+        assert not mark.any()
+    x0 = model.points
+    out = np.empty((n, 3))
+    KA.step_velocities(x, x0, em.fixed, h, out)
+    np.testing.assert_array_equal(out, np.where(em.fixed, 0.0, (x - x0) / h))
+    f = np.zeros((n, 3))
+    f[[4, 7], [2, 0]] = [-1e-3, 2.0]
+    np.testing.assert_array_equal(KA.loaded_nodes(f), [4, 7])

@@ -354,3 +354,30 @@ def test_model_without_fixed_nodes_warns(tmp_path, capsys):
     err = capsys.readouterr()
     lines = [ln for ln in (err.out + err.err).splitlines() if "no fixed node" in ln]
     assert len(lines) == 1 and "fixed_labels" in lines[0]
+
+
+def test_place_through_old_shape_matches_twin():
+    """Nodes inside a tet, between two (a shared face: the first tet wins), just outside (extended
+    map) and far outside (the fallback position stays)."""
+    from _twins_simulate import place_through_old_shape_twin
+
+    from cutkit.simulate._kernels import place_through_old_shape
+
+    rng = np.random.default_rng(3)
+    Xc = np.array([[[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]],
+                   [[1, 1, 1], [1, 0, 0], [0, 1, 0], [0, 0, 1]]], np.float64)  # share the face 1-2-3
+    Xc = np.concatenate([Xc, rng.uniform(-3, 3, (6, 4, 3))])
+    T = np.stack([Xc[:, 1] - Xc[:, 0], Xc[:, 2] - Xc[:, 0], Xc[:, 3] - Xc[:, 0]], axis=2)
+    Tinv = np.linalg.inv(T)
+    xc = Xc + rng.normal(0, 0.1, Xc.shape)  # a deformation, affine per tet
+    rest = np.concatenate([[[0.1, 0.2, 0.3], [1 / 3, 1 / 3, 1 / 3], [-0.2, 0.1, 0.1], [40.0, 40.0, 40.0]],
+                           rng.uniform(-4, 4, (40, 3))])
+    fallback = rng.normal(size=rest.shape)
+    got = fallback.copy()
+    place_through_old_shape(rest, Xc, xc, Tinv, 0.5, got)
+    want = place_through_old_shape_twin(rest, Xc, xc, Tinv, 0.5, fallback)
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(got[3], fallback[3])  # out of reach
+    # on the shared face both maps agree; inside tet 0 its own map holds exactly
+    b = np.array([1 - 0.6, 0.1, 0.2, 0.3])
+    np.testing.assert_allclose(got[0], b @ xc[0], atol=1e-12)

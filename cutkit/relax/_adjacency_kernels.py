@@ -11,7 +11,7 @@ kernels check nothing (:mod:`cutkit.relax.elastic` does).
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 from cutkit.relax._elastic_kernels import EDGE_COLUMN, OPPOSITE
 
@@ -114,27 +114,8 @@ def colour_classes_of(colour, nodes, n_colours):
 
 
 @njit(cache=True, nogil=True)
-def awake_after_sweep(adj, movable, r2, tau2, nodes, mark):
-    """The nodes the next sweep moves, in ascending order: those of ``nodes`` still out of
-    balance by more than sqrt(tau2), and every movable node sharing a tet with one of them
-    (read from the nodes' own adjacency rows, ``adj.opposite``).
-
-    Marks first, then one pass over ``mark`` (n,) bool collects and clears them
-    (all False on entry and on return): a third of the time of collecting
-    while marking, whose branch on every visit cost more than the pass.
-    """
-    for q in range(nodes.shape[0]):
-        i = nodes[q]
-        if r2[i] <= tau2:
-            continue
-        if movable[i]:
-            mark[i] = True
-        s0 = adj.start[i]
-        for r in range(s0, s0 + adj.degree[i]):
-            for m in range(3):
-                a = adj.opposite[r, m]
-                if movable[a]:
-                    mark[a] = True
+def _collect(mark):
+    """The indices of ``mark`` (n,) bool that are True, ascending; clears them."""
     k = 0
     for i in range(mark.shape[0]):
         if mark[i]:
@@ -146,4 +127,88 @@ def awake_after_sweep(adj, movable, r2, tau2, nodes, mark):
             out[k] = i
             k += 1
             mark[i] = False
+    return out
+
+
+#: Blocks the nodes of :func:`awake_after_sweep` are split into for its threads.
+AWAKE_BLOCKS = 16
+
+
+@njit(cache=True, nogil=True, parallel=True)
+def awake_after_sweep(adj, movable, r2, tau2, nodes, mark):
+    """The nodes the next sweep moves, in ascending order: those of ``nodes`` still out of
+    balance by more than sqrt(tau2), and every movable node sharing a tet with one of them
+    (read from the nodes' own adjacency rows, ``adj.opposite``).
+
+    Marks first, then one pass over ``mark`` (n,) bool collects and clears them
+    (all False on entry and on return): a third of the time of collecting
+    while marking, whose branch on every visit cost more than the pass.  The
+    blocks of ``nodes`` mark in parallel: two threads may both write True to
+    one node, and the set marked is the same for any thread count.  Unsigned
+    indices spare each read numba's negative-index test (15 % on the knee).
+    """
+    n = nodes.shape[0]
+    for b in prange(AWAKE_BLOCKS):
+        for q in range(b * n // AWAKE_BLOCKS, (b + 1) * n // AWAKE_BLOCKS):
+            i = np.uint64(nodes[q])
+            if r2[i] <= tau2:
+                continue
+            if movable[i]:
+                mark[i] = True
+            s0 = np.uint64(adj.start[i])
+            for r in range(s0, s0 + np.uint64(adj.degree[i])):
+                for m in range(3):
+                    a = np.uint64(adj.opposite[r, m])
+                    if movable[a]:
+                        mark[a] = True
+    return _collect(mark)
+
+
+@njit(cache=True, nogil=True)
+def step_seeds(masses, fixed, degree, velocities, r2, h, tau2, seeds, movable, mark):
+    """The start of a local step (:func:`cutkit.relax.vbd.local_step`) in one pass over the nodes.
+
+    Fills ``movable`` (n,) bool (not held in all three directions, in some
+    tet), zeroes ``r2`` of the others, and returns in ascending order the
+    nodes to wake first: ``seeds``, and the movable nodes that move (inertial
+    force ``m |v| / h`` above ``sqrt(tau2)``) or are out of balance
+    (``r2 > tau2``).  ``mark`` (n,) bool is all False on entry and on return.
+    """
+    tau = np.sqrt(tau2)
+    for i in range(movable.shape[0]):
+        mov = degree[i] > 0 and not (fixed[i, 0] and fixed[i, 1] and fixed[i, 2])
+        movable[i] = mov
+        if not mov:
+            r2[i] = 0.0
+            continue
+        v = velocities[i]
+        speed = np.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+        if masses[i] * speed / h > tau or r2[i] > tau2:
+            mark[i] = True
+    for q in range(seeds.shape[0]):
+        mark[seeds[q]] = True
+    return _collect(mark)
+
+
+@njit(cache=True, nogil=True)
+def step_velocities(x, x0, fixed, h, velocities):
+    """Backward Euler's velocities ``(x - x0) / h``, 0 in held directions: (n, 3) float64, in place."""
+    for i in range(x.shape[0]):
+        for c in range(3):
+            velocities[i, c] = 0.0 if fixed[i, c] else (x[i, c] - x0[i, c]) / h
+
+
+@njit(cache=True, nogil=True)
+def loaded_nodes(forces):
+    """The nodes with a non-zero force, ascending: (k,) int64 of ``forces`` (n, 3) float64."""
+    k = 0
+    for i in range(forces.shape[0]):
+        if forces[i, 0] != 0.0 or forces[i, 1] != 0.0 or forces[i, 2] != 0.0:
+            k += 1
+    out = np.empty(k, np.int64)
+    k = 0
+    for i in range(forces.shape[0]):
+        if forces[i, 0] != 0.0 or forces[i, 1] != 0.0 or forces[i, 2] != 0.0:
+            out[k] = i
+            k += 1
     return out

@@ -233,7 +233,7 @@ class ElementModel:
         self.mass_share[ids] = share
         np.add.at(self.masses, tets.ravel(), np.repeat(share, 4))
         self.n_elements = max(self.n_elements, int(ids.max()) + 1)
-        self._make_room(np.bincount(tets.ravel(), minlength=self.n_nodes))
+        self._make_room(*np.unique(tets.ravel(), return_counts=True))
         KA.add_to_adjacency(self.adjacency, self.tets, K.node_term_rows(Dminv, volume, self.mu[ids], self.lam[ids]),
                            ids)
         self._classes = None
@@ -245,8 +245,9 @@ class ElementModel:
         if ids.size == 0:
             return
         KA.remove_from_adjacency(self.adjacency, self.tets, ids)
-        np.add.at(self.masses, self.tets[ids].ravel(), np.repeat(-self.mass_share[ids], 4))
-        self.masses[self.adj_degree == 0] = 0.0  # exactly: what is left is rounding
+        corners = self.tets[ids].ravel()
+        np.add.at(self.masses, corners, np.repeat(-self.mass_share[ids], 4))
+        self.masses[corners[self.adj_degree[corners] == 0]] = 0.0  # exactly: what is left is rounding
         self.volume[ids] = 0.0
         self.mass_share[ids] = 0.0
         self._classes = None
@@ -262,14 +263,15 @@ class ElementModel:
         for name in ("volume", "mu", "lam", "mass_share"):
             setattr(self, name, np.concatenate([getattr(self, name), np.zeros(grow)]))
 
-    def _make_room(self, more: np.ndarray) -> None:
-        """Rows with room for ``more`` (n,) slots each: a row too small moves to the pool's end."""
-        n = self.n_nodes
-        need = self.adj_degree + more[:n]
-        short = np.flatnonzero(need > self.adj_capacity[:n])
+    def _make_room(self, nodes: np.ndarray, more: np.ndarray) -> None:
+        """Rows of ``nodes`` (k,) ascending with room for ``more`` (k,) slots each: a row too small
+        moves to the pool's end (only the nodes a change touches are looked at, never all)."""
+        need = self.adj_degree[nodes] + more
+        grow = need > self.adj_capacity[nodes]
+        short = nodes[grow]
         if short.size == 0:
             return
-        cap = np.maximum(2 * self.adj_capacity[short], need[short] + ADJACENCY_SLACK)
+        cap = np.maximum(2 * self.adj_capacity[short], need[grow] + ADJACENCY_SLACK)
         start = self.adj_used + np.concatenate([[0], np.cumsum(cap)[:-1]])
         end = self.adj_used + int(cap.sum())
         size = self.adj_tets.shape[0]

@@ -152,14 +152,12 @@ def local_step(em: ElementModel, state: ElementState, h: float, f_ext, r2, seeds
     x, v = state.positions, state.velocities
     n = em.n_nodes
     tau2 = (0.5 * atol) ** 2 / max(n, 1)
-    movable = ~em.fixed.all(axis=1) & (em.adj_degree > 0)
-    # a node held or left without tets (a cut's orphan) has no residual: its last one would
-    # otherwise stay in the sum and keep every later step from converging
-    r2[~movable] = 0.0
-    moving = movable & (em.masses * np.linalg.norm(v, axis=1) / h > np.sqrt(tau2))
-    seeds = np.unique(np.concatenate([np.asarray(seeds, np.int64), np.flatnonzero(moving),
-                                      np.flatnonzero(movable & (r2 > tau2))]))
+    movable = np.empty(n, bool)
     mark = np.zeros(n, bool)
+    # a node held or left without tets (a cut's orphan) gets no residual (step_seeds): its last
+    # one would otherwise stay in the sum and keep every later step from converging
+    seeds = KA.step_seeds(em.masses, em.fixed, em.adj_degree, v, r2, float(h), float(tau2),
+                          np.asarray(seeds, np.int64), movable, mark)
     awake = KA.awake_after_sweep(em.adjacency, movable, r2, -1.0, seeds, mark)
     x0 = x.copy()
     y = x0.copy()
@@ -195,7 +193,7 @@ def local_step(em: ElementModel, state: ElementState, h: float, f_ext, r2, seeds
         if res <= atol or stop[0]:
             break
         awake = KA.awake_after_sweep(em.adjacency, movable, r2, tau2, awake, mark)
-    v[:] = np.where(em.fixed, 0.0, (x - x0) / h)
+    KA.step_velocities(x, x0, em.fixed, float(h), v)
     state.time += h
     return SolveInfo(it, r0, res, res <= atol, updates)
 

@@ -1,4 +1,4 @@
-"""Numba kernels of the cut-to-spring coupling (twins in ``tests/_twins_simulate.py``)."""
+"""Numba kernels that carry a cut over to the tissue (twins in ``tests/_twins_simulate.py``)."""
 
 from __future__ import annotations
 
@@ -41,3 +41,47 @@ def lookup_springs(adj_offsets, adj_nodes, adj_springs, a, b):
         if lo < adj_offsets[u + 1] and adj_nodes[lo] == w:
             out[i] = adj_springs[lo]
     return out
+
+
+@njit(cache=True, nogil=True)
+def place_through_old_shape(rest, X, x, Tinv, reach, out):
+    """Current positions of nodes through the piecewise affine old shape of a few tets.
+
+    Each node takes the affine map of the tet it lies in, or of the nearest
+    one (the largest smallest barycentric weight, the first on a tie),
+    extended outside it while that weight is at least ``-reach``; farther
+    from every tet it keeps the position ``out`` holds on entry.
+
+    Parameters
+    ----------
+    rest : (p, 3) float64
+        The nodes' rest positions, mm.
+    X, x : (r, 4, 3) float64
+        The tets' rest and current corners, mm.
+    Tinv : (r, 3, 3) float64
+        Inverse rest edge matrices (columns X1 - X0, X2 - X0, X3 - X0).
+    reach : float
+    out : (p, 3) float64
+        In: each node's position where no tet reaches it; out: its place.
+    """
+    b = np.empty(4)
+    best_b = np.empty(4)
+    for p in range(rest.shape[0]):
+        best = -np.inf
+        k = -1
+        for r in range(X.shape[0]):
+            d0 = rest[p, 0] - X[r, 0, 0]
+            d1 = rest[p, 1] - X[r, 0, 1]
+            d2 = rest[p, 2] - X[r, 0, 2]
+            for i in range(3):
+                b[i + 1] = Tinv[r, i, 0] * d0 + Tinv[r, i, 1] * d1 + Tinv[r, i, 2] * d2
+            b[0] = 1.0 - (b[1] + b[2] + b[3])
+            worst = min(min(b[0], b[1]), min(b[2], b[3]))
+            if worst > best:
+                best = worst
+                k = r
+                best_b[:] = b
+        if k >= 0 and best >= -reach:
+            for c in range(3):
+                out[p, c] = (best_b[0] * x[k, 0, c] + best_b[1] * x[k, 1, c] + best_b[2] * x[k, 2, c]
+                             + best_b[3] * x[k, 3, c])

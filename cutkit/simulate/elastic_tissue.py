@@ -31,8 +31,10 @@ from cutkit.relax.elastic import (
     initial_element_state,
     node_damping,
 )
+from cutkit.relax._adjacency_kernels import loaded_nodes
 from cutkit.relax.vbd import DEFAULT_ATOL_N, local_step
 from cutkit.relax.materials import material_of_tets, prestress_of_tets
+from cutkit.simulate._kernels import place_through_old_shape
 from cutkit.simulate.tissue_base import TissueBase
 
 #: Each implicit step of a simulation is solved until its residual is below
@@ -53,8 +55,6 @@ PLACE_REACH = 0.5
 UNFOLD_J = 0.05
 #: ... in at most this many exact steps per node (ElasticTissue._lift).
 UNFOLD_STEPS = 4
-#: Most (node, tet) pairs whose barycentric weights are held at once when placing nodes.
-PLACE_BLOCK = 1 << 18
 
 
 class ElasticTissue(TissueBase):
@@ -166,7 +166,7 @@ class ElasticTissue(TissueBase):
         """
         n_steps = int(np.floor((until - self.state.time) / self.step_s + 1e-6))
         sweeps = 0
-        loaded = np.flatnonzero(np.any(f_ext != 0.0, axis=1))
+        loaded = loaded_nodes(np.ascontiguousarray(f_ext, np.float64))
         for _ in range(max(n_steps, 0)):
             if stop is not None and stop[0]:
                 break
@@ -390,18 +390,8 @@ class ElasticTissue(TissueBase):
         """
         x = self.interpolate_positions(nodes)
         X, xc, Tinv = old_shape
-        if X.shape[0] == 0 or nodes.size == 0:
-            return x
-        chunk = max(1, PLACE_BLOCK // X.shape[0])  # (chunk, r, 4) barycentric weights at a time
-        for lo in range(0, nodes.size, chunk):
-            p = slice(lo, min(lo + chunk, nodes.size))
-            lam = np.einsum("rij,prj->pri", Tinv, self.cm._X[nodes[p]][:, None, :] - X[None, :, 0])
-            bary = np.concatenate([1.0 - lam.sum(axis=2, keepdims=True), lam], axis=2)
-            worst = bary.min(axis=2)
-            best = np.argmax(worst, axis=1)
-            rows = np.arange(best.size)
-            reach = worst[rows, best] >= -PLACE_REACH
-            x[p] = np.where(reach[:, None], np.einsum("pk,pkc->pc", bary[rows, best], xc[best]), x[p])
+        if X.shape[0] and nodes.size:
+            place_through_old_shape(np.ascontiguousarray(self.cm._X[nodes]), X, xc, Tinv, PLACE_REACH, x)
         return x
 
     def _hold_orphans(self, nodes: np.ndarray) -> None:
