@@ -26,6 +26,7 @@ import numpy as np
 
 from cutkit.relax import _adjacency_kernels as KA
 from cutkit.relax import _elastic_kernels as K
+from cutkit.relax.growable import append_rows
 from cutkit.relax.materials import material_of_tets, prestress_of_tets
 
 #: A tet whose normalised rest volume 6 sqrt(2) V / l_rms^3 (1 for a regular
@@ -182,18 +183,19 @@ class ElementModel:
     def add_nodes(self, count: int, damping=0.0, fixed=None) -> np.ndarray:
         """Append ``count`` nodes without elements (mass comes with their elements); returns their ids."""
         n, p = self.n_nodes, int(count)
-        self.masses = np.concatenate([self.masses, np.zeros(p)])
-        self.damping = np.concatenate([self.damping, np.broadcast_to(np.asarray(damping, np.float64), (p,))])
+        # a cut adds a few nodes at a time: the arrays grow into spare room (growable.append_rows)
+        self.masses = append_rows(self.masses, np.zeros(p))
+        self.damping = append_rows(self.damping, np.broadcast_to(np.asarray(damping, np.float64), (p,)))
         fx = np.zeros((p, 3), bool) if fixed is None else np.broadcast_to(np.asarray(fixed, bool).reshape(p, -1),
                                                                              (p, 3))
-        self.fixed = np.concatenate([self.fixed, fx])
+        self.fixed = append_rows(self.fixed, fx)
         if n + p > self.adj_start.shape[0]:
-            # rows grow by doubling (a cut adds a few nodes at a time); rows past n_nodes are unused
+            # rows grow by doubling; rows past n_nodes are unused
             rows = max(n + p, 2 * self.adj_start.shape[0]) - self.adj_start.shape[0]
             self.adj_start = np.concatenate([self.adj_start, np.zeros(rows, np.int64)])
             self.adj_capacity = np.concatenate([self.adj_capacity, np.zeros(rows, np.int64)])
-        self.adj_degree = np.concatenate([self.adj_degree, np.zeros(p, np.int32)])
-        self.colour = np.concatenate([self.colour, np.full(p, -1, np.int32)])
+        self.adj_degree = append_rows(self.adj_degree, np.zeros(p, np.int32))
+        self.colour = append_rows(self.colour, np.full(p, -1, np.int32))
         self._classes = None
         return np.arange(n, n + p)
 

@@ -32,6 +32,7 @@ from cutkit.relax.elastic import (
     node_damping,
 )
 from cutkit.relax._adjacency_kernels import loaded_nodes
+from cutkit.relax.growable import append_rows
 from cutkit.relax.vbd import DEFAULT_ATOL_N, local_step
 from cutkit.relax.materials import material_of_tets, prestress_of_tets
 from cutkit.simulate._kernels import place_through_old_shape
@@ -228,7 +229,7 @@ class ElasticTissue(TissueBase):
                                                      np.arange(n_old, n_new)])))
         self._recolour(added, n_old)
         if self.r2.shape[0] < em.n_nodes:
-            self.r2 = np.concatenate([self.r2, np.zeros(em.n_nodes - self.r2.shape[0])])
+            self.r2 = append_rows(self.r2, np.zeros(em.n_nodes - self.r2.shape[0]))
         touched = [np.arange(n_old, em.n_nodes), moved]
         if redo.size:
             touched.append(em.tets[redo].ravel())
@@ -243,10 +244,10 @@ class ElasticTissue(TissueBase):
         damping = (w * em.damping[par]).sum(axis=1)
         vel = np.einsum("pq,pqc->pc", w, st.velocities[par])
         x = self._through_old_shape(old_shape, new)
-        self.bc_fixed = np.concatenate([self.bc_fixed, held])
+        self.bc_fixed = append_rows(self.bc_fixed, held)
         em.add_nodes(new.size, damping=damping, fixed=held)
-        st.positions = np.concatenate([st.positions, x])
-        st.velocities = np.concatenate([st.velocities, np.where(held[:, None], 0.0, vel)])
+        st.positions = append_rows(st.positions, x)
+        st.velocities = append_rows(st.velocities, np.where(held[:, None], 0.0, vel))
 
     def _unfold(self, tets: np.ndarray, placed: np.ndarray, before: np.ndarray) -> None:
         """Re-place the placed nodes of tets born folded, among a few candidate positions.
