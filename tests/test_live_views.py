@@ -283,12 +283,20 @@ print(json.dumps(out))
 """
 
 
+#: What VTK prints when Xvfb's OpenGL cannot compile a shader (no frame was drawn).
+XVFB_GL_FAILURE = "Could not create shader object"
+
+
 @pytest.mark.skipif(shutil.which("xvfb-run") is None, reason="needs Xvfb (xvfb-run)")
 def test_the_window_on_screen_under_xvfb():
     """The on-screen window under Xvfb: frames drawn, keys and a drag through VTK's events, the cut visible."""
     tests = str(Path(__file__).resolve().parent)
-    res = subprocess.run(["xvfb-run", "-a", sys.executable, "-c", ON_SCREEN.format(tests=tests)],
-                         capture_output=True, text=True, timeout=180)
+    run = ["xvfb-run", "-a", sys.executable, "-c", ON_SCREEN.format(tests=tests)]
+    res = subprocess.run(run, capture_output=True, text=True, timeout=180)
+    if res.returncode != 0 and XVFB_GL_FAILURE in res.stderr:
+        # Xvfb's software OpenGL once could not compile the window's shaders on a loaded CI
+        # machine (no frame was drawn): one more try on a fresh display
+        res = subprocess.run(run, capture_output=True, text=True, timeout=180)
     assert res.returncode == 0, res.stderr[-2000:]
     out = json.loads(res.stdout.strip().splitlines()[-1])
     assert out["interactive"] and out["frames"] == 11 and out["closed"]
