@@ -142,3 +142,22 @@ def step_seeds(masses, fixed, degree, velocities, r2, h, tau2, seeds):
     wake = np.unique(np.concatenate([np.asarray(seeds, np.int64), np.flatnonzero(moving),
                                      np.flatnonzero(movable & (r2 > tau2))]))
     return movable, r2, wake
+
+
+def rest_shape(X, tets, prestrain=None, fibre=None, quality_min=1e-6):
+    """Inverse natural edge matrices, natural and rest volumes (NumPy's batched det and inv)."""
+    p = X[tets]
+    Dm = np.stack([p[:, 1] - p[:, 0], p[:, 2] - p[:, 0], p[:, 3] - p[:, 0]], axis=2)  # columns
+    rest_volume = np.linalg.det(Dm) / 6.0
+    if prestrain is not None:
+        ff = np.einsum("mi,mj->mij", fibre, fibre)
+        Dm = Dm - prestrain[:, None, None] * np.einsum("mij,mjk->mik", ff, Dm)
+    volume = np.linalg.det(Dm) / 6.0
+    edges = np.concatenate([Dm, Dm[:, :, [1, 2, 0]] - Dm], axis=2)
+    l_rms = np.sqrt(np.einsum("mij,mij->m", edges, edges) / 6.0)
+    quality = 6.0 * np.sqrt(2.0) * volume / np.maximum(l_rms, 1e-300) ** 3
+    active = quality >= quality_min
+    Dminv = np.zeros_like(Dm)
+    if active.any():
+        Dminv[active] = np.linalg.inv(Dm[active])
+    return Dminv, np.where(active, volume, 0.0), rest_volume

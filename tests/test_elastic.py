@@ -312,3 +312,33 @@ def test_local_step_bookkeeping_matches_the_twins(deformed):
     f = np.zeros((n, 3))
     f[[4, 7], [2, 0]] = [-1e-3, 2.0]
     np.testing.assert_array_equal(KA.loaded_nodes(f), [4, 7])
+
+
+def test_rest_shapes_match_the_twin_with_prestrain_and_degenerate_tets():
+    """The kernel against NumPy's det and inv: random tets, one inverted, one flat, one a
+    sliver just below MIN_ELEMENT_QUALITY; with and without a prestrain along a fibre."""
+    from cutkit.relax._shape_kernels import corner_edge_inverses
+    from cutkit.relax.elastic import MIN_ELEMENT_QUALITY
+
+    rng = np.random.default_rng(11)
+    X = rng.uniform(-2.0, 2.0, (40, 3))
+    X[36:40] = [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0.5, 0.5, 0.0]]  # a flat tet
+    tets = rng.integers(0, 36, (30, 4))
+    tets = np.concatenate([tets, [[36, 37, 38, 39]], [[36, 38, 37, 0]]])  # flat; and one of either sign
+    Xs = np.concatenate([X, [[0, 0, 1e-7]]])  # a sliver: quality about 2e-7
+    tets_s = np.concatenate([tets, [[36, 37, 38, 40]]])
+    p = rng.uniform(0.0, 0.2, tets_s.shape[0])
+    f = rng.normal(size=(tets_s.shape[0], 3))
+    f /= np.linalg.norm(f, axis=1, keepdims=True)
+    for pre, fib in ((None, None), (p, f)):
+        got = rest_shape(Xs, tets_s, pre, fib)
+        want = T.rest_shape(Xs, tets_s, pre, fib, MIN_ELEMENT_QUALITY)
+        for g, w in zip(got, want):
+            np.testing.assert_allclose(g, w, rtol=1e-10, atol=1e-12)
+        assert got[1][-1] == 0.0 and got[1][-2] == 0.0 and np.all(got[0][-1] == 0.0)  # sliver, flat: no energy
+    corners = Xs[tets_s]
+    Tinv = np.zeros((len(tets_s), 3, 3))
+    ok = corner_edge_inverses(corners, Tinv)
+    D = np.stack([corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0], corners[:, 3] - corners[:, 0]], 2)
+    np.testing.assert_array_equal(ok, np.linalg.det(D) != 0)
+    np.testing.assert_allclose(Tinv[ok], np.linalg.inv(D[ok]), rtol=1e-9, atol=1e-12)

@@ -26,6 +26,7 @@ import numpy as np
 
 from cutkit.relax import _adjacency_kernels as KA
 from cutkit.relax import _elastic_kernels as K
+from cutkit.relax import _shape_kernels as KS
 from cutkit.relax.growable import append_rows
 from cutkit.relax.materials import material_of_tets, prestress_of_tets
 
@@ -66,21 +67,15 @@ def rest_shape(X, tets, prestrain=None, fibre=None):
     rest_volume : (m,) float64
         Volumes of the rest shape, mm^3 (what the mass is lumped from).
     """
-    p = X[tets]
-    Dm = np.stack([p[:, 1] - p[:, 0], p[:, 2] - p[:, 0], p[:, 3] - p[:, 0]], axis=2)  # columns
-    rest_volume = np.linalg.det(Dm) / 6.0
-    if prestrain is not None:
-        ff = np.einsum("mi,mj->mij", fibre, fibre)
-        Dm = Dm - prestrain[:, None, None] * np.einsum("mij,mjk->mik", ff, Dm)
-    volume = np.linalg.det(Dm) / 6.0
-    edges = np.concatenate([Dm, Dm[:, :, [1, 2, 0]] - Dm], axis=2)
-    l_rms = np.sqrt(np.einsum("mij,mij->m", edges, edges) / 6.0)
-    quality = 6.0 * np.sqrt(2.0) * volume / np.maximum(l_rms, 1e-300) ** 3
-    active = quality >= MIN_ELEMENT_QUALITY
-    Dminv = np.zeros_like(Dm)
-    if active.any():
-        Dminv[active] = np.linalg.inv(Dm[active])
-    return Dminv, np.where(active, volume, 0.0), rest_volume
+    X = np.ascontiguousarray(X, np.float64)
+    tets = np.ascontiguousarray(tets, np.int64)
+    m = tets.shape[0]
+    if prestrain is None:
+        prestrain, fibre = np.zeros(m), np.zeros((m, 3))
+    Dminv, volume, rest_volume = np.empty((m, 3, 3)), np.empty(m), np.empty(m)
+    KS.rest_shapes(X, tets, np.ascontiguousarray(prestrain, np.float64), np.ascontiguousarray(fibre, np.float64),
+                   MIN_ELEMENT_QUALITY, Dminv, volume, rest_volume)
+    return Dminv, volume, rest_volume
 
 
 @dataclass

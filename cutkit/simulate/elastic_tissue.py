@@ -32,6 +32,7 @@ from cutkit.relax.elastic import (
     node_damping,
 )
 from cutkit.relax._adjacency_kernels import loaded_nodes
+from cutkit.relax._shape_kernels import corner_edge_inverses
 from cutkit.relax.growable import append_rows
 from cutkit.relax.vbd import DEFAULT_ATOL_N, local_step
 from cutkit.relax.materials import material_of_tets, prestress_of_tets
@@ -370,9 +371,9 @@ class ElasticTissue(TissueBase):
             hit = moved[order][k] == q
             X[hit] = moved_from[order][k[hit]]
         x = self.state.positions[q]
-        T = np.stack([X[:, 1] - X[:, 0], X[:, 2] - X[:, 0], X[:, 3] - X[:, 0]], axis=2)
-        ok = np.abs(np.linalg.det(T)) > 0
-        return X[ok], x[ok], np.linalg.inv(T[ok])
+        Tinv = np.empty((X.shape[0], 3, 3))
+        ok = corner_edge_inverses(np.ascontiguousarray(X), Tinv)
+        return X[ok], x[ok], Tinv[ok]
 
     def _through_old_shape(self, old_shape, nodes: np.ndarray) -> np.ndarray:
         """Current positions of nodes at their (new) rest positions, through the old shape.
