@@ -172,3 +172,25 @@ def set_node_twin(x, X, uvw, nodes, w):
 
 def min_volume_twin(x, tets):
     return float(volumes(x, np.asarray(tets).reshape(-1, 4)).min()) if len(tets) else np.inf
+
+
+def _dihedrals_twin(p):
+    """The six dihedral angles (degrees) of a tet with corners p (4, 3), by face normals."""
+    faces = [(1, 2, 3), (0, 3, 2), (0, 1, 3), (0, 2, 1)]
+    n = [np.cross(p[b] - p[a], p[c] - p[a]) for a, b, c in faces]
+    out = []
+    for f, g in [(2, 3), (1, 3), (1, 2), (0, 3), (0, 2), (0, 1)]:  # faces meeting at each edge
+        out.append(np.degrees(np.arctan2(np.linalg.norm(np.cross(n[f], n[g])), -np.dot(n[f], n[g]))))
+    return out
+
+
+def best_cone_apex_twin(x, corners, tb, blends, tris, bary_min):
+    """Each blend's apex, its cone's smallest dihedral angle, and the first best: by plain loops."""
+    best, best_b = -1.0, None
+    for w in blends:
+        b = clamp_bary_twin((1.0 - w) * np.asarray(tb) + 0.25 * w, bary_min)
+        apex = b @ x[corners]
+        worst = min(min(_dihedrals_twin(np.array([x[t[0]], x[t[2]], x[t[1]], apex]))) for t in tris)
+        if worst > best:
+            best, best_b = worst, b
+    return best_b, best

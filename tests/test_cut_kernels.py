@@ -170,3 +170,26 @@ def test_segment_against_several_tets_matches_the_twin_in_either_orientation():
         hits += want
     assert 20 < hits < 280
     assert not K.seg_meets_any_tet(np.zeros(3), np.ones(3), x, np.zeros((0, 4), np.int64))
+
+
+def test_best_cone_apex_matches_twin():
+    """The T-cone choice: over random tets and cut triangles, the kernel's apex and angle are the
+    twin's, the spare row is the only row written, and a single blend gives the clamped centroid."""
+    from _twins_cut import best_cone_apex_twin
+
+    rng = np.random.default_rng(5)
+    for trial in range(40):
+        x = rng.uniform(-1.0, 1.0, (12, 3))
+        x[:4] = [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]] + rng.normal(0, 0.1, (4, 3))
+        corners = np.arange(4)
+        tris = np.array([rng.choice(11, 3, replace=False) for _ in range(int(rng.integers(2, 9)))])
+        tb = rng.dirichlet(np.ones(4))
+        blends = np.array([0.0, 0.35, 0.7])
+        before = x.copy()
+        b, angle = KS.best_cone_apex(x, corners, tb, blends, tris, 0.15, 11)
+        b_t, angle_t = best_cone_apex_twin(before, corners, tb, blends, tris, 0.15)
+        np.testing.assert_allclose(b, b_t, atol=1e-12)
+        assert angle == pytest.approx(angle_t, abs=1e-9)
+        np.testing.assert_array_equal(x[:11], before[:11])
+    one, _ = KS.best_cone_apex(x, corners, tb, np.zeros(1), tris, 0.15, 11)
+    np.testing.assert_allclose(one, clamp_bary_twin(tb, 0.15), atol=1e-15)

@@ -17,6 +17,7 @@ import numpy as np
 from numba import njit
 
 from cutkit.cutting._kernels import seg_tet, tet_sweep
+from cutkit.mesh._quality_kernels import _tet_dihedrals as tet_dihedrals
 
 #: The walk stops in a tet whose barycentric coordinates of the target are all >= -WALK_EPS.
 WALK_EPS = 1e-12
@@ -322,3 +323,52 @@ def min_volume(x, tets):
         v = ((b1y * b2z - b1z * b2y) * b3x + (b1z * b2x - b1x * b2z) * b3y + (b1x * b2y - b1y * b2x) * b3z) / 6.0
         m = min(m, v)
     return m
+
+
+@njit(cache=True, nogil=True)
+def best_cone_apex(x, corners, tb, blends, tris, bary_min, spare):
+    """The apex T of a cone over triangles with the largest smallest dihedral angle.
+
+    Each candidate is ``clamp_bary((1 - w) tb + w / 4, bary_min)`` over the
+    tet's ``corners`` for w in ``blends`` (from the cut nodes' centroid
+    towards the tet's centroid); its cone is the tets ``(t0, t2, t1, T)`` of
+    the triangles.  The first best candidate wins a tie.
+
+    Parameters
+    ----------
+    x : (n, 3) float64
+        Node positions; row ``spare`` (no node's) holds each candidate in turn.
+    corners : (4,) int64
+    tb : (4,) float64
+    blends : (q,) float64
+    tris : (k, 3) int64
+    bary_min : float
+    spare : int
+
+    Returns
+    -------
+    (bary, angle) : (4,) float64 and float
+        The best candidate's weights and the smallest dihedral angle of its cone, degrees.
+    """
+    k = tris.shape[0]
+    cone = np.empty((k, 4), np.int64)
+    for j in range(k):
+        cone[j, 0], cone[j, 1], cone[j, 2], cone[j, 3] = tris[j, 0], tris[j, 2], tris[j, 1], spare
+    normals = np.empty((4, 3))
+    angles = np.empty((k, 6))
+    best = -1.0
+    best_b = np.zeros(4)
+    for q in range(blends.shape[0]):
+        b = clamp_bary((1.0 - blends[q]) * tb + 0.25 * blends[q], bary_min)
+        for c in range(3):
+            x[spare, c] = (b[0] * x[corners[0], c] + b[1] * x[corners[1], c] + b[2] * x[corners[2], c]
+                           + b[3] * x[corners[3], c])
+        worst = np.inf
+        for j in range(k):
+            tet_dihedrals(x, cone, j, normals, angles)
+            for e in range(6):
+                worst = min(worst, angles[j, e])
+        if worst > best:
+            best = worst
+            best_b[:] = b
+    return best_b, best

@@ -28,8 +28,7 @@ from cutkit.mesh.topology import TET_EDGES, TET_FACES, unique_edges, unique_face
 from cutkit.cutting import subdivision as S
 from cutkit.cutting import _kernels_step as K
 from cutkit.cutting.rebase import cut_twins, init_records, rebase, twin_face_bary
-from cutkit.cutting.splits import (COMPACT_VOL_MIN, SPLIT_ANGLE_GAIN, SPLIT_ANGLE_GOOD, compact_split,
-                                   min_angles_per_group)
+from cutkit.cutting.splits import COMPACT_VOL_MIN, SPLIT_ANGLE_GAIN, SPLIT_ANGLE_GOOD, compact_split
 
 #: Edge intersection parameters are clamped into [EDGE_SNAP, 1 - EDGE_SNAP]
 #: (a crossing near a vertex, or through it, becomes a crossing near it).
@@ -47,6 +46,8 @@ TET_BARY_MIN = 0.15
 #: nodes' centroid to the tet's centroid): the best-shaped cone is taken.  0
 #: keeps the cut surface flattest; further in, fewer slivers near the cut.
 T_BLENDS = (0.0, 0.35, 0.7)
+_T_BLENDS = np.array(T_BLENDS)
+_T_AT_CENTROID = np.zeros(1)
 
 _TET_EDGES_L = TET_EDGES.tolist()
 _TET_FACES_L = TET_FACES.tolist()
@@ -487,24 +488,18 @@ class CutMesh:
 
         With ``free`` (no tip inside), T is moved from the cut nodes' centroid
         ``tb`` towards the tet's centroid by each of ``T_BLENDS`` and the
-        best-shaped cone is kept.  The candidates are tried in the spare rows
-        from ``n_points`` on of the node arrays (no node is made), all in one
-        kernel call.
+        best-shaped cone is kept.  The candidates are tried in the spare row
+        ``n_points`` of the node arrays (no node is made), all in one kernel
+        call (``_kernels_step.best_cone_apex``).
         """
-        blends = T_BLENDS if free else (0.0,)
-        while self._x.shape[0] < self.n_points + len(blends):
-            self.n_points += len(blends)  # make _grow_nodes double the arrays
+        if self._x.shape[0] <= self.n_points:
+            self.n_points += 1  # make _grow_nodes double the arrays
             self._grow_nodes()
-            self.n_points -= len(blends)
-        i = self.n_points
-        cands = [_clamp_bary((1.0 - w) * np.asarray(tb) + 0.25 * w, TET_BARY_MIN) for w in blends]
-        self._x[i:i + len(blends)] = np.array(cands) @ self._x[v]
-        base = np.array([(tri[0], tri[2], tri[1], 0) for tri, _, _ in tris], np.int64)
-        cones = np.tile(base, (len(blends), 1))
-        cones[:, 3] = np.repeat(np.arange(i, i + len(blends)), base.shape[0])
-        angles = min_angles_per_group(self._x, cones, len(blends))
-        k = int(np.argmax(angles))
-        return cands[k], float(angles[k])
+            self.n_points -= 1
+        tris = np.array([tri for tri, _, _ in tris], np.int64).reshape(-1, 3)
+        b, angle = K.best_cone_apex(self._x, np.asarray(v, np.int64), np.asarray(tb, np.float64),
+                                    _T_BLENDS if free else _T_AT_CENTROID, tris, TET_BARY_MIN, self.n_points)
+        return b, float(angle)
 
     def _add_tets(self, new, o):
         """Append the tets ``new`` (list of 4-tuples) as sub-tets of original ``o``; returns their ids."""
