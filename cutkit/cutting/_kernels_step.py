@@ -17,7 +17,7 @@ import numpy as np
 from numba import njit
 
 from cutkit.cutting._kernels import seg_tet, tet_sweep
-from cutkit.mesh._quality_kernels import _tet_dihedrals as tet_dihedrals
+from cutkit.mesh._quality_kernels import tet_dihedrals
 
 #: The walk stops in a tet whose barycentric coordinates of the target are all >= -WALK_EPS.
 WALK_EPS = 1e-12

@@ -55,12 +55,12 @@ def dihedral_angles(points, tets):
     for ch in prange(n_chunks):
         n = np.empty((4, 3), np.float64)  # one scratch array per chunk, not per tet
         for t in range(ch * _CHUNK, min(m, (ch + 1) * _CHUNK)):
-            _tet_dihedrals(points, tets, t, n, out)
+            tet_dihedrals(points, tets, t, n, out)
     return out
 
 
 @njit(cache=True, nogil=True)
-def _tet_dihedrals(points, tets, t, n, out):
+def tet_dihedrals(points, tets, t, n, out):
     """The six dihedral angles of tet t into out[t] (n: (4, 3) scratch for the face normals)."""
     for f in range(4):
         a = tets[t, _FACES[f, 0]]
@@ -91,5 +91,5 @@ def dihedral_angles_serial(points, tets):
     out = np.empty((tets.shape[0], 6), np.float64)
     n = np.empty((4, 3), np.float64)
     for t in range(tets.shape[0]):
-        _tet_dihedrals(points, tets, t, n, out)
+        tet_dihedrals(points, tets, t, n, out)
     return out

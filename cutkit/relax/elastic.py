@@ -103,7 +103,7 @@ class ElementModel:
     fixed : (n, 3) bool
         Components held at their current value.
     adj_start, adj_capacity, adj_degree : each node's row of the adjacency pool
-        ``(rows,) int64, (rows,) int64, (n,) int32`` (``rows >= n``): its slots
+        ``(n,) int64, (n,) int64, (n,) int32``: its slots
         ``adj_start[i] .. + adj_degree[i] - 1``, room for ``adj_capacity[i]``.
     adj_tets, adj_corner : the element and the node's corner in it, per slot
         ``(P,) int32, (P,) int8``.
@@ -163,13 +163,12 @@ class ElementModel:
         """No elements yet: room for ``capacity`` elements and their adjacency slots, with a
         quarter to spare for rows that move (:data:`ADJACENCY_POOL_SPARE`)."""
         cap = max(int(capacity), 1)
-        rows = int(n_nodes)
-        pool = int((1.0 + ADJACENCY_POOL_SPARE) * (4 * cap + ADJACENCY_SLACK * rows))
+        pool = int((1.0 + ADJACENCY_POOL_SPARE) * (4 * cap + ADJACENCY_SLACK * int(n_nodes)))
         return cls(
             tets=np.zeros((cap, 4), np.int64), Dminv=np.zeros((cap, 3, 3)), volume=np.zeros(cap),
             mu=np.zeros(cap), lam=np.zeros(cap), mass_share=np.zeros(cap), n_elements=0,
             masses=np.zeros(n_nodes), damping=np.zeros(n_nodes), fixed=np.zeros((n_nodes, 3), bool),
-            adj_start=np.zeros(rows, np.int64), adj_capacity=np.zeros(rows, np.int64),
+            adj_start=np.zeros(n_nodes, np.int64), adj_capacity=np.zeros(n_nodes, np.int64),
             adj_degree=np.zeros(n_nodes, np.int32),
             adj_tets=np.zeros(pool, np.int32), adj_corner=np.zeros(pool, np.int8),
             adj_opposite=np.zeros((pool, 3), np.int32), adj_terms=np.zeros((pool, K.INCIDENCE_TERMS)),
@@ -184,11 +183,8 @@ class ElementModel:
         fx = np.zeros((p, 3), bool) if fixed is None else np.broadcast_to(np.asarray(fixed, bool).reshape(p, -1),
                                                                              (p, 3))
         self.fixed = append_rows(self.fixed, fx)
-        if n + p > self.adj_start.shape[0]:
-            # rows grow by doubling; rows past n_nodes are unused
-            rows = max(n + p, 2 * self.adj_start.shape[0]) - self.adj_start.shape[0]
-            self.adj_start = np.concatenate([self.adj_start, np.zeros(rows, np.int64)])
-            self.adj_capacity = np.concatenate([self.adj_capacity, np.zeros(rows, np.int64)])
+        self.adj_start = append_rows(self.adj_start, np.zeros(p, np.int64))
+        self.adj_capacity = append_rows(self.adj_capacity, np.zeros(p, np.int64))
         self.adj_degree = append_rows(self.adj_degree, np.zeros(p, np.int32))
         self.colour = append_rows(self.colour, np.full(p, -1, np.int32))
         self._classes = None
