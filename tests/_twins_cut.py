@@ -194,3 +194,45 @@ def best_cone_apex_twin(x, corners, tb, blends, tris, bary_min):
         if worst > best:
             best, best_b = worst, b
     return best_b, best
+
+
+def best_compact_split_twin(x, candidates, vol_min, n_rotations):
+    """The compact split choice by plain loops: ``candidates`` is a list of (rotation, side, tets);
+    returns the two picked candidates' indices and the worse side's angle, or (-1, -1, 0.0)."""
+    best = {}  # (rotation, side) -> (score, index); the first of equals kept
+    for i, (r, s, tets) in enumerate(candidates):
+        vols = [np.linalg.det(x[list(t[1:])] - x[t[0]]) / 6.0 for t in tets]
+        angle = min(min(_dihedrals_twin(x[list(t)])) for t in tets)
+        score = angle if min(vols) >= vol_min else -1.0
+        if score > best.get((r, s), (-1.0, -1))[0]:
+            best[(r, s)] = (score, i)
+    pick, worse_best = None, -np.inf
+    for r in range(n_rotations):
+        worse = min(best.get((r, 0), (-1.0, -1))[0], best.get((r, 1), (-1.0, -1))[0])
+        if worse > worse_best:
+            worse_best, pick = worse, r
+    if worse_best < 0.0:
+        return -1, -1, 0.0
+    return best[(pick, 0)][1], best[(pick, 1)][1], worse_best
+
+
+def cut_nodes_centroid_twin(cm, o, mask):
+    """The mean of original tet ``o``'s cut nodes in barycentric weights, by plain loops over its
+    edges (those in ``mask``) and its notched faces."""
+    v = cm.orig_tets[o].tolist()
+    pairs = [(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)]
+    acc, n = np.zeros(4), 0
+    for k, e in enumerate(cm.tet_edges[o].tolist()):
+        if mask >> k & 1:
+            i, j = pairs[k]
+            s = float(cm.edge_t[e])
+            a = np.zeros(4)
+            a[i], a[j] = (1 - s, s) if cm.edges[e, 0] == v[i] else (s, 1 - s)
+            acc, n = acc + a, n + 1
+    for f in cm.tet_faces[o].tolist():
+        fn = int(cm.face_node[f, 0])
+        if fn >= 0 and cm.face_ncut[f] >= 1:
+            for q in range(3):
+                acc[v.index(int(cm._def_nodes[fn, q]))] += cm._def_w[fn, q]
+            n += 1
+    return acc / n

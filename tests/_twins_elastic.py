@@ -161,3 +161,18 @@ def rest_shape(X, tets, prestrain=None, fibre=None, quality_min=1e-6):
     if active.any():
         Dminv[active] = np.linalg.inv(Dm[active])
     return Dminv, np.where(active, volume, 0.0), rest_volume
+
+
+def node_term_rows(Dminv, volume, mu, lam):
+    """The per-tet constants of a node update by NumPy: (m, 9) float64 (the six edge weights
+    V mu b_j . b_c, then 1 / (6 V) where V > 0, V (lam + mu), V mu)."""
+    B = np.concatenate([-Dminv.sum(axis=1, keepdims=True), Dminv], axis=1)  # (m, 4, 3)
+    L = np.einsum("mjd,mcd->mjc", B, B)
+    out = np.zeros((Dminv.shape[0], 9))
+    for col, (j, c) in enumerate([(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)]):
+        out[:, col] = volume * mu * L[:, j, c]
+    active = volume > 0
+    out[active, 6] = 1.0 / (6.0 * volume[active])
+    out[:, 7] = volume * (lam + mu)
+    out[:, 8] = volume * mu
+    return out

@@ -193,3 +193,65 @@ def test_best_cone_apex_matches_twin():
         np.testing.assert_array_equal(x[:11], before[:11])
     one, _ = KS.best_cone_apex(x, corners, tb, np.zeros(1), tris, 0.15, 11)
     np.testing.assert_allclose(one, clamp_bary_twin(tb, 0.15), atol=1e-15)
+
+
+def test_best_compact_split_matches_twin():
+    """The compact split choice: over random candidate cones (some inverted, some flat) the
+    kernel picks the twin's candidates with the twin's angle; a rotation with a side whose
+    candidates all fail the volume test is never picked; none passing gives (-1, -1, 0)."""
+    from _twins_cut import best_compact_split_twin
+
+    rng = np.random.default_rng(11)
+    for trial in range(60):
+        x = rng.uniform(-1.0, 1.0, (10, 3))
+        n_rot = int(rng.integers(1, 4))
+        candidates = []
+        for r in range(n_rot):
+            for side in (0, 1):
+                for _ in range(int(rng.integers(0, 3))):
+                    tets = [tuple(rng.choice(10, 4, replace=False)) for _ in range(int(rng.integers(1, 5)))]
+                    candidates.append((r, side, tets))
+        if not candidates:
+            continue
+        flat = np.array([t for _, _, c in candidates for t in c], np.int64)
+        starts = np.concatenate([[0], np.cumsum([len(c) for _, _, c in candidates])]).astype(np.int64)
+        rot = np.array([r for r, _, _ in candidates], np.int64)
+        side = np.array([s for _, s, _ in candidates], np.int64)
+        vol_min = float(rng.choice([-1.0, 0.0, 0.01]))
+        got = KS.best_compact_split(x, flat, starts, rot, side, n_rot, vol_min)
+        want = best_compact_split_twin(x, candidates, vol_min, n_rot)
+        assert got[:2] == want[:2]
+        assert got[2] == pytest.approx(want[2], abs=1e-9)
+        if got[0] >= 0:
+            assert candidates[got[0]][0] == candidates[got[1]][0]
+            assert (candidates[got[0]][1], candidates[got[1]][1]) == (0, 1)
+    # one rotation, side 1 only inverted tets: no split
+    x = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1.0]])
+    flat = np.array([[0, 1, 2, 3], [0, 2, 1, 3]], np.int64)
+    got = KS.best_compact_split(x, flat, np.array([0, 1, 2]), np.zeros(2, np.int64), np.array([0, 1]), 1, 0.0)
+    assert got == (-1, -1, 0.0)
+
+
+def test_cut_nodes_centroid_matches_twin():
+    """T's default place (the mean of a tet's cut nodes) in every tet a blade left cut, partly or
+    completely, against the twin; the weights sum to 1."""
+    from _twins_cut import cut_nodes_centroid_twin
+
+    from cutkit.cutting import cut_step
+    from cutkit.cutting import subdivision as S
+
+    p, t = _jittered_box(8)
+    cm = CutMesh(p, t)
+    a = np.array([0.2, -0.1, 1.0]) / np.linalg.norm([0.2, -0.1, 1.0])
+    for x in np.linspace(-0.5, 2.7, 9):  # the blade stops inside: crack-front tets stay partly cut
+        cut_step(cm, np.array([x, 1.4, 1.2]), a)
+    seen = set()
+    for o in range(len(t)):
+        mask = S.REDUCE_TABLE[cm.tet_mask(o)]
+        if mask == 0:
+            continue
+        b = KS.cut_nodes_centroid(cm.cut_tables(), o, mask)
+        np.testing.assert_allclose(b, cut_nodes_centroid_twin(cm, o, mask), rtol=0, atol=1e-15)
+        assert b.sum() == pytest.approx(1.0, abs=1e-12)
+        seen.add(S.CLASSIFY_TABLE[mask][0])
+    assert seen == {"partial", "corner", "quad"}

@@ -126,3 +126,36 @@ def test_laying_out_the_rows_in_sweep_order_changes_no_result():
     xb = x.copy()
     K.vbd_sweep(xb, em.adjacency, terms, offsets, nodes, np.zeros(em.n_nodes), np.zeros(1, np.int64))
     assert np.array_equal(xa, xb) and not np.array_equal(xa, x)
+
+
+def test_removing_elements_leaves_the_rows_a_fresh_build_has():
+    """A cut takes elements out of the node rows: every node's row then holds exactly what a model
+    built without them holds (tet, corner, other corners, terms; the order of the rest kept), and
+    the masses agree to rounding; a node left with no tet has mass exactly 0."""
+    from cutkit.relax.elastic import ElementModel
+
+    tis = tissue()
+    cm = tis.cm
+    n, m = tis.n_nodes, cm.orig_tets.shape[0]
+    gone = np.random.default_rng(4).choice(m, m // 5, replace=False)
+    lone = cm.orig_tets[gone[0], 0]
+    gone = np.union1d(gone, np.flatnonzero((cm.orig_tets == lone).any(axis=1)))  # every tet of one node
+    keep = np.setdiff1d(np.arange(m), gone)
+
+    def build(ids):
+        em = ElementModel.empty(n, m)
+        em.add_elements(cm._X[:n], cm.orig_tets[ids], tis.mu[ids], tis.lam[ids], tis.density[ids], ids=ids)
+        return em
+
+    cut, fresh = build(np.arange(m)), build(keep)
+    cut.remove_elements(gone)
+
+    def row(em, i):
+        s, d = em.adj_start[i], em.adj_degree[i]
+        return [(int(t), int(c), em.adj_opposite[s + k].tolist(), em.adj_terms[s + k].tolist())
+                for k, (t, c) in enumerate(zip(em.adj_tets[s:s + d], em.adj_corner[s:s + d]))]
+
+    assert all(row(cut, i) == row(fresh, i) for i in range(n))
+    np.testing.assert_allclose(cut.masses, fresh.masses, rtol=1e-12, atol=1e-30)
+    orphans = np.flatnonzero(fresh.adj_degree[:n] == 0)
+    assert lone in orphans and np.all(cut.masses[orphans] == 0.0)

@@ -13,11 +13,14 @@
 Slow, obviously correct NumPy twins: ``tests/_twins_cut.py``.
 """
 
+from collections import namedtuple
+
 import numpy as np
 from numba import njit
 
 from cutkit.cutting._kernels import seg_tet, tet_sweep
 from cutkit.mesh._quality_kernels import tet_dihedrals
+from cutkit.mesh.topology import TET_EDGES
 
 #: The walk stops in a tet whose barycentric coordinates of the target are all >= -WALK_EPS.
 WALK_EPS = 1e-12
@@ -372,3 +375,102 @@ def best_cone_apex(x, corners, tb, blends, tris, bary_min, spare):
             best = worst
             best_b[:] = b
     return best_b, best
+
+
+@njit(cache=True, nogil=True)
+def best_compact_split(x, tets, starts, rotation, side, n_rotations, vol_min):
+    """The compact split of a tet whose worse side is best shaped (:func:`cutkit.cutting.splits.compact_split`).
+
+    Candidate ``i`` is the tets ``starts[i] .. starts[i + 1] - 1``: the cone
+    of one side (``side[i]``) to one apex for one rotation of the cut
+    polygon's fan (``rotation[i]``).  Its score is its smallest dihedral
+    angle, or -1 when a tet has a signed volume below ``vol_min`` (the
+    paper's Fig. 4 penetration test).  Each side of each rotation takes its
+    best candidate (the first of equals); the rotation whose worse side
+    scores best wins (the first of equals).
+
+    Parameters
+    ----------
+    x : (n, 3) float64
+    tets : (k, 4) int64
+    starts : (c + 1,) int64
+    rotation, side : (c,) int64
+    n_rotations : int
+    vol_min : float
+        mm^3.
+
+    Returns
+    -------
+    (pick0, pick1, angle) : int, int, float
+        The candidates of side 0 and side 1 and the worse side's angle in
+        degrees; (-1, -1, 0.0) when every rotation has a side without a
+        candidate passing the volume test.
+    """
+    n_c = starts.shape[0] - 1
+    side_best = np.full((n_rotations, 2), -1.0)
+    side_pick = np.full((n_rotations, 2), -1, np.int64)
+    normals = np.empty((4, 3))
+    angles = np.empty((tets.shape[0], 6))
+    for i in range(n_c):
+        worst = np.inf
+        lowest = np.inf
+        for t in range(starts[i], starts[i + 1]):
+            lowest = min(lowest, min_volume(x, tets[t:t + 1]))
+            tet_dihedrals(x, tets, t, normals, angles)
+            for e in range(6):
+                worst = min(worst, angles[t, e])
+        score = worst if lowest >= vol_min else -1.0
+        r, s = rotation[i], side[i]
+        if score > side_best[r, s]:
+            side_best[r, s] = score
+            side_pick[r, s] = i
+    best_r = -1
+    best = -np.inf
+    for r in range(n_rotations):
+        worse = min(side_best[r, 0], side_best[r, 1])
+        if worse > best:
+            best, best_r = worse, r
+    if best < 0.0:
+        return -1, -1, 0.0
+    return side_pick[best_r, 0], side_pick[best_r, 1], best
+
+
+#: The cut state a kernel reads of one original tet's edges and faces: orig_tets (m, 4),
+#: tet_edges (m, 6), tet_faces (m, 4), edges (E, 2) int64; edge_t (E,) float64 (NaN: uncut);
+#: face_node (F, 2), face_ncut (F,) int64; def_nodes (N, 4) int64, def_w (N, 4) float64 (each
+#: node's defining original nodes and weights).
+CutTables = namedtuple("CutTables", ["orig_tets", "tet_edges", "tet_faces", "edges", "edge_t", "face_node",
+                                     "face_ncut", "def_nodes", "def_w"])
+
+
+@njit(cache=True, nogil=True)
+def cut_nodes_centroid(ct, o, mask):
+    """Barycentric weights (4,) over original tet ``o``'s corners of the mean of its cut nodes:
+    the edge nodes of the edges in ``mask`` (6-bit) and the node of every notched face
+    (the tip node T of a tet no tip is in, :meth:`CutMesh.resubdivide`)."""
+    acc = np.zeros(4)
+    n = 0
+    for k in range(6):
+        if mask >> k & 1:
+            e = ct.tet_edges[o, k]
+            i, j = TET_EDGES[k, 0], TET_EDGES[k, 1]
+            s = ct.edge_t[e]
+            if ct.edges[e, 0] == ct.orig_tets[o, i]:
+                acc[i] += 1.0 - s
+                acc[j] += s
+            else:
+                acc[i] += s
+                acc[j] += 1.0 - s
+            n += 1
+    for lf in range(4):
+        f = ct.tet_faces[o, lf]
+        fn = ct.face_node[f, 0]
+        if fn >= 0 and ct.face_ncut[f] >= 1:
+            for q in range(3):
+                a = ct.def_nodes[fn, q]
+                for c in range(4):
+                    if ct.orig_tets[o, c] == a:
+                        acc[c] += ct.def_w[fn, q]
+                        break
+            n += 1
+    return acc / n

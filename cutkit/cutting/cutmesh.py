@@ -190,7 +190,9 @@ class CutMesh:
     def _move_node(self, i, nodes, w):
         # the rest position before the step's first move of the node: the tissue maps the
         # node's new place through the old shape of the tets around it
-        self._delta["moved_from"].setdefault(i, self._X[i].copy())
+        moved_from = self._delta["moved_from"]
+        if i not in moved_from:
+            moved_from[i] = self._X[i].copy()
         self._set_node(i, nodes, w)
         self._delta["moved_nodes"].append(i)
 
@@ -396,28 +398,10 @@ class CutMesh:
                 mask |= 1 << k
         return mask
 
-    def _tip_centre_bary(self, o, mask, v):
-        """(4,) bary of T without a recorded tip: mean of the tet's cut nodes (edge and face nodes)."""
-        acc = [0.0, 0.0, 0.0, 0.0]
-        n = 0
-        for k, e in enumerate(self.tet_edges[o].tolist()):
-            if mask >> k & 1:
-                i, j = _TET_EDGES_L[k]
-                s = float(self.edge_t[e])
-                if self.edges[e, 0] == v[i]:
-                    acc[i] += 1 - s; acc[j] += s
-                else:
-                    acc[i] += s; acc[j] += 1 - s
-                n += 1
-        for f in self.tet_faces[o].tolist():
-            fn = int(self.face_node[f, 0])
-            if fn >= 0 and self.face_ncut[f] >= 1:
-                nodes = self._def_nodes[fn, :3].tolist()
-                w = self._def_w[fn, :3].tolist()
-                for q in range(3):
-                    acc[v.index(nodes[q])] += w[q]
-                n += 1
-        return np.array(acc) / n
+    def cut_tables(self):
+        """The cut state as the step kernels read it (``_kernels_step.CutTables``; views, no copy)."""
+        return K.CutTables(self.orig_tets, self.tet_edges, self.tet_faces, self.edges, self.edge_t, self.face_node,
+                           self.face_ncut, self._def_nodes, self._def_w)
 
     def resubdivide(self, o):
         """Re-subdivide original tet ``o`` from scratch from its cut state."""
@@ -429,8 +413,8 @@ class CutMesh:
         # tip / centre node T
         tb = self.tip_bary.get(o)
         free_T = tb is None  # no tip inside: T may go where its cone is best shaped
-        if free_T:
-            tb = self._tip_centre_bary(o, mask, v)
+        if free_T:  # the mean of the tet's cut nodes
+            tb = K.cut_nodes_centroid(self.cut_tables(), o, mask)
         tb = _clamp_bary(tb, TET_BARY_MIN)
         complete = case in ("corner", "quad")
         vgroup = {v[i]: group[i] for i in range(4)}

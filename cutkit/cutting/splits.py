@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from cutkit.cutting import _kernels_step as KS
 from cutkit.mesh import _quality_kernels as Q
 
 #: Compact complete splits accept only sub-tets of at least this fraction
@@ -144,22 +145,14 @@ def compact_split(cm, o, tris, vgroup):
 
 
 def _best(x, cands, vol_min, n_rot):
-    """The fan rotation whose worse side is best; each side takes its best apex."""
+    """The fan rotation whose worse side is best; each side takes its best apex
+    (``_kernels_step.best_compact_split``)."""
     flat = np.array([t for _, _, c in cands for t in c], np.int64)
-    sizes = np.array([len(c) for _, _, c in cands])
-    starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
-    e = x[flat[:, 1:]] - x[flat[:, :1]]  # (k, 3, 3) edges from the first vertex
-    vol = np.minimum.reduceat(np.linalg.det(e) / 6.0, starts)
-    ang = np.minimum.reduceat(Q.dihedral_angles_serial(x, flat).min(axis=1), starts)
-    score = np.where(vol >= vol_min, ang, -1.0)
-    side_best = np.full((n_rot, 2), -1.0)
-    side_pick = np.full((n_rot, 2), -1, np.int64)
-    for i, (r, side, _) in enumerate(cands):
-        if score[i] > side_best[r, side]:
-            side_best[r, side] = score[i]
-            side_pick[r, side] = i
-    worse = side_best.min(axis=1)
-    r = int(np.argmax(worse))
-    if worse[r] < 0:
+    starts = np.zeros(len(cands) + 1, np.int64)
+    np.cumsum([len(c) for _, _, c in cands], out=starts[1:])
+    rotation = np.array([r for r, _, _ in cands], np.int64)
+    side = np.array([s for _, s, _ in cands], np.int64)
+    p0, p1, angle = KS.best_compact_split(x, flat, starts, rotation, side, n_rot, vol_min)
+    if p0 < 0:
         return None, 0.0
-    return cands[side_pick[r, 0]][2] + cands[side_pick[r, 1]][2], float(worse[r])
+    return cands[p0][2] + cands[p1][2], float(angle)

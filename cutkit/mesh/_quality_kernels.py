@@ -17,26 +17,41 @@ _CHUNK = 4096
 _FACES = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]], dtype=np.int64)
 
 
+@njit(cache=True, nogil=True, inline="always")
+def tet_volume(points, tets, t):
+    """Signed volume of tet t: det[p1-p0, p2-p0, p3-p0] / 6."""
+    p0 = tets[t, 0]
+    p1 = tets[t, 1]
+    p2 = tets[t, 2]
+    p3 = tets[t, 3]
+    ax = points[p1, 0] - points[p0, 0]
+    ay = points[p1, 1] - points[p0, 1]
+    az = points[p1, 2] - points[p0, 2]
+    bx = points[p2, 0] - points[p0, 0]
+    by = points[p2, 1] - points[p0, 1]
+    bz = points[p2, 2] - points[p0, 2]
+    cx = points[p3, 0] - points[p0, 0]
+    cy = points[p3, 1] - points[p0, 1]
+    cz = points[p3, 2] - points[p0, 2]
+    return (ax * (by * cz - bz * cy) - ay * (bx * cz - bz * cx) + az * (bx * cy - by * cx)) / 6.0
+
+
 @njit(cache=True, parallel=True)
 def signed_volumes(points, tets):
     """(m,) float64 det[p1-p0, p2-p0, p3-p0] / 6."""
     m = tets.shape[0]
     out = np.empty(m, np.float64)
     for t in prange(m):
-        p0 = tets[t, 0]
-        p1 = tets[t, 1]
-        p2 = tets[t, 2]
-        p3 = tets[t, 3]
-        ax = points[p1, 0] - points[p0, 0]
-        ay = points[p1, 1] - points[p0, 1]
-        az = points[p1, 2] - points[p0, 2]
-        bx = points[p2, 0] - points[p0, 0]
-        by = points[p2, 1] - points[p0, 1]
-        bz = points[p2, 2] - points[p0, 2]
-        cx = points[p3, 0] - points[p0, 0]
-        cy = points[p3, 1] - points[p0, 1]
-        cz = points[p3, 2] - points[p0, 2]
-        out[t] = (ax * (by * cz - bz * cy) - ay * (bx * cz - bz * cx) + az * (bx * cy - by * cx)) / 6.0
+        out[t] = tet_volume(points, tets, t)
+    return out
+
+
+@njit(cache=True, nogil=True)
+def signed_volumes_serial(points, tets):
+    """:func:`signed_volumes` on one thread, for a handful of tets (no thread start-up per call)."""
+    out = np.empty(tets.shape[0], np.float64)
+    for t in range(tets.shape[0]):
+        out[t] = tet_volume(points, tets, t)
     return out
 
 

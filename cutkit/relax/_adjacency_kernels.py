@@ -87,11 +87,14 @@ def remove_from_adjacency(adj, tets, ids):
             k_out = 0
             for k in range(adj.degree[i]):
                 if adj.tets[s0 + k] != t:
-                    if k_out != k:
-                        adj.tets[s0 + k_out] = adj.tets[s0 + k]
-                        adj.corner[s0 + k_out] = adj.corner[s0 + k]
-                        adj.opposite[s0 + k_out] = adj.opposite[s0 + k]
-                        adj.terms[s0 + k_out] = adj.terms[s0 + k]
+                    if k_out != k:  # element by element: a row slice copy costs more than its six reads
+                        a, b = s0 + k_out, s0 + k
+                        adj.tets[a] = adj.tets[b]
+                        adj.corner[a] = adj.corner[b]
+                        for m in range(3):
+                            adj.opposite[a, m] = adj.opposite[b, m]
+                        for m in range(adj.terms.shape[1]):
+                            adj.terms[a, m] = adj.terms[b, m]
                     k_out += 1
             adj.degree[i] = k_out
 
@@ -128,6 +131,28 @@ def _collect(mark):
             k += 1
             mark[i] = False
     return out
+
+
+@njit(cache=True, nogil=True)
+def tets_around(adj, nodes):
+    """The tets around any of ``nodes`` (k,) int64, ascending and each once: (t,) int64."""
+    total = 0
+    for q in range(nodes.shape[0]):
+        total += adj.degree[nodes[q]]
+    found = np.empty(total, np.int64)
+    k = 0
+    for q in range(nodes.shape[0]):
+        s0 = adj.start[nodes[q]]
+        for r in range(s0, s0 + adj.degree[nodes[q]]):
+            found[k] = adj.tets[r]
+            k += 1
+    found.sort()
+    k = 0
+    for r in range(total):
+        if r == 0 or found[r] != found[r - 1]:
+            found[k] = found[r]
+            k += 1
+    return found[:k].copy()
 
 
 #: Blocks the nodes of :func:`awake_after_sweep` are split into for its threads.

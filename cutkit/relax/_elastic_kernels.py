@@ -35,6 +35,7 @@ Elements = namedtuple("Elements", ["tets", "Dminv", "volume", "mu", "lam"])
 
 #: Corner pairs (j, c) of a tet's six edges, in the order of the first six node-term columns.
 EDGE_PAIRS = ((0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3))
+_EDGE_PAIRS = np.array(EDGE_PAIRS, np.int64)
 #: Columns of a tet's node-term row: the six edge weights V mu b_j . b_c, then 1 / det Dm,
 #: V (lam + mu) and V mu.
 NODE_TERMS = 9
@@ -51,6 +52,7 @@ INCIDENCE_TERMS = 6
 SWEEP_BLOCKS = 64
 
 
+@njit(cache=True, nogil=True)
 def node_term_rows(Dminv, volume, mu, lam):
     """The per-tet constants of a node update, (m, NODE_TERMS) float64.
 
@@ -60,17 +62,29 @@ def node_term_rows(Dminv, volume, mu, lam):
     tet (the cotangent Laplacian).  J = det Ds / det Dm and dJ/dx_c is the
     cross product of the opposite face's edges over det Dm (:data:`OPPOSITE`).
     :func:`~cutkit.relax._adjacency_kernels.add_to_adjacency` hands each corner its part.
+    A cut hands over a few dozen tets at a time: one pass, no temporaries.
     """
-    B = np.concatenate([-Dminv.sum(axis=1, keepdims=True), Dminv], axis=1)  # (m, 4, 3)
-    L = np.einsum("mjd,mcd->mjc", B, B)
-    out = np.zeros((Dminv.shape[0], NODE_TERMS))
-    for col, (j, c) in enumerate(EDGE_PAIRS):
-        out[:, col] = volume * mu * L[:, j, c]
-    active = volume > 0
-    out[active, 6] = 1.0 / (6.0 * volume[active])
-    out[:, 7] = volume * (lam + mu)
-    out[:, 8] = volume * mu
+    m = Dminv.shape[0]
+    out = np.zeros((m, NODE_TERMS))
+    B = np.empty((4, 3))
+    for t in range(m):
+        for d in range(3):
+            B[0, d] = -(Dminv[t, 0, d] + Dminv[t, 1, d] + Dminv[t, 2, d])
+            B[1, d] = Dminv[t, 0, d]
+            B[2, d] = Dminv[t, 1, d]
+            B[3, d] = Dminv[t, 2, d]
+        vm = volume[t] * mu[t]
+        for col in range(6):
+            j, c = _EDGE_PAIRS[col, 0], _EDGE_PAIRS[col, 1]
+            # summed in the order NumPy's einsum pairs them (0 and 2, then 1): the rows are
+            # bit-identical to the NumPy version's (tests/_twins_elastic.node_term_rows)
+            out[t, col] = vm * ((B[j, 0] * B[c, 0] + B[j, 2] * B[c, 2]) + B[j, 1] * B[c, 1])
+        if volume[t] > 0.0:
+            out[t, 6] = 1.0 / (6.0 * volume[t])
+        out[t, 7] = volume[t] * (lam[t] + mu[t])
+        out[t, 8] = vm
     return out
+
 
 #: The tets around each node, one row per node in a shared pool: node i's are the slots
 #: ``start[i] .. start[i] + degree[i] - 1``.  start (rows,) int64, degree (n,) int32; per slot

@@ -31,7 +31,8 @@ from cutkit.relax.elastic import (
     initial_element_state,
     node_damping,
 )
-from cutkit.relax._adjacency_kernels import loaded_nodes
+from cutkit.mesh._quality_kernels import signed_volumes_serial
+from cutkit.relax._adjacency_kernels import loaded_nodes, tets_around
 from cutkit.relax._shape_kernels import corner_edge_inverses
 from cutkit.relax.growable import append_rows
 from cutkit.relax.vbd import DEFAULT_ATOL_N, local_step
@@ -203,8 +204,7 @@ class ElasticTissue(TissueBase):
         added, removed = np.setdiff1d(added, both), np.setdiff1d(removed, both)
         moved = np.asarray(res.moved_nodes, np.int64)
         old_moved = moved[moved < n_old]
-        around = (np.unique(np.concatenate([em.tets_of(k) for k in old_moved]).astype(np.int64))
-                  if old_moved.size else np.zeros(0, np.int64))
+        around = tets_around(em.adjacency, old_moved)
         # the tissue as it was before the step, piecewise affine over the removed tets and those
         # around moved nodes: new and moved nodes are placed in it (see _through_old_shape)
         old_shape = self._old_shape(np.union1d(removed, around), old_moved,
@@ -272,11 +272,9 @@ class ElasticTissue(TissueBase):
         before : (p, 3) float64
             Their positions before the step (new nodes: as placed).
         """
-        from cutkit.mesh.quality import signed_volumes
-
         x, em = self.state.positions, self.em
         q = self.cm._tets[tets]
-        folded = signed_volumes(x, q) <= 0.0
+        folded = signed_volumes_serial(x, q) <= 0.0
         if not folded.any():
             return
         X = self.cm._X[: em.n_nodes]
@@ -284,24 +282,24 @@ class ElasticTissue(TissueBase):
         for k in np.flatnonzero(np.isin(placed, q[folded])):
             i = placed[k]
             around = em.tets[em.tets_of(i)]
-            rest = signed_volumes(X, around)
+            rest = signed_volumes_serial(X, around)
             now = x[i].copy()
             best, best_j = now, -np.inf
             ring = x[around[around != i]].mean(axis=0) if around.size else now  # the one-ring's centroid
             for c in (now, interp[k], before[k], 0.5 * (now + interp[k]), 0.5 * (now + before[k]), ring,
                       0.5 * (now + ring)):
                 x[i] = c
-                j = float(np.min(signed_volumes(x, around) / rest)) if around.size else 0.0
+                j = float(np.min(signed_volumes_serial(x, around) / rest)) if around.size else 0.0
                 if j > best_j:
                     best, best_j = c, j
             x[i] = best
             if best_j <= 0.0:
                 self._lift(i, around, rest)
         # what one node could not open, the other corners of the tet may
-        for i in np.unique(q[signed_volumes(x, q) <= 0.0]):
+        for i in np.unique(q[signed_volumes_serial(x, q) <= 0.0]):
             if not em.fixed[i].any():
                 around = em.tets[em.tets_of(i)]
-                self._lift(i, around, signed_volumes(X, around))
+                self._lift(i, around, signed_volumes_serial(X, around))
 
     def _lift(self, i: int, around: np.ndarray, rest: np.ndarray) -> None:
         """Move node i so the most folded of its tets opens, keeping the others open.
@@ -319,11 +317,9 @@ class ElasticTissue(TissueBase):
         rest : (k,) float64
             Their rest volumes.
         """
-        from cutkit.mesh.quality import signed_volumes
-
         x = self.state.positions
         for _ in range(UNFOLD_STEPS):
-            J = signed_volumes(x, around) / rest
+            J = signed_volumes_serial(x, around) / rest
             w = int(np.argmin(J))
             if J[w] > 0.0:
                 return
@@ -331,7 +327,7 @@ class ElasticTissue(TissueBase):
             xi = x[i].copy()
             for c in range(3):
                 x[i, c] = xi[c] + 1.0
-                g[:, c] = signed_volumes(x, around) / rest - J
+                g[:, c] = signed_volumes_serial(x, around) / rest - J
                 x[i, c] = xi[c]
             gg = float(g[w] @ g[w])
             if gg == 0.0:
