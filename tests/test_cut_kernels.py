@@ -6,6 +6,7 @@ import pytest
 from _twins_cut import clamp_bary_twin, min_volume_twin, set_node_twin, sweep_twin, tet_bary_twin, walk_twin
 from cutkit.cutting import CutMesh
 from cutkit.cutting import _kernels as K
+from cutkit.cutting import _kernels_split as KP
 from cutkit.cutting import _kernels_step as KS
 from cutkit.mesh.generate import box_mesh
 from cutkit.cutting._geometry import edge_crosses_triangle, segment_hits_tet, segment_triangle
@@ -218,7 +219,7 @@ def test_best_compact_split_matches_twin():
         rot = np.array([r for r, _, _ in candidates], np.int64)
         side = np.array([s for _, s, _ in candidates], np.int64)
         vol_min = float(rng.choice([-1.0, 0.0, 0.01]))
-        got = KS.best_compact_split(x, flat, starts, rot, side, n_rot, vol_min)
+        got = KP.best_compact_split(x, flat, starts, rot, side, n_rot, vol_min)
         want = best_compact_split_twin(x, candidates, vol_min, n_rot)
         assert got[:2] == want[:2]
         assert got[2] == pytest.approx(want[2], abs=1e-9)
@@ -228,7 +229,7 @@ def test_best_compact_split_matches_twin():
     # one rotation, side 1 only inverted tets: no split
     x = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1.0]])
     flat = np.array([[0, 1, 2, 3], [0, 2, 1, 3]], np.int64)
-    got = KS.best_compact_split(x, flat, np.array([0, 1, 2]), np.zeros(2, np.int64), np.array([0, 1]), 1, 0.0)
+    got = KP.best_compact_split(x, flat, np.array([0, 1, 2]), np.zeros(2, np.int64), np.array([0, 1]), 1, 0.0)
     assert got == (-1, -1, 0.0)
 
 
@@ -255,3 +256,42 @@ def test_cut_nodes_centroid_matches_twin():
         assert b.sum() == pytest.approx(1.0, abs=1e-12)
         seen.add(S.CLASSIFY_TABLE[mask][0])
     assert seen == {"partial", "corner", "quad"}
+
+
+def test_compact_split_matches_twin_along_cut_paths(monkeypatch):
+    """Every compact split the cut paths ask for (jittered block and Delaunay ball; straight,
+    tremor, crossing): the kernel's tets, their order and angle are the twin's (the rule as first
+    written, with dicts and lists), including refusals (a volume floor raised to 5 % on the ball)."""
+    from _cut_paths import delaunay_ball, jittered_block, make_path
+    from _twins_cut import compact_split_twin
+
+    import cutkit.cutting.cutmesh as CM
+    import cutkit.cutting.splits as SP
+    from cutkit.cutting import cut_step
+
+    kernel = CM.compact_split
+    calls = {"made": 0, "refused": 0}
+
+    def both(cm, o, tris, group):
+        got = kernel(cm, o, tris, group)
+        v = cm.orig_tets[o].tolist()
+        want = compact_split_twin(cm, o, tris, {v[i]: int(group[i]) for i in range(4)}, SP.COMPACT_VOL_MIN)
+        assert (got[0] is None) == (want[0] is None)
+        if got[0] is not None:
+            assert got[0] == [tuple(int(a) for a in q) for q in want[0]]
+            assert got[1] == pytest.approx(want[1], abs=1e-9)
+        calls["made" if got[0] is not None else "refused"] += 1
+        return got
+
+    monkeypatch.setattr(CM, "compact_split", both)
+    for (p, t), floor in ((jittered_block(), SP.COMPACT_VOL_MIN), (delaunay_ball(), 0.05)):
+        monkeypatch.setattr(SP, "COMPACT_VOL_MIN", floor)
+        L = p.max(axis=0)
+        for seed, (kind, tremor) in enumerate([("straight", 0.0), ("tremor", 0.3), ("crossing", 1.0)]):
+            cm = CutMesh(p, t)
+            for pose in make_path(kind, np.random.default_rng(seed), L, tremor):
+                if pose is None:
+                    cm.rebase()
+                else:
+                    cut_step(cm, *pose)
+    assert calls["made"] > 50 and calls["refused"] > 0

@@ -377,70 +377,12 @@ def best_cone_apex(x, corners, tb, blends, tris, bary_min, spare):
     return best_b, best
 
 
-@njit(cache=True, nogil=True)
-def best_compact_split(x, tets, starts, rotation, side, n_rotations, vol_min):
-    """The compact split of a tet whose worse side is best shaped (:func:`cutkit.cutting.splits.compact_split`).
-
-    Candidate ``i`` is the tets ``starts[i] .. starts[i + 1] - 1``: the cone
-    of one side (``side[i]``) to one apex for one rotation of the cut
-    polygon's fan (``rotation[i]``).  Its score is its smallest dihedral
-    angle, or -1 when a tet has a signed volume below ``vol_min`` (the
-    paper's Fig. 4 penetration test).  Each side of each rotation takes its
-    best candidate (the first of equals); the rotation whose worse side
-    scores best wins (the first of equals).
-
-    Parameters
-    ----------
-    x : (n, 3) float64
-    tets : (k, 4) int64
-    starts : (c + 1,) int64
-    rotation, side : (c,) int64
-    n_rotations : int
-    vol_min : float
-        mm^3.
-
-    Returns
-    -------
-    (pick0, pick1, angle) : int, int, float
-        The candidates of side 0 and side 1 and the worse side's angle in
-        degrees; (-1, -1, 0.0) when every rotation has a side without a
-        candidate passing the volume test.
-    """
-    n_c = starts.shape[0] - 1
-    side_best = np.full((n_rotations, 2), -1.0)
-    side_pick = np.full((n_rotations, 2), -1, np.int64)
-    normals = np.empty((4, 3))
-    angles = np.empty((tets.shape[0], 6))
-    for i in range(n_c):
-        worst = np.inf
-        lowest = np.inf
-        for t in range(starts[i], starts[i + 1]):
-            lowest = min(lowest, min_volume(x, tets[t:t + 1]))
-            tet_dihedrals(x, tets, t, normals, angles)
-            for e in range(6):
-                worst = min(worst, angles[t, e])
-        score = worst if lowest >= vol_min else -1.0
-        r, s = rotation[i], side[i]
-        if score > side_best[r, s]:
-            side_best[r, s] = score
-            side_pick[r, s] = i
-    best_r = -1
-    best = -np.inf
-    for r in range(n_rotations):
-        worse = min(side_best[r, 0], side_best[r, 1])
-        if worse > best:
-            best, best_r = worse, r
-    if best < 0.0:
-        return -1, -1, 0.0
-    return side_pick[best_r, 0], side_pick[best_r, 1], best
-
-
 #: The cut state a kernel reads of one original tet's edges and faces: orig_tets (m, 4),
 #: tet_edges (m, 6), tet_faces (m, 4), edges (E, 2) int64; edge_t (E,) float64 (NaN: uncut);
-#: face_node (F, 2), face_ncut (F,) int64; def_nodes (N, 4) int64, def_w (N, 4) float64 (each
-#: node's defining original nodes and weights).
-CutTables = namedtuple("CutTables", ["orig_tets", "tet_edges", "tet_faces", "edges", "edge_t", "face_node",
-                                     "face_ncut", "def_nodes", "def_w"])
+#: edge_node (E, 2) (the cut node's copy at either end), face_node (F, 2), face_ncut (F,) int64;
+#: def_nodes (N, 4) int64, def_w (N, 4) float64 (each node's defining original nodes and weights).
+CutTables = namedtuple("CutTables", ["orig_tets", "tet_edges", "tet_faces", "edges", "edge_t", "edge_node",
+                                     "face_node", "face_ncut", "def_nodes", "def_w"])
 
 
 @njit(cache=True, nogil=True)

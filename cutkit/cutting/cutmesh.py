@@ -400,8 +400,8 @@ class CutMesh:
 
     def cut_tables(self):
         """The cut state as the step kernels read it (``_kernels_step.CutTables``; views, no copy)."""
-        return K.CutTables(self.orig_tets, self.tet_edges, self.tet_faces, self.edges, self.edge_t, self.face_node,
-                           self.face_ncut, self._def_nodes, self._def_w)
+        return K.CutTables(self.orig_tets, self.tet_edges, self.tet_faces, self.edges, self.edge_t, self.edge_node,
+                           self.face_node, self.face_ncut, self._def_nodes, self._def_w)
 
     def resubdivide(self, o):
         """Re-subdivide original tet ``o`` from scratch from its cut state."""
@@ -439,7 +439,7 @@ class CutMesh:
             tris.extend((tri, ow, lf) for tri, ow in S.face_triangles(gv, cut, edge_copy, f_node, self.centre_nodes))
         new = None
         if complete and self.compact_splits:
-            new, angle = compact_split(self, o, tris, vgroup)
+            new, angle = compact_split(self, o, tris, group)
             if new is not None and angle < SPLIT_ANGLE_GOOD:
                 # a poor compact cone: the T-cone may be better (more tets, but no sliver)
                 tb_c, cone = self._best_T(v, tb, tris, free_T)

@@ -1,0 +1,277 @@
+"""Numba kernels of the compact complete split (:mod:`cutkit.cutting.splits`).
+
+A completely split tetrahedron (``corner`` or ``quad``) is tetrahedralised
+by coning each side to one of its original vertices: the cut polygon is
+fanned from one of its nodes, and every fan rotation, side and allowed apex
+is a candidate, scored by its smallest dihedral angle.  One kernel call per
+re-subdivided tetrahedron finds the loop, the apexes, the candidates and
+the best choice; it checks nothing (:func:`cutkit.cutting.splits.compact_split`
+hands it plain arrays).  The slow, obviously correct twin (dicts and lists,
+as the rule was first written) is ``tests/_twins_cut.compact_split_twin``.
+"""
+
+import numpy as np
+from numba import njit
+
+from cutkit.cutting._kernels_step import min_volume
+from cutkit.mesh._quality_kernels import tet_dihedrals
+
+#: At most this many cut nodes per tet: two copies of each of six edge nodes and of four face nodes.
+_MAX_KEYS = 20
+
+
+@njit(cache=True, nogil=True)
+def best_compact_split(x, tets, starts, rotation, side, n_rotations, vol_min):
+    """The compact split whose worse side is best shaped, among candidate cones.
+
+    Candidate ``i`` is the tets ``starts[i] .. starts[i + 1] - 1``: the cone
+    of one side (``side[i]``) to one apex for one rotation of the cut
+    polygon's fan (``rotation[i]``).  Its score is its smallest dihedral
+    angle, or -1 when a tet has a signed volume below ``vol_min`` (the
+    paper's Fig. 4 penetration test).  Each side of each rotation takes its
+    best candidate (the first of equals); the rotation whose worse side
+    scores best wins (the first of equals).
+
+    Parameters
+    ----------
+    x : (n, 3) float64
+    tets : (k, 4) int64
+    starts : (c + 1,) int64
+    rotation, side : (c,) int64
+    n_rotations : int
+    vol_min : float
+        mm^3.
+
+    Returns
+    -------
+    (pick0, pick1, angle) : int, int, float
+        The candidates of side 0 and side 1 and the worse side's angle in
+        degrees; (-1, -1, 0.0) when every rotation has a side without a
+        candidate passing the volume test.
+    """
+    n_c = starts.shape[0] - 1
+    side_best = np.full((n_rotations, 2), -1.0)
+    side_pick = np.full((n_rotations, 2), -1, np.int64)
+    normals = np.empty((4, 3))
+    angles = np.empty((tets.shape[0], 6))
+    for i in range(n_c):
+        worst = np.inf
+        lowest = np.inf
+        for t in range(starts[i], starts[i + 1]):
+            lowest = min(lowest, min_volume(x, tets[t:t + 1]))
+            tet_dihedrals(x, tets, t, normals, angles)
+            for e in range(6):
+                worst = min(worst, angles[t, e])
+        score = worst if lowest >= vol_min else -1.0
+        r, s = rotation[i], side[i]
+        if score > side_best[r, s]:
+            side_best[r, s] = score
+            side_pick[r, s] = i
+    best_r = -1
+    best = -np.inf
+    for r in range(n_rotations):
+        worse = min(side_best[r, 0], side_best[r, 1])
+        if worse > best:
+            best, best_r = worse, r
+    if best < 0.0:
+        return -1, -1, 0.0
+    return side_pick[best_r, 0], side_pick[best_r, 1], best
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _find(keys, n, k):
+    """Index of ``k`` among ``keys[:n]``, or -1."""
+    for i in range(n):
+        if keys[i] == k:
+            return i
+    return -1
+
+
+@njit(cache=True, nogil=True)
+def _loop_keys(ct, o):
+    """The cut nodes of original tet ``o`` and the key of each: edge e -> e, face f -> -1 - f.
+
+    Returns (nodes (q,), keys (q,)) in the twin's order (edges, then faces).
+    """
+    nodes = np.empty(_MAX_KEYS, np.int64)
+    keys = np.empty(_MAX_KEYS, np.int64)
+    q = 0
+    for k in range(6):
+        e = ct.tet_edges[o, k]
+        if ct.edge_t[e] == ct.edge_t[e]:  # cut (not NaN)
+            for c in range(2):
+                nodes[q], keys[q] = ct.edge_node[e, c], e
+                q += 1
+    for lf in range(4):
+        f = ct.tet_faces[o, lf]
+        for c in range(2):
+            if ct.face_node[f, c] >= 0:
+                nodes[q], keys[q] = ct.face_node[f, c], -1 - f
+                q += 1
+    return nodes[:q], keys[:q]
+
+
+@njit(cache=True, nogil=True)
+def _cut_loop(ct, o, tris, tri_side):
+    """The cut polygon: its nodes' keys in order (side 0's loop), and each side's node of each key.
+
+    Each face triangle's edges between two cut nodes are the polygon's edges
+    on that triangle's side, run the other way.  Returns (loop_keys (L,),
+    copy_keys (2, q), copy_nodes (2, q), n_copy (2,)); L = 0 when the
+    segments do not close into one loop seen from both sides.
+    """
+    nodes, keys = _loop_keys(ct, o)
+    q = nodes.shape[0]
+    k3 = 3 * tris.shape[0]
+    nxt_b = np.empty((2, k3), np.int64)  # b -> a, in first-insertion order of b
+    nxt_a = np.empty((2, k3), np.int64)
+    n_nxt = np.zeros(2, np.int64)
+    copy_keys = np.empty((2, q), np.int64)
+    copy_nodes = np.empty((2, q), np.int64)
+    n_copy = np.zeros(2, np.int64)
+    for t in range(tris.shape[0]):
+        s = tri_side[t]
+        for j in range(3):
+            a, b = tris[t, j], tris[t, (j + 1) % 3]
+            ia, ib = _find(nodes, q, a), _find(nodes, q, b)
+            if ia < 0 or ib < 0:
+                continue
+            i = _find(nxt_b[s], n_nxt[s], b)
+            if i < 0:
+                i = n_nxt[s]
+                n_nxt[s] += 1
+                nxt_b[s, i] = b
+            nxt_a[s, i] = a
+            for node, key in ((a, keys[ia]), (b, keys[ib])):
+                i = _find(copy_keys[s], n_copy[s], key)
+                if i < 0:
+                    i = n_copy[s]
+                    n_copy[s] += 1
+                    copy_keys[s, i] = key
+                copy_nodes[s, i] = node
+    none = np.zeros(0, np.int64)
+    m = n_nxt[0]
+    if m == 0 or m != n_nxt[1]:
+        return none, copy_keys, copy_nodes, n_copy
+    loop = np.empty(m, np.int64)
+    loop[0] = nxt_b[0, 0]
+    L = 1
+    while True:
+        i = _find(nxt_b[0], m, loop[L - 1])
+        if i < 0:
+            return none, copy_keys, copy_nodes, n_copy
+        if nxt_a[0, i] == loop[0]:
+            break
+        if L == m:
+            return none, copy_keys, copy_nodes, n_copy
+        loop[L] = nxt_a[0, i]
+        L += 1
+    if L != m:
+        return none, copy_keys, copy_nodes, n_copy
+    loop_keys = np.empty(L, np.int64)
+    for i in range(L):
+        loop_keys[i] = keys[_find(nodes, q, loop[i])]
+        if _find(copy_keys[1], n_copy[1], loop_keys[i]) < 0:
+            return none, copy_keys, copy_nodes, n_copy
+    return loop_keys, copy_keys, copy_nodes, n_copy
+
+
+@njit(cache=True, nogil=True)
+def _allowed_apexes(corners, tris, tri_side, tri_face, group):
+    """Whether each corner may be its side's apex, (4,) bool: every face triangle of its side on a
+    face through the corner contains it (the cone then reproduces the face patterns: no crack).
+    Face ``lf`` is the one opposite corner ``lf``; its triangles are the cone's flat ones."""
+    ok = np.ones(4, np.bool_)
+    for ia in range(4):
+        apex = corners[ia]
+        for t in range(tris.shape[0]):
+            if tri_side[t] == group[ia] and tri_face[t] != ia:
+                if tris[t, 0] != apex and tris[t, 1] != apex and tris[t, 2] != apex:
+                    ok[ia] = False
+                    break
+    return ok
+
+
+@njit(cache=True, nogil=True)
+def compact_split(ct, x, o, tris, tri_corner, tri_face, group, vol_min):
+    """The best compact split of original tet ``o`` (:func:`cutkit.cutting.splits.compact_split`).
+
+    Parameters
+    ----------
+    ct : CutTables
+    x : (n, 3) float64
+    o : int
+    tris : (k, 3) int64
+        The tet's face triangles (Fig. 2 patterns), outward.
+    tri_corner : (k,) int64
+        Local corner of each triangle's owner vertex (which decides its side).
+    tri_face : (k,) int64
+        Local face each triangle lies on (face ``lf`` is opposite corner ``lf``).
+    group : (4,) int64
+        Side (0 or 1) of each corner.
+    vol_min : float
+        Smallest signed volume a tet of the split may have, mm^3.
+
+    Returns
+    -------
+    (tets, angle) : (p, 4) int64 and float
+        Side 0's cone, then side 1's, and the worse side's smallest
+        dihedral angle in degrees; p = 0 when no choice passes the volume test.
+    """
+    k = tris.shape[0]
+    tri_side = np.empty(k, np.int64)
+    for t in range(k):
+        tri_side[t] = group[tri_corner[t]]
+    none = np.zeros((0, 4), np.int64)
+    loop_keys, copy_keys, copy_nodes, n_copy = _cut_loop(ct, o, tris, tri_side)
+    L = loop_keys.shape[0]
+    if L == 0:
+        return none, 0.0
+    corners = ct.orig_tets[o]
+    ok = _allowed_apexes(corners, tris, tri_side, tri_face, group)
+    n_apex = np.zeros(2, np.int64)
+    for ia in range(4):
+        n_apex[group[ia]] += ok[ia]
+    if n_apex[0] == 0 or n_apex[1] == 0:
+        return none, 0.0
+    fan = max(L - 2, 0)
+    # the cut polygon's node of each key on each side
+    node_of = np.empty((2, L), np.int64)
+    for s in range(2):
+        for i in range(L):
+            node_of[s, i] = copy_nodes[s, _find(copy_keys[s], n_copy[s], loop_keys[i])]
+    n_cand = L * (n_apex[0] + n_apex[1])
+    starts = np.zeros(n_cand + 1, np.int64)
+    rotation = np.empty(n_cand, np.int64)
+    side = np.empty(n_cand, np.int64)
+    flat = np.empty((L * (4 * k + 2 * 4 * fan), 4), np.int64)
+    c = 0
+    p = 0
+    for r in range(L):
+        for s in range(2):
+            for ia in range(4):
+                if not ok[ia] or group[ia] != s:
+                    continue
+                apex = corners[ia]
+                for t in range(k):  # the cone of the side's face triangles ...
+                    if tri_side[t] == s and tri_face[t] == ia:
+                        flat[p, 0], flat[p, 1], flat[p, 2], flat[p, 3] = tris[t, 0], tris[t, 2], tris[t, 1], apex
+                        p += 1
+                for i in range(1, L - 1):  # ... and of the fan from loop node r (side 1 sees it flipped)
+                    n0, n1, n2 = node_of[s, r], node_of[s, (r + i) % L], node_of[s, (r + i + 1) % L]
+                    if s == 0:
+                        flat[p, 0], flat[p, 1], flat[p, 2], flat[p, 3] = n0, n2, n1, apex
+                    else:
+                        flat[p, 0], flat[p, 1], flat[p, 2], flat[p, 3] = n0, n1, n2, apex
+                    p += 1
+                rotation[c], side[c] = r, s
+                c += 1
+                starts[c] = p
+    p0, p1, angle = best_compact_split(x, flat[:p], starts, rotation, side, L, vol_min)
+    if p0 < 0:
+        return none, 0.0
+    n0 = starts[p0 + 1] - starts[p0]
+    out = np.empty((n0 + starts[p1 + 1] - starts[p1], 4), np.int64)
+    out[:n0] = flat[starts[p0]:starts[p0 + 1]]
+    out[n0:] = flat[starts[p1]:starts[p1 + 1]]
+    return out, angle
