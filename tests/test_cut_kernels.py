@@ -258,40 +258,55 @@ def test_cut_nodes_centroid_matches_twin():
     assert seen == {"partial", "corner", "quad"}
 
 
-def test_compact_split_matches_twin_along_cut_paths(monkeypatch):
-    """Every compact split the cut paths ask for (jittered block and Delaunay ball; straight,
-    tremor, crossing): the kernel's tets, their order and angle are the twin's (the rule as first
-    written, with dicts and lists), including refusals (a volume floor raised to 5 % on the ball)."""
+def test_subdivision_kernels_match_twins_along_cut_paths(monkeypatch):
+    """Along cut paths (jittered block and Delaunay ball; straight, tremor, crossing), the face
+    patterns of every cut tet and every compact split are the twins' (the rules as first written,
+    with dicts and lists): the same triangles and owners in the same order, the same split tets
+    and angle, the refusals too (a volume floor raised to 5 % on the ball); with and without
+    centre nodes."""
     from _cut_paths import delaunay_ball, jittered_block, make_path
-    from _twins_cut import compact_split_twin
+    from _twins_cut import compact_split_twin, face_triangles_twin
 
     import cutkit.cutting.cutmesh as CM
     import cutkit.cutting.splits as SP
     from cutkit.cutting import cut_step
+    from cutkit.cutting import subdivision as S
 
     kernel = CM.compact_split
-    calls = {"made": 0, "refused": 0}
+    calls = {"made": 0, "refused": 0, "faces": 0}
 
-    def both(cm, o, tris, group):
-        got = kernel(cm, o, tris, group)
+    def as_list(cm, o, tris, corner, face):
         v = cm.orig_tets[o].tolist()
-        want = compact_split_twin(cm, o, tris, {v[i]: int(group[i]) for i in range(4)}, SP.COMPACT_VOL_MIN)
+        return [(tuple(t), v[c], f) for t, c, f in zip(tris.tolist(), corner.tolist(), face.tolist())]
+
+    def both(cm, ct, o, tris, corner, face, group):
+        got = kernel(cm, ct, o, tris, corner, face, group)
+        v = cm.orig_tets[o].tolist()
+        want = compact_split_twin(cm, o, as_list(cm, o, tris, corner, face), {v[i]: int(group[i]) for i in range(4)},
+                                  SP.COMPACT_VOL_MIN)
         assert (got[0] is None) == (want[0] is None)
         if got[0] is not None:
-            assert got[0] == [tuple(int(a) for a in q) for q in want[0]]
+            assert [tuple(q) for q in got[0].tolist()] == [tuple(int(a) for a in q) for q in want[0]]
             assert got[1] == pytest.approx(want[1], abs=1e-9)
         calls["made" if got[0] is not None else "refused"] += 1
         return got
 
     monkeypatch.setattr(CM, "compact_split", both)
-    for (p, t), floor in ((jittered_block(), SP.COMPACT_VOL_MIN), (delaunay_ball(), 0.05)):
+    for (p, t), floor, centre in ((jittered_block(), SP.COMPACT_VOL_MIN, False), (delaunay_ball(), 0.05, False),
+                                  (jittered_block(seed=3), SP.COMPACT_VOL_MIN, True)):
         monkeypatch.setattr(SP, "COMPACT_VOL_MIN", floor)
         L = p.max(axis=0)
         for seed, (kind, tremor) in enumerate([("straight", 0.0), ("tremor", 0.3), ("crossing", 1.0)]):
-            cm = CutMesh(p, t)
+            cm = CutMesh(p, t, centre_nodes=centre)
             for pose in make_path(kind, np.random.default_rng(seed), L, tremor):
                 if pose is None:
                     cm.rebase()
-                else:
-                    cut_step(cm, *pose)
-    assert calls["made"] > 50 and calls["refused"] > 0
+                    continue
+                cut_step(cm, *pose)
+                for o in range(cm.orig_tets.shape[0]):
+                    mask = S.REDUCE_TABLE[cm.tet_mask(o)]
+                    if mask:
+                        got = KP.face_triangles(cm.cut_tables(), o, mask, cm.centre_nodes)
+                        assert as_list(cm, o, *got) == face_triangles_twin(cm, o, mask)
+                        calls["faces"] += 1
+    assert calls["made"] > 50 and calls["refused"] > 0 and calls["faces"] > 1000

@@ -1,23 +1,122 @@
-"""Numba kernels of the compact complete split (:mod:`cutkit.cutting.splits`).
+"""Numba kernels of the subdivision of one cut tetrahedron: its face patterns and compact splits.
 
-A completely split tetrahedron (``corner`` or ``quad``) is tetrahedralised
+:func:`face_triangles` triangulates the four faces of a tetrahedron by the
+paper's Fig. 2 patterns (:mod:`cutkit.cutting.subdivision`).  A completely split tetrahedron (``corner`` or ``quad``) is tetrahedralised
 by coning each side to one of its original vertices: the cut polygon is
 fanned from one of its nodes, and every fan rotation, side and allowed apex
 is a candidate, scored by its smallest dihedral angle.  One kernel call per
 re-subdivided tetrahedron finds the loop, the apexes, the candidates and
 the best choice; it checks nothing (:func:`cutkit.cutting.splits.compact_split`
-hands it plain arrays).  The slow, obviously correct twin (dicts and lists,
-as the rule was first written) is ``tests/_twins_cut.compact_split_twin``.
+hands it plain arrays).  The slow, obviously correct twins (dicts and lists,
+as the rules were first written) are ``tests/_twins_cut.face_triangles_twin``
+and ``compact_split_twin``.
 """
 
 import numpy as np
 from numba import njit
 
 from cutkit.cutting._kernels_step import min_volume
+from cutkit.cutting.subdivision import FACE_EDGES
 from cutkit.mesh._quality_kernels import tet_dihedrals
+from cutkit.mesh.topology import TET_FACES
 
 #: At most this many cut nodes per tet: two copies of each of six edge nodes and of four face nodes.
 _MAX_KEYS = 20
+#: At most this many face triangles per tet: four faces of at most five triangles (Fig. 2c with centre nodes).
+MAX_FACE_TRIANGLES = 20
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _edge_copy(ct, e, vertex):
+    """The copy of cut edge e's node on the side of its end ``vertex``."""
+    return ct.edge_node[e, 0 if ct.edges[e, 0] == vertex else 1]
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _put(tris, corner, face, k, a, b, c, owner, lf):
+    tris[k, 0], tris[k, 1], tris[k, 2] = a, b, c
+    corner[k], face[k] = owner, lf
+    return k + 1
+
+
+@njit(cache=True, nogil=True)
+def face_triangles(ct, o, mask, centre_nodes):
+    """The Fig. 2 triangles of the four faces of original tet ``o``, outward.
+
+    Each face is triangulated from global data only (its cut edges, its
+    node), so the two tets sharing it agree: no cut edge, the face; one
+    (notch, Fig. 2b), four triangles around the face node F; two (complete,
+    Fig. 2c), the lone vertex's triangle and the quad split by its diagonal
+    through the smaller global vertex id, or with ``centre_nodes`` five
+    triangles around the centre node's two copies.
+
+    Parameters
+    ----------
+    ct : CutTables
+    o : int
+    mask : int
+        The tet's cut edges (6-bit, reduced).
+    centre_nodes : bool
+
+    Returns
+    -------
+    (tris, corner, face) : (k, 3), (k,), (k,) int64
+        The triangles, the local corner that owns each (its side), and the
+        local face each lies on.
+    """
+    tris = np.empty((MAX_FACE_TRIANGLES, 3), np.int64)
+    corner = np.empty(MAX_FACE_TRIANGLES, np.int64)
+    face = np.empty(MAX_FACE_TRIANGLES, np.int64)
+    k = 0
+    for lf in range(4):
+        lc = TET_FACES[lf]  # local corners in outward cyclic order
+        g0, g1, g2 = ct.orig_tets[o, lc[0]], ct.orig_tets[o, lc[1]], ct.orig_tets[o, lc[2]]
+        gv = (g0, g1, g2)
+        n_cut = 0
+        first_cut = -1
+        first_uncut = -1
+        for j in range(3):
+            if mask >> FACE_EDGES[lf, j] & 1:
+                n_cut += 1
+                first_cut = j if first_cut < 0 else first_cut
+            elif first_uncut < 0:
+                first_uncut = j
+        f = ct.tet_faces[o, lf]
+        if n_cut == 0:
+            k = _put(tris, corner, face, k, g0, g1, g2, lc[0], lf)
+        elif n_cut == 1:
+            j = first_cut
+            p, q, r = gv[j], gv[(j + 1) % 3], gv[(j + 2) % 3]
+            cp, cq, cr = lc[j], lc[(j + 1) % 3], lc[(j + 2) % 3]
+            e = ct.tet_edges[o, FACE_EDGES[lf, j]]
+            F = ct.face_node[f, 0]
+            k = _put(tris, corner, face, k, p, _edge_copy(ct, e, p), F, cp, lf)
+            k = _put(tris, corner, face, k, _edge_copy(ct, e, q), q, F, cq, lf)
+            k = _put(tris, corner, face, k, q, r, F, cq, lf)
+            k = _put(tris, corner, face, k, r, p, F, cr, lf)
+        else:  # two cut edges: the lone vertex p is on both
+            ju = first_uncut
+            q, r, p = gv[ju], gv[(ju + 1) % 3], gv[(ju + 2) % 3]
+            cq, cr, cp = lc[ju], lc[(ju + 1) % 3], lc[(ju + 2) % 3]
+            e1 = ct.tet_edges[o, FACE_EDGES[lf, (ju + 2) % 3]]  # edge (p, q)
+            e2 = ct.tet_edges[o, FACE_EDGES[lf, (ju + 1) % 3]]  # edge (r, p)
+            if centre_nodes:
+                Cl, Cp = ct.face_node[f, 0], ct.face_node[f, 1]
+                k = _put(tris, corner, face, k, Cl, p, _edge_copy(ct, e1, p), cp, lf)
+                k = _put(tris, corner, face, k, Cl, _edge_copy(ct, e2, p), p, cp, lf)
+                k = _put(tris, corner, face, k, Cp, _edge_copy(ct, e1, q), q, cq, lf)
+                k = _put(tris, corner, face, k, Cp, q, r, cq, lf)
+                k = _put(tris, corner, face, k, Cp, r, _edge_copy(ct, e2, r), cr, lf)
+            else:
+                k = _put(tris, corner, face, k, p, _edge_copy(ct, e1, p), _edge_copy(ct, e2, p), cp, lf)
+                E1, E2 = _edge_copy(ct, e1, q), _edge_copy(ct, e2, r)
+                if q < r:  # the quad's diagonal through its vertex of smaller global id
+                    k = _put(tris, corner, face, k, E1, q, E2, cq, lf)
+                    k = _put(tris, corner, face, k, q, r, E2, cq, lf)
+                else:
+                    k = _put(tris, corner, face, k, E1, q, r, cq, lf)
+                    k = _put(tris, corner, face, k, E1, r, E2, cr, lf)
+    return tris[:k], corner[:k], face[:k]
 
 
 @njit(cache=True, nogil=True)

@@ -26,6 +26,7 @@ import numpy as np
 from cutkit.errors import InputError
 from cutkit.mesh.topology import TET_EDGES, TET_FACES, unique_edges, unique_faces, tet_neighbors
 from cutkit.cutting import subdivision as S
+from cutkit.cutting import _kernels_split as KP
 from cutkit.cutting import _kernels_step as K
 from cutkit.cutting.rebase import cut_twins, init_records, rebase, twin_face_bary
 from cutkit.cutting.splits import COMPACT_VOL_MIN, SPLIT_ANGLE_GAIN, SPLIT_ANGLE_GOOD, compact_split
@@ -50,8 +51,6 @@ _T_BLENDS = np.array(T_BLENDS)
 _T_AT_CENTROID = np.zeros(1)
 
 _TET_EDGES_L = TET_EDGES.tolist()
-_TET_FACES_L = TET_FACES.tolist()
-_FACE_EDGES_L = S.FACE_EDGES.tolist()
 #: Texture coordinates placeholder for :func:`_kernels_step.set_node` (no texture).
 _NO_UVW = np.zeros((0, 3))
 
@@ -413,33 +412,16 @@ class CutMesh:
         # tip / centre node T
         tb = self.tip_bary.get(o)
         free_T = tb is None  # no tip inside: T may go where its cone is best shaped
+        ct = self.cut_tables()
         if free_T:  # the mean of the tet's cut nodes
-            tb = K.cut_nodes_centroid(self.cut_tables(), o, mask)
+            tb = K.cut_nodes_centroid(ct, o, mask)
         tb = _clamp_bary(tb, TET_BARY_MIN)
         complete = case in ("corner", "quad")
-        vgroup = {v[i]: group[i] for i in range(4)}
-        edges, edge_node, face_node = self.edges, self.edge_node, self.face_node
-        te = self.tet_edges[o].tolist()
-        tf = self.tet_faces[o].tolist()
-        tris = []
-        for lf in range(4):
-            gv = [v[i] for i in _TET_FACES_L[lf]]
-            le = _FACE_EDGES_L[lf]
-            ge = [te[k] for k in le]
-            cut = [bool(mask >> k & 1) for k in le]
-            f = tf[lf]
-
-            def edge_copy(k, vert, ge=ge):
-                e = ge[k]
-                return int(edge_node[e, 0 if edges[e, 0] == vert else 1])
-
-            def f_node(side, f=f):
-                return int(face_node[f, side])
-
-            tris.extend((tri, ow, lf) for tri, ow in S.face_triangles(gv, cut, edge_copy, f_node, self.centre_nodes))
+        group = np.array(group, np.int64)  # side of each corner
+        tris, corner, face = KP.face_triangles(ct, o, mask, self.centre_nodes)
         new = None
         if complete and self.compact_splits:
-            new, angle = compact_split(self, o, tris, group)
+            new, angle = compact_split(self, ct, o, tris, corner, face, group)
             if new is not None and angle < SPLIT_ANGLE_GOOD:
                 # a poor compact cone: the T-cone may be better (more tets, but no sliver)
                 tb_c, cone = self._best_T(v, tb, tris, free_T)
@@ -453,8 +435,10 @@ class CutMesh:
                     self.tet_T[o, c] = self._new_node(v, tb)
                 else:
                     self._move_node(self.tet_T[o, c], v, tb)
-            T = self.tet_T[o].tolist()
-            new = [(tri[0], tri[2], tri[1], T[vgroup[owner] if complete else 0]) for tri, owner, _ in tris]
+            # the cone of the face triangles to T (each side's copy of T for a complete split)
+            new = np.empty((tris.shape[0], 4), np.int64)
+            new[:, 0], new[:, 1], new[:, 2] = tris[:, 0], tris[:, 2], tris[:, 1]
+            new[:, 3] = self.tet_T[o][group[corner]] if complete else self.tet_T[o, 0]
         # replace the old sub-tets
         old = self.subtets.get(o, [o])
         self._alive[old] = False
@@ -480,7 +464,6 @@ class CutMesh:
             self.n_points += 1  # make _grow_nodes double the arrays
             self._grow_nodes()
             self.n_points -= 1
-        tris = np.array([tri for tri, _, _ in tris], np.int64).reshape(-1, 3)
         b, angle = K.best_cone_apex(self._x, np.asarray(v, np.int64), np.asarray(tb, np.float64),
                                     _T_BLENDS if free else _T_AT_CENTROID, tris, TET_BARY_MIN, self.n_points)
         return b, float(angle)

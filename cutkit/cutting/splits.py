@@ -37,28 +37,23 @@ SPLIT_ANGLE_GOOD = 6.0
 SPLIT_ANGLE_GAIN = 2.0
 
 
-def compact_split(cm, o, tris, group):
+def compact_split(cm, ct, o, tris, corner, face, group):
     """Best compact tetrahedralisation of the complete split of original tet ``o``.
 
     Parameters
     ----------
     cm : CutMesh
+    ct : CutTables  its cut state (``cm.cut_tables()``)
     o : int  original tet
-    tris : list of ((3,) node ids, owner vertex, local face)  its Fig. 2 face triangles
+    tris, corner, face : (k, 3), (k,), (k,) int64  its Fig. 2 face triangles, the local corner
+        owning each and the local face each lies on (``_kernels_split.face_triangles``)
     group : (4,) int64  side (0 or 1) of each corner of the tet
 
     Returns
     -------
-    (tets, angle) : list of 4-tuples and their smallest dihedral angle in
+    (tets, angle) : (p, 4) int64 and their smallest dihedral angle in
         degrees, or (None, 0.0) when no choice passes the volume test
         (``_kernels_split.compact_split``).
     """
-    corners = cm.orig_tets[o].tolist()
-    t = np.array([tri for tri, _, _ in tris], np.int64).reshape(-1, 3)
-    corner = np.array([corners.index(owner) for _, owner, _ in tris], np.int64)
-    face = np.array([lf for _, _, lf in tris], np.int64)
-    tets, angle = KP.compact_split(cm.cut_tables(), cm._x, o, t, corner, face, np.asarray(group, np.int64),
-                                   COMPACT_VOL_MIN * float(cm._vol0(o)))
-    if tets.shape[0] == 0:
-        return None, 0.0
-    return [tuple(q) for q in tets.tolist()], float(angle)
+    tets, angle = KP.compact_split(ct, cm._x, o, tris, corner, face, group, COMPACT_VOL_MIN * float(cm._vol0(o)))
+    return (None, 0.0) if tets.shape[0] == 0 else (tets, float(angle))

@@ -104,53 +104,6 @@ def classify(mask: int):
     return "partial", group
 
 
-def face_triangles(gv, cut, edge_copy, face_node, centre_nodes):
-    """Triangles of one face by the Fig. 2 patterns.
-
-    Parameters
-    ----------
-    gv : (3,) int  global vertex ids, outward cyclic order
-    cut : (3,) bool  whether edge (gv[k], gv[k+1]) is cut
-    edge_copy : callable (k, vertex) -> node id of the copy of edge k's node
-        on the side of ``vertex``
-    face_node : callable (side) -> node id; side 0 = notch F or lone-side C,
-        1 = pair-side C
-    centre_nodes : bool
-
-    Returns
-    -------
-    tris : list of ((3,) node ids, owner original vertex or -1, on_cut) where
-        ``owner`` is an original vertex of the triangle (decides the side).
-    """
-    cut = [bool(c) for c in cut]
-    n = sum(cut)
-    if n == 0:
-        return [((gv[0], gv[1], gv[2]), gv[0])]
-    if n == 1:
-        k = cut.index(True)
-        p, q, r = gv[k], gv[(k + 1) % 3], gv[(k + 2) % 3]
-        F = face_node(0)
-        return [((p, edge_copy(k, p), F), p), ((edge_copy(k, q), q, F), q),
-                ((q, r, F), q), ((r, p, F), r)]
-    # two cut edges: lone vertex p is shared by both cut edges
-    k_uncut = cut.index(False)
-    q, r = gv[k_uncut], gv[(k_uncut + 1) % 3]
-    p = gv[(k_uncut + 2) % 3]
-    k1 = (k_uncut + 2) % 3  # edge (p, q)
-    k2 = (k_uncut + 1) % 3  # edge (r, p)
-    if centre_nodes:
-        Cl, Cp = face_node(0), face_node(1)
-        return [((Cl, p, edge_copy(k1, p)), p), ((Cl, edge_copy(k2, p), p), p),
-                ((Cp, edge_copy(k1, q), q), q), ((Cp, q, r), q), ((Cp, r, edge_copy(k2, r)), r)]
-    tris = [((p, edge_copy(k1, p), edge_copy(k2, p)), p)]
-    E1, E2 = edge_copy(k1, q), edge_copy(k2, r)
-    if q < r:
-        tris += [((E1, q, E2), q), ((q, r, E2), q)]
-    else:
-        tris += [((E1, q, r), q), ((E1, r, E2), r)]
-    return tris
-
-
 #: Masks of two opposite cut edges only (01+23, 02+13, 03+12): the cut would be two
 #: crack sheets meeting at the tet's single crack-front node (non-manifold), so
 #: ``CutMesh`` defers the second edge until a third links them.
