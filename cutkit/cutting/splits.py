@@ -19,7 +19,6 @@ avoids slivers where a better choice exists.
 
 from __future__ import annotations
 
-import numpy as np
 
 from cutkit.cutting import _kernels_split as KP
 
