@@ -19,7 +19,6 @@ avoids slivers where a better choice exists.
 
 from __future__ import annotations
 
-
 from cutkit.cutting import _kernels_split as KP
 
 #: Compact complete splits accept only sub-tets of at least this fraction
