@@ -22,3 +22,15 @@ def place_through_old_shape_twin(rest, X, x, Tinv, reach, fallback):
     rows = np.arange(best.size)
     inside = worst[rows, best] >= -reach
     return np.where(inside[:, None], np.einsum("pk,pkc->pc", bary[rows, best], x[best]), fallback)
+
+
+def old_shape_corners_twin(tets, X, x, n, moved, moved_from):
+    """Rest (moved nodes at their old place) and current corners and inverse rest edge matrices of
+    the tets with every corner < n and a non-zero rest volume, by NumPy."""
+    q = tets[np.all(tets < n, axis=1)]
+    Xc = X[q]
+    for b, a in enumerate(moved):
+        Xc[q == a] = moved_from[b]
+    T = np.stack([Xc[:, 1] - Xc[:, 0], Xc[:, 2] - Xc[:, 0], Xc[:, 3] - Xc[:, 0]], axis=2)
+    ok = np.linalg.det(T) != 0.0
+    return Xc[ok], x[q][ok], np.linalg.inv(T[ok])

@@ -136,6 +136,12 @@ def test_clamp_set_node_min_volume_match_twins():
             if len(tex):
                 np.testing.assert_allclose(uvw[8], ru, atol=1e-14)
             assert list(dn[8, :k]) == list(nodes) and (dn[8, k:] == -1).all() and (dw[8, k:] == 0).all()
+            # clamped and set in one call: the weights are the clamp's
+            w_raw = rng.uniform(-0.3, 1.0, k)
+            KS.set_node_clamped(x, X, tex, dn, dw, 9, nodes, w_raw, 0.05)
+            rx, rX, ru = set_node_twin(x, X, tex if len(tex) else None, nodes, clamp_bary_twin(w_raw, 0.05))
+            np.testing.assert_allclose(x[9], rx, atol=1e-14)
+            np.testing.assert_allclose(dw[9, :k], clamp_bary_twin(w_raw, 0.05), atol=1e-15)
     p, t = _jittered_box(8)
     t = t.copy()
     t[::3] = t[::3, [1, 0, 2, 3]]  # some inverted

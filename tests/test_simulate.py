@@ -381,3 +381,26 @@ def test_place_through_old_shape_matches_twin():
     # on the shared face both maps agree; inside tet 0 its own map holds exactly
     b = np.array([1 - 0.6, 0.1, 0.2, 0.3])
     np.testing.assert_allclose(got[0], b @ xc[0], atol=1e-12)
+
+
+def test_old_shape_corners_match_twin():
+    """The tissue before a cut step as tet corners: moved nodes at their old rest place, tets with a
+    node the tissue does not have yet and flat tets left out, against NumPy."""
+    from _twins_simulate import old_shape_corners_twin
+
+    from cutkit.simulate._kernels import old_shape_corners
+
+    rng = np.random.default_rng(9)
+    X = rng.uniform(0, 5, (32, 3))
+    x = X + rng.normal(0, 0.1, X.shape)
+    tets = np.array([rng.choice(30, 4, replace=False) for _ in range(25)], np.int64)
+    tets[3, 2] = 31  # a node the tissue does not have yet (n = 30)
+    X[[4, 5, 6]] = [[0, 0, 0], [1, 0, 0], [2, 0, 0]]
+    tets[7] = [4, 5, 6, 8]  # flat: three corners on a line
+    moved = np.array([2, 8, 11], np.int64)
+    moved_from = rng.uniform(0, 5, (3, 3))
+    got = old_shape_corners(tets, X, x, 30, moved, moved_from)
+    want = old_shape_corners_twin(tets, X, x, 30, moved, moved_from)
+    assert got[0].shape[0] == want[0].shape[0] == 23
+    for g, w in zip(got, want):
+        np.testing.assert_allclose(g, w, rtol=1e-12, atol=1e-12)

@@ -372,11 +372,22 @@ class CutMesh:
         return self._set_face_crossing(f, bary)
 
     def _set_face_crossing(self, f, bary):
-        self.face_bary[f] = np.asarray(bary, np.float64)
-        if self.face_ncut[f] == 1:
+        bary = np.asarray(bary, np.float64)
+        self.face_bary[f] = bary
+        if self.face_ncut[f] != 1:
+            return False
+        i = int(self.face_node[f, 0])
+        if i < 0:
             self._update_face_node(f)
             return True
-        return False
+        # the notch node F follows the blade (what _update_face_node does, in one kernel call)
+        moved_from = self._delta["moved_from"]
+        if i not in moved_from:
+            moved_from[i] = self._X[i].copy()
+        K.set_node_clamped(self._x, self._X, _NO_UVW if self._uvw is None else self._uvw, self._def_nodes,
+                           self._def_w, i, self.faces[f], bary, FACE_BARY_MIN)
+        self._delta["moved_nodes"].append(i)
+        return True
 
     def move_tip_node(self, o):
         """Move the T node(s) of a cut tet to its recorded tip (no topology change)."""

@@ -5,6 +5,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from cutkit.relax._shape_kernels import corner_edge_inverses
+
 
 @njit(cache=True, nogil=True)
 def lookup_springs(adj_offsets, adj_nodes, adj_springs, a, b):
@@ -85,3 +87,46 @@ def place_through_old_shape(rest, X, x, Tinv, reach, out):
             for c in range(3):
                 out[p, c] = (best_b[0] * x[k, 0, c] + best_b[1] * x[k, 1, c] + best_b[2] * x[k, 2, c]
                              + best_b[3] * x[k, 3, c])
+
+
+@njit(cache=True, nogil=True)
+def old_shape_corners(tets, X, x, n, moved, moved_from):
+    """The tissue before a cut step, as corners of the tets it was made of.
+
+    Parameters
+    ----------
+    tets : (r, 4) int64
+        Corners of the tets (those with a corner >= ``n``, a node the tissue does not have yet, are left out).
+    X, x : (N, 3) float64
+        Rest and current positions (rows >= n unread).
+    n : int
+    moved : (b,) int64
+        Nodes the step moved in the rest configuration, ascending.
+    moved_from : (b, 3) float64
+        Their rest positions before the step (taken in place of ``X``).
+
+    Returns
+    -------
+    (Xc, xc, Tinv) : (q, 4, 3), (q, 4, 3), (q, 3, 3) float64
+        Rest and current corners and inverse rest edge matrices of the tets
+        with every corner < n and a non-zero rest volume, in input order.
+    """
+    r = tets.shape[0]
+    Xc = np.empty((r, 4, 3))
+    xc = np.empty((r, 4, 3))
+    q = 0
+    for t in range(r):
+        if tets[t, 0] >= n or tets[t, 1] >= n or tets[t, 2] >= n or tets[t, 3] >= n:
+            continue
+        for c in range(4):
+            a = tets[t, c]
+            k = np.searchsorted(moved, a)
+            src = moved_from[k] if k < moved.shape[0] and moved[k] == a else X[a]
+            for d in range(3):
+                Xc[q, c, d] = src[d]
+                xc[q, c, d] = x[a, d]
+        q += 1
+    Tinv = np.empty((q, 3, 3))
+    ok = corner_edge_inverses(Xc[:q], Tinv)
+    keep = np.flatnonzero(ok)
+    return Xc[keep], xc[keep], Tinv[keep]

@@ -33,11 +33,10 @@ from cutkit.relax.elastic import (
 )
 from cutkit.mesh._quality_kernels import signed_volumes_serial
 from cutkit.relax._adjacency_kernels import loaded_nodes, tets_around
-from cutkit.relax._shape_kernels import corner_edge_inverses
 from cutkit.relax.growable import append_rows
 from cutkit.relax.vbd import DEFAULT_ATOL_N, local_step
 from cutkit.relax.materials import material_of_tets, prestress_of_tets
-from cutkit.simulate._kernels import place_through_old_shape
+from cutkit.simulate._kernels import old_shape_corners, place_through_old_shape
 from cutkit.simulate.tissue_base import TissueBase
 
 #: Each implicit step of a simulation is solved until its residual is below
@@ -356,20 +355,9 @@ class ElasticTissue(TissueBase):
             Rest and current corners and the inverse rest edge matrices; tets
             with no rest volume are left out.
         """
-        cm = self.cm
-        q = cm._tets[tets]
-        q = q[np.all(q < self.state.positions.shape[0], axis=1)]
-        X = cm._X[q]
-        if moved.size:
-            order = np.argsort(moved)
-            k = np.searchsorted(moved[order], q)
-            k = np.minimum(k, moved.size - 1)
-            hit = moved[order][k] == q
-            X[hit] = moved_from[order][k[hit]]
-        x = self.state.positions[q]
-        Tinv = np.empty((X.shape[0], 3, 3))
-        ok = corner_edge_inverses(np.ascontiguousarray(X), Tinv)
-        return X[ok], x[ok], Tinv[ok]
+        order = np.argsort(moved)
+        return old_shape_corners(self.cm._tets[tets], self.cm._X, self.state.positions, self.state.positions.shape[0],
+                                 np.ascontiguousarray(moved[order]), np.ascontiguousarray(moved_from[order]))
 
     def _through_old_shape(self, old_shape, nodes: np.ndarray) -> np.ndarray:
         """Current positions of nodes at their (new) rest positions, through the old shape.
