@@ -176,3 +176,26 @@ def node_term_rows(Dminv, volume, mu, lam):
     out[:, 7] = volume * (lam + mu)
     out[:, 8] = volume * mu
     return out
+
+
+def make_room_twin(start, degree, capacity, slots, corners, used, slack):
+    """Rows too small for their new slots moved to the pool's end by NumPy (as ElementModel did):
+    returns start, capacity, the slot arrays (a dict of copies) and the slots in use."""
+    nodes, more = np.unique(corners, return_counts=True)
+    start, capacity = start.copy(), capacity.copy()
+    need = degree[nodes] + more
+    grow = need > capacity[nodes]
+    short = nodes[grow]
+    cap = np.maximum(2 * capacity[short], need[grow] + slack)
+    new_start = used + np.concatenate([[0], np.cumsum(cap)[:-1]]).astype(np.int64)
+    end = used + int(cap.sum())
+    out = {}
+    for name, a in slots.items():
+        b = np.zeros((max(end, a.shape[0]),) + a.shape[1:], a.dtype)
+        b[:used] = a[:used]
+        for i, s in zip(short, new_start):
+            b[s:s + degree[i]] = a[start[i]:start[i] + degree[i]]
+        out[name] = b
+    start[short] = new_start
+    capacity[short] = cap
+    return start, capacity, out, end

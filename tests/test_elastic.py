@@ -363,3 +363,38 @@ def test_node_term_rows_match_the_twin():
     got = node_term_rows(Dminv, volume, mu, lam)
     np.testing.assert_allclose(got, twin(Dminv, volume, mu, lam), rtol=1e-14, atol=0.0)
     assert got[7].tolist() == [0.0] * 9
+
+
+def test_make_room_matches_the_twin():
+    """Rows moved to the pool's end for the slots new tets need: the kernel's starts, room and
+    slots are NumPy's; a pool too small is left as it was and the end asked for is returned."""
+    from cutkit.relax import _adjacency_kernels as KA
+    from cutkit.relax._elastic_kernels import Adjacency
+
+    rng = np.random.default_rng(2)
+    n, used = 12, 0
+    degree = rng.integers(0, 5, n).astype(np.int32)
+    capacity = degree.astype(np.int64) + rng.integers(0, 3, n)
+    start = np.concatenate([[0], np.cumsum(capacity)[:-1]]).astype(np.int64)
+    used = int(capacity.sum())
+    pool = used + 80
+    slots = {"tets": rng.integers(0, 99, pool).astype(np.int32), "corner": rng.integers(0, 4, pool).astype(np.int8),
+             "opposite": rng.integers(0, 99, (pool, 3)).astype(np.int32), "terms": rng.normal(size=(pool, 6))}
+    for name in slots:
+        slots[name][used:] = 0
+    corners = rng.integers(0, n, 16).astype(np.int64)
+    want = T.make_room_twin(start, degree, capacity, slots, corners, used, 8)
+    adj = Adjacency(start.copy(), degree, *(slots[k].copy() for k in ("tets", "corner", "opposite", "terms")))
+    cap = capacity.copy()
+    end = KA.make_room(adj, cap, corners, used, 8, pool)
+    assert end == want[3] and end > used
+    np.testing.assert_array_equal(adj.start, want[0])
+    np.testing.assert_array_equal(cap, want[1])
+    for k, got in zip(("tets", "corner", "opposite", "terms"), adj[2:]):
+        np.testing.assert_array_equal(got, want[2][k][:pool])
+    # too small a pool: nothing moves, the end needed comes back
+    adj2 = Adjacency(start.copy(), degree, *(slots[k].copy() for k in ("tets", "corner", "opposite", "terms")))
+    cap2 = capacity.copy()
+    assert KA.make_room(adj2, cap2, corners, used, 8, want[3] - 1) == -want[3] - 1
+    np.testing.assert_array_equal(adj2.start, start)
+    np.testing.assert_array_equal(cap2, capacity)

@@ -131,7 +131,8 @@ def test_laying_out_the_rows_in_sweep_order_changes_no_result():
 def test_removing_elements_leaves_the_rows_a_fresh_build_has():
     """A cut takes elements out of the node rows: every node's row then holds exactly what a model
     built without them holds (tet, corner, other corners, terms; the order of the rest kept), and
-    the masses agree to rounding; a node left with no tet has mass exactly 0."""
+    the masses agree to rounding; a node left with no tet has mass exactly 0.  Built a few
+    elements at a time from a pool with no room, the rows are the same."""
     from cutkit.relax.elastic import ElementModel
 
     tis = tissue()
@@ -148,6 +149,10 @@ def test_removing_elements_leaves_the_rows_a_fresh_build_has():
         return em
 
     cut, fresh = build(np.arange(m)), build(keep)
+    # added a few at a time into a pool with no room: the rows move and the pool grows, same rows
+    grown = ElementModel.empty(n, 1)
+    for ids in np.array_split(keep, 9):
+        grown.add_elements(cm._X[:n], cm.orig_tets[ids], tis.mu[ids], tis.lam[ids], tis.density[ids], ids=ids)
     cut.remove_elements(gone)
 
     def row(em, i):
@@ -155,7 +160,8 @@ def test_removing_elements_leaves_the_rows_a_fresh_build_has():
         return [(int(t), int(c), em.adj_opposite[s + k].tolist(), em.adj_terms[s + k].tolist())
                 for k, (t, c) in enumerate(zip(em.adj_tets[s:s + d], em.adj_corner[s:s + d]))]
 
-    assert all(row(cut, i) == row(fresh, i) for i in range(n))
+    assert all(row(cut, i) == row(fresh, i) == row(grown, i) for i in range(n))
+    assert grown.adj_tets.shape[0] >= grown.adj_used >= 4 * keep.size
     np.testing.assert_allclose(cut.masses, fresh.masses, rtol=1e-12, atol=1e-30)
     orphans = np.flatnonzero(fresh.adj_degree[:n] == 0)
     assert lone in orphans and np.all(cut.masses[orphans] == 0.0)

@@ -77,6 +77,70 @@ def add_to_adjacency(adj, tets, rows, ids):
 
 
 @njit(cache=True, nogil=True)
+def make_room(adj, capacity, corners, used, slack, pool_size):
+    """Give the row of every node in ``corners`` room for as many more slots as it occurs there.
+
+    A row too small moves to the pool's end (slots ``used`` onwards) with room
+    ``max(2 capacity, need + slack)``, its slots carried over; rows are moved
+    in ascending node order.  Nothing changes when the pool (``pool_size``
+    slots) is too small: the caller grows it and calls again.
+
+    Parameters
+    ----------
+    adj : Adjacency
+    capacity : (n,) int64
+        Room of each row; updated.
+    corners : (k,) int64
+        Corners of the tets to be added (a node once per tet).
+    used, slack, pool_size : int
+
+    Returns
+    -------
+    end : int
+        The pool's slots in use afterwards; ``-end - 1`` when ``end > pool_size`` (nothing moved).
+    """
+    nodes = np.sort(corners)
+    end = used
+    for q in range(nodes.shape[0]):
+        if q + 1 < nodes.shape[0] and nodes[q + 1] == nodes[q]:
+            continue  # the last of a run counts it
+        i = nodes[q]
+        count = 1
+        while q - count >= 0 and nodes[q - count] == i:
+            count += 1
+        need = adj.degree[i] + count
+        if need > capacity[i]:
+            end += max(2 * capacity[i], need + slack)
+    if end > pool_size:
+        return -end - 1
+    pos = used
+    for q in range(nodes.shape[0]):
+        if q + 1 < nodes.shape[0] and nodes[q + 1] == nodes[q]:
+            continue
+        i = nodes[q]
+        count = 1
+        while q - count >= 0 and nodes[q - count] == i:
+            count += 1
+        need = adj.degree[i] + count
+        if need <= capacity[i]:
+            continue
+        cap = max(2 * capacity[i], need + slack)
+        s0 = adj.start[i]
+        for k in range(adj.degree[i]):
+            a, b = pos + k, s0 + k
+            adj.tets[a] = adj.tets[b]
+            adj.corner[a] = adj.corner[b]
+            for m in range(3):
+                adj.opposite[a, m] = adj.opposite[b, m]
+            for m in range(adj.terms.shape[1]):
+                adj.terms[a, m] = adj.terms[b, m]
+        adj.start[i] = pos
+        capacity[i] = cap
+        pos += cap
+    return end
+
+
+@njit(cache=True, nogil=True)
 def remove_from_adjacency(adj, tets, ids):
     """Remove tets ``ids`` from the lists of their nodes (order of the rest kept)."""
     for q in range(ids.shape[0]):

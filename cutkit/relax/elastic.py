@@ -226,7 +226,7 @@ class ElementModel:
         self.mass_share[ids] = share
         np.add.at(self.masses, tets.ravel(), np.repeat(share, 4))
         self.n_elements = max(self.n_elements, int(ids.max()) + 1)
-        self._make_room(*np.unique(tets.ravel(), return_counts=True))
+        self._make_room(tets.ravel())
         KA.add_to_adjacency(self.adjacency, self.tets, K.node_term_rows(Dminv, volume, self.mu[ids], self.lam[ids]),
                            ids)
         self._classes = None
@@ -256,21 +256,18 @@ class ElementModel:
         for name in ("volume", "mu", "lam", "mass_share"):
             setattr(self, name, np.concatenate([getattr(self, name), np.zeros(grow)]))
 
-    def _make_room(self, nodes: np.ndarray, more: np.ndarray) -> None:
-        """Rows of ``nodes`` (k,) ascending with room for ``more`` (k,) slots each: a row too small
-        moves to the pool's end (only the nodes a change touches are looked at, never all)."""
-        need = self.adj_degree[nodes] + more
-        grow = need > self.adj_capacity[nodes]
-        short = nodes[grow]
-        if short.size == 0:
-            return
-        cap = np.maximum(2 * self.adj_capacity[short], need[grow] + ADJACENCY_SLACK)
-        start = self.adj_used + np.concatenate([[0], np.cumsum(cap)[:-1]])
-        end = self.adj_used + int(cap.sum())
-        size = self.adj_tets.shape[0]
-        if end > size:  # the pool grows by doubling
-            size = max(end, 2 * size)
-        self._move_rows(short, start, cap, size)
+    def _make_room(self, corners: np.ndarray) -> None:
+        """Room in the rows of ``corners`` (k,) for one more slot per occurrence: a row too small
+        moves to the pool's end (``_adjacency_kernels.make_room``; only the nodes a change touches
+        are looked at, never all).  The pool grows by doubling."""
+        corners = np.ascontiguousarray(corners, np.int64)
+        end = KA.make_room(self.adjacency, self.adj_capacity, corners, self.adj_used, ADJACENCY_SLACK,
+                           self.adj_tets.shape[0])
+        if end < 0:
+            self._move_rows(np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0, np.int64),
+                            max(-end - 1, 2 * self.adj_tets.shape[0]))
+            end = KA.make_room(self.adjacency, self.adj_capacity, corners, self.adj_used, ADJACENCY_SLACK,
+                               self.adj_tets.shape[0])
         self.adj_used = end
 
     def lay_out_rows(self) -> None:
