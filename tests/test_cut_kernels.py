@@ -241,7 +241,7 @@ def test_best_compact_split_matches_twin():
 
 def test_cut_nodes_centroid_matches_twin():
     """T's default place (the mean of a tet's cut nodes) in every tet a blade left cut, partly or
-    completely, against the twin; the weights sum to 1."""
+    completely, against the twin; the weights sum to 1; each tet's mask of cut edges."""
     from _twins_cut import cut_nodes_centroid_twin
 
     from cutkit.cutting import cut_step
@@ -254,6 +254,7 @@ def test_cut_nodes_centroid_matches_twin():
         cut_step(cm, np.array([x, 1.4, 1.2]), a)
     seen = set()
     for o in range(len(t)):
+        assert cm.tet_mask(o) == sum(1 << k for k in range(6) if np.isfinite(cm.edge_t[cm.tet_edges[o, k]]))
         mask = S.REDUCE_TABLE[cm.tet_mask(o)]
         if mask == 0:
             continue

@@ -36,3 +36,13 @@ def test_rows_are_cast_and_shaped_and_the_input_keeps_its_length():
     assert flags.shape == (3, 3)
     ids = append_rows(np.zeros(0, np.int32), np.array([2.0, 5.0]))
     assert ids.dtype == np.int32 and ids.tolist() == [2, 5]
+
+
+def test_an_older_view_is_copied_so_rows_appended_since_stay():
+    a = append_rows(np.zeros((0, 2)), np.ones((3, 2)))
+    b = append_rows(a, np.full((1, 2), 2.0))  # in place: b shares a's buffer
+    assert b.base is a.base
+    c = append_rows(a, np.full((1, 2), 7.0))  # a is no longer the newest view: copied
+    assert c.base is not a.base
+    np.testing.assert_array_equal(b[3], [2.0, 2.0])
+    np.testing.assert_array_equal(c[3], [7.0, 7.0])

@@ -392,6 +392,17 @@ CutTables = namedtuple("CutTables", ["orig_tets", "tet_edges", "tet_faces", "edg
                                      "face_node", "face_ncut", "def_nodes", "def_w"])
 
 
+
+@njit(cache=True, nogil=True)
+def tet_mask(tet_edges, edge_t, o):
+    """6-bit mask of the cut edges of original tet ``o`` (bit k: local edge k; cut = edge_t not NaN)."""
+    mask = 0
+    for k in range(6):
+        t = edge_t[tet_edges[o, k]]
+        if t == t:
+            mask |= 1 << k
+    return mask
+
 @njit(cache=True, nogil=True)
 def cut_nodes_centroid(ct, o, mask):
     """Barycentric weights (4,) over original tet ``o``'s corners of the mean of its cut nodes:

@@ -401,12 +401,7 @@ class CutMesh:
     # ------------------------------------------------------------------ subdivision
     def tet_mask(self, o):
         """6-bit mask of the cut edges of original tet o (bit k = local edge TET_EDGES[k])."""
-        mask = 0
-        edge_t = self.edge_t
-        for k, e in enumerate(self.tet_edges[o].tolist()):
-            if edge_t[e] == edge_t[e]:  # not NaN: cut
-                mask |= 1 << k
-        return mask
+        return int(K.tet_mask(self.tet_edges, self.edge_t, o))
 
     def cut_tables(self):
         """The cut state as the step kernels read it (``_kernels_step.CutTables``; views, no copy)."""

@@ -14,9 +14,11 @@ import weakref
 
 import numpy as np
 
-#: Buffers :func:`append_rows` made, by id: only a prefix view of one of these grows in
-#: place (a view of anything else, such as the cut mesh's own node arrays, is copied first).
-_BUFFERS: "weakref.WeakValueDictionary[int, np.ndarray]" = weakref.WeakValueDictionary()
+#: The view :func:`append_rows` last returned of each buffer it made, by the buffer's id: only that
+#: view grows in place (a view holds its buffer, so the id is the buffer's while the entry lives).
+#: Any other array, an older view of the same buffer or a view of someone else's (the cut mesh's
+#: own node arrays), is copied first.
+_LATEST: "weakref.WeakValueDictionary[int, np.ndarray]" = weakref.WeakValueDictionary()
 #: Rows a new buffer holds at least.
 MIN_ROWS = 16
 
@@ -35,19 +37,17 @@ def append_rows(a: np.ndarray, rows) -> np.ndarray:
     -------
     out : (n + p, ...) array
         A view of a buffer this function owns, sharing ``a``'s first ``n``
-        rows when ``a`` is such a view with room after it; otherwise the
-        rows are copied once into a buffer of twice the size.  Call it on
-        the newest array only: appending to an older view of the same
-        buffer would write over rows appended since.
+        rows when ``a`` is the view it last returned of that buffer and
+        there is room after it; otherwise the rows are copied once into a
+        buffer of twice the size (so an older view is never written over).
     """
     rows = np.asarray(rows, a.dtype).reshape((-1,) + a.shape[1:])
     n, p = a.shape[0], rows.shape[0]
     buf = a.base
-    fits = (buf is not None and _BUFFERS.get(id(buf)) is buf and buf.shape[0] >= n + p
-            and a.ctypes.data == buf.ctypes.data)
-    if not fits:
+    if buf is None or _LATEST.get(id(buf)) is not a or buf.shape[0] < n + p:
         buf = np.empty((max(n + p, 2 * n, MIN_ROWS),) + a.shape[1:], a.dtype)
         buf[:n] = a
-        _BUFFERS[id(buf)] = buf
     buf[n:n + p] = rows
-    return buf[:n + p]
+    out = buf[:n + p]
+    _LATEST[id(buf)] = out
+    return out
