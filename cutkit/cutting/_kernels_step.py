@@ -7,8 +7,11 @@
   met by the swept surface, faces crossed by the blade) in visit order, so
   the cut state machine (Python, :mod:`cutkit.cutting.cutmesh`) replays
   them exactly as a per-tet Python loop would;
-* :func:`clamp_bary`, :func:`set_node`, :func:`min_volume`: the small
-  per-node / per-candidate work of the subdivision.
+* :func:`clamp_bary`, :func:`set_node`, :func:`set_node_clamped`,
+  :func:`min_volume`, :func:`tet_mask`, :func:`cut_nodes_centroid`,
+  :func:`best_cone_apex`: the small per-node / per-candidate work of the
+  subdivision (the face patterns and compact splits are in
+  :mod:`cutkit.cutting._kernels_split`).
 
 Slow, obviously correct NumPy twins: ``tests/_twins_cut.py``.
 """

@@ -28,6 +28,11 @@ The construction, in two parts:
    triangles on either side of a cut segment use different copies of
    the cut nodes.
 
+The face patterns are built by ``_kernels_split.face_triangles`` and the
+compact complete splits (each side coned to one of its vertices, fewer
+tetrahedra than the cone to T) by ``_kernels_split.compact_split``; this
+module keeps the tables of edge masks and cases.
+
 Node copies (duplication so the cut can open): an edge node has two
 copies, one attached to each end vertex of its *global* edge; a centre
 node C has a copy for the face's lone vertex side and one for its pair
