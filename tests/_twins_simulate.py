@@ -34,3 +34,11 @@ def old_shape_corners_twin(tets, X, x, n, moved, moved_from):
     T = np.stack([Xc[:, 1] - Xc[:, 0], Xc[:, 2] - Xc[:, 0], Xc[:, 3] - Xc[:, 0]], axis=2)
     ok = np.linalg.det(T) != 0.0
     return Xc[ok], x[q][ok], np.linalg.inv(T[ok])
+
+
+def step_tet_sets_twin(added, removed, around):
+    """The hand-over's tet sets by NumPy's set operations (as ElasticTissue.apply_cut did)."""
+    both = np.intersect1d(added, removed)
+    added, removed = np.setdiff1d(added, both), np.setdiff1d(removed, both)
+    again = np.setdiff1d(around, np.concatenate([added, removed]))
+    return added, removed, again, np.union1d(removed, around)

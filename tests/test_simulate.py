@@ -404,3 +404,22 @@ def test_old_shape_corners_match_twin():
     assert got[0].shape[0] == want[0].shape[0] == 23
     for g, w in zip(got, want):
         np.testing.assert_allclose(g, w, rtol=1e-12, atol=1e-12)
+
+
+def test_step_tet_sets_match_twin():
+    """A cut step's tet sets (made, unmade, made again, old shape) against NumPy's set operations:
+    random overlaps, repeats, empty inputs."""
+    from _twins_simulate import step_tet_sets_twin
+
+    from cutkit.simulate._kernels import step_tet_sets
+
+    rng = np.random.default_rng(12)
+    cases = [(rng.integers(0, 60, rng.integers(0, 30)), rng.integers(0, 60, rng.integers(0, 30)),
+              np.unique(rng.integers(0, 60, rng.integers(0, 20)))) for _ in range(200)]
+    cases.append((np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0, np.int64)))
+    cases.append((np.array([5, 5, 7]), np.array([7, 9, 9]), np.array([1, 5, 9, 11])))
+    for added, removed, around in cases:
+        got = step_tet_sets(added.astype(np.int64), removed.astype(np.int64), around.astype(np.int64))
+        for g, w in zip(got, step_tet_sets_twin(added, removed, around)):
+            np.testing.assert_array_equal(g, w)
+    assert [g.tolist() for g in got] == [[5], [9], [1, 11], [1, 5, 9, 11]]

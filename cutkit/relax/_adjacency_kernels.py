@@ -141,26 +141,42 @@ def make_room(adj, capacity, corners, used, slack, pool_size):
 
 
 @njit(cache=True, nogil=True)
-def remove_from_adjacency(adj, tets, ids):
-    """Remove tets ``ids`` from the lists of their nodes (order of the rest kept)."""
+def remove_from_adjacency(adj, tets, ids, mark):
+    """Remove tets ``ids`` from the rows of their nodes (the order of the rest kept).
+
+    Each node's row is compacted once, however many of its tets go: the
+    tets are marked in ``mark`` (one flag per tet id, all False on entry and
+    on return) and every slot is kept or dropped by its mark.
+    """
+    k = 0
+    corners = np.empty(4 * ids.shape[0], np.int64)
     for q in range(ids.shape[0]):
-        t = ids[q]
+        mark[ids[q]] = True
         for c in range(4):
-            i = tets[t, c]
-            s0 = adj.start[i]
-            k_out = 0
-            for k in range(adj.degree[i]):
-                if adj.tets[s0 + k] != t:
-                    if k_out != k:  # element by element: a row slice copy costs more than its six reads
-                        a, b = s0 + k_out, s0 + k
-                        adj.tets[a] = adj.tets[b]
-                        adj.corner[a] = adj.corner[b]
-                        for m in range(3):
-                            adj.opposite[a, m] = adj.opposite[b, m]
-                        for m in range(adj.terms.shape[1]):
-                            adj.terms[a, m] = adj.terms[b, m]
-                    k_out += 1
-            adj.degree[i] = k_out
+            corners[k] = tets[ids[q], c]
+            k += 1
+    corners.sort()
+    for q in range(k):
+        if q > 0 and corners[q] == corners[q - 1]:
+            continue
+        i = corners[q]
+        s0 = adj.start[i]
+        k_out = 0
+        for r in range(adj.degree[i]):
+            if mark[adj.tets[s0 + r]]:
+                continue
+            if k_out != r:  # element by element: a row slice copy costs more than its six reads
+                a, b = s0 + k_out, s0 + r
+                adj.tets[a] = adj.tets[b]
+                adj.corner[a] = adj.corner[b]
+                for m in range(3):
+                    adj.opposite[a, m] = adj.opposite[b, m]
+                for m in range(adj.terms.shape[1]):
+                    adj.terms[a, m] = adj.terms[b, m]
+            k_out += 1
+        adj.degree[i] = k_out
+    for q in range(ids.shape[0]):
+        mark[ids[q]] = False
 
 
 @njit(cache=True, nogil=True)

@@ -138,6 +138,7 @@ class ElementModel:
     adj_used: int = 0
     colour: np.ndarray = field(default=None)
     _classes: tuple | None = None
+    _tet_mark: np.ndarray | None = None  # scratch of remove_elements: a flag per element id
 
     @property
     def n_nodes(self) -> int:
@@ -237,7 +238,9 @@ class ElementModel:
         ids = np.asarray(ids, np.int64)
         if ids.size == 0:
             return
-        KA.remove_from_adjacency(self.adjacency, self.tets, ids)
+        if self._tet_mark is None or self._tet_mark.shape[0] < self.tets.shape[0]:
+            self._tet_mark = np.zeros(self.tets.shape[0], bool)  # all False between calls
+        KA.remove_from_adjacency(self.adjacency, self.tets, ids, self._tet_mark)
         corners = self.tets[ids].ravel()
         np.add.at(self.masses, corners, np.repeat(-self.mass_share[ids], 4))
         self.masses[corners[self.adj_degree[corners] == 0]] = 0.0  # exactly: what is left is rounding

@@ -130,3 +130,63 @@ def old_shape_corners(tets, X, x, n, moved, moved_from):
     ok = corner_edge_inverses(Xc[:q], Tinv)
     keep = np.flatnonzero(ok)
     return Xc[keep], xc[keep], Tinv[keep]
+
+
+@njit(cache=True, nogil=True)
+def _minus(a, b):
+    """Sorted unique ``a`` without the elements of sorted unique ``b``."""
+    out = np.empty(a.shape[0], np.int64)
+    k = 0
+    j = 0
+    for i in range(a.shape[0]):
+        while j < b.shape[0] and b[j] < a[i]:
+            j += 1
+        if j == b.shape[0] or b[j] != a[i]:
+            out[k] = a[i]
+            k += 1
+    return out[:k]
+
+
+@njit(cache=True, nogil=True)
+def _union(a, b):
+    """Sorted unique union of sorted unique ``a`` and ``b``."""
+    out = np.empty(a.shape[0] + b.shape[0], np.int64)
+    i = j = k = 0
+    while i < a.shape[0] or j < b.shape[0]:
+        if j == b.shape[0] or (i < a.shape[0] and a[i] < b[j]):
+            out[k] = a[i]
+            i += 1
+        elif i == a.shape[0] or b[j] < a[i]:
+            out[k] = b[j]
+            j += 1
+        else:
+            out[k] = a[i]
+            i += 1
+            j += 1
+        k += 1
+    return out[:k]
+
+
+@njit(cache=True, nogil=True)
+def step_tet_sets(added, removed, around):
+    """The tet sets a cut step hands over, each sorted and unique.
+
+    Parameters
+    ----------
+    added, removed : (a,), (r,) int64
+        Tets the step made and unmade (a tet may be both: made and unmade
+        within the step, never simulated).
+    around : (b,) int64, sorted unique
+        Tets around the nodes the step moved.
+
+    Returns
+    -------
+    (added, removed, again, old) : int64 arrays
+        Made and not unmade; unmade and not made; ``around`` neither made
+        nor unmade (their rest shape is made again); unmade or around (the
+        old shape's tets).
+    """
+    a, r = np.unique(added), np.unique(removed)
+    added_only, removed_only = _minus(a, r), _minus(r, a)
+    again = _minus(around, _union(added_only, removed_only))
+    return added_only, removed_only, again, _union(removed_only, around)

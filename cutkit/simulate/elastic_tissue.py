@@ -36,7 +36,7 @@ from cutkit.relax._adjacency_kernels import loaded_nodes, tets_around
 from cutkit.relax.growable import append_rows
 from cutkit.relax.vbd import DEFAULT_ATOL_N, local_step
 from cutkit.relax.materials import material_of_tets, prestress_of_tets
-from cutkit.simulate._kernels import old_shape_corners, place_through_old_shape
+from cutkit.simulate._kernels import old_shape_corners, place_through_old_shape, step_tet_sets
 from cutkit.simulate.tissue_base import TissueBase
 
 #: Each implicit step of a simulation is solved until its residual is below
@@ -197,26 +197,22 @@ class ElasticTissue(TissueBase):
         """
         cm, em = self.cm, self.em
         n_old, n_new = em.n_nodes, cm.n_points
-        added = np.asarray(res.added_tets, np.int64)
-        removed = np.asarray(res.removed_tets, np.int64)
-        both = np.intersect1d(added, removed)  # made and unmade within one step: never simulated
-        added, removed = np.setdiff1d(added, both), np.setdiff1d(removed, both)
         moved = np.asarray(res.moved_nodes, np.int64)
         old_moved = moved[moved < n_old]
-        around = tets_around(em.adjacency, old_moved)
+        # a tet made and unmade within the step is never simulated; the tets around moved nodes
+        # that the step did not touch get their rest shape again
+        added, removed, again, before = step_tet_sets(np.asarray(res.added_tets, np.int64),
+                                                      np.asarray(res.removed_tets, np.int64),
+                                                      tets_around(em.adjacency, old_moved))
         # the tissue as it was before the step, piecewise affine over the removed tets and those
         # around moved nodes: new and moved nodes are placed in it (see _through_old_shape)
-        old_shape = self._old_shape(np.union1d(removed, around), old_moved,
-                                    np.asarray(res.moved_from, np.float64)[moved < n_old])
+        old_shape = self._old_shape(before, old_moved, np.asarray(res.moved_from, np.float64)[moved < n_old])
         x_moved = self._through_old_shape(old_shape, old_moved)
         x_before = self.state.positions[old_moved].copy()
         if n_new > n_old:
             self._append_nodes(np.arange(n_old, n_new), old_shape)
-        # tets of moved nodes (and not otherwise touched) get their rest shape again
-        again = np.zeros(0, np.int64)
         if old_moved.size:
             self.state.positions[old_moved] = x_moved
-            again = np.setdiff1d(around, np.concatenate([added, removed]))
         em.remove_elements(np.concatenate([removed, again]))
         redo = np.concatenate([added, again])
         if redo.size:
