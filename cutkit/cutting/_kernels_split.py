@@ -186,6 +186,17 @@ def _find(keys, n, k):
     return -1
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _find_or_add(keys, counts, s, k):
+    """Index of ``k`` among ``keys[s, :counts[s]]``, appended first if missing (a dict's insertion order)."""
+    i = _find(keys[s], counts[s], k)
+    if i < 0:
+        i = counts[s]
+        counts[s] += 1
+        keys[s, i] = k
+    return i
+
+
 @njit(cache=True, nogil=True)
 def _loop_keys(ct, o):
     """The cut nodes of original tet ``o`` and the key of each: edge e -> e, face f -> -1 - f.
@@ -235,19 +246,9 @@ def _cut_loop(ct, o, tris, tri_side):
             ia, ib = _find(nodes, q, a), _find(nodes, q, b)
             if ia < 0 or ib < 0:
                 continue
-            i = _find(nxt_b[s], n_nxt[s], b)
-            if i < 0:
-                i = n_nxt[s]
-                n_nxt[s] += 1
-                nxt_b[s, i] = b
-            nxt_a[s, i] = a
-            for node, key in ((a, keys[ia]), (b, keys[ib])):
-                i = _find(copy_keys[s], n_copy[s], key)
-                if i < 0:
-                    i = n_copy[s]
-                    n_copy[s] += 1
-                    copy_keys[s, i] = key
-                copy_nodes[s, i] = node
+            nxt_a[s, _find_or_add(nxt_b, n_nxt, s, b)] = a
+            copy_nodes[s, _find_or_add(copy_keys, n_copy, s, keys[ia])] = a
+            copy_nodes[s, _find_or_add(copy_keys, n_copy, s, keys[ib])] = b
     none = np.zeros(0, np.int64)
     m = n_nxt[0]
     if m == 0 or m != n_nxt[1]:

@@ -76,6 +76,17 @@ def add_to_adjacency(adj, tets, rows, ids):
             adj.degree[i] += 1
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _copy_slot(adj, a, b):
+    """Slot b of the pool into slot a, element by element (a row slice copy costs more than its reads)."""
+    adj.tets[a] = adj.tets[b]
+    adj.corner[a] = adj.corner[b]
+    for m in range(3):
+        adj.opposite[a, m] = adj.opposite[b, m]
+    for m in range(adj.terms.shape[1]):
+        adj.terms[a, m] = adj.terms[b, m]
+
+
 @njit(cache=True, nogil=True)
 def make_room(adj, capacity, corners, used, slack, pool_size):
     """Give the row of every node in ``corners`` room for as many more slots as it occurs there.
@@ -127,13 +138,7 @@ def make_room(adj, capacity, corners, used, slack, pool_size):
         cap = max(2 * capacity[i], need + slack)
         s0 = adj.start[i]
         for k in range(adj.degree[i]):
-            a, b = pos + k, s0 + k
-            adj.tets[a] = adj.tets[b]
-            adj.corner[a] = adj.corner[b]
-            for m in range(3):
-                adj.opposite[a, m] = adj.opposite[b, m]
-            for m in range(adj.terms.shape[1]):
-                adj.terms[a, m] = adj.terms[b, m]
+            _copy_slot(adj, pos + k, s0 + k)
         adj.start[i] = pos
         capacity[i] = cap
         pos += cap
@@ -165,14 +170,8 @@ def remove_from_adjacency(adj, tets, ids, mark):
         for r in range(adj.degree[i]):
             if mark[adj.tets[s0 + r]]:
                 continue
-            if k_out != r:  # element by element: a row slice copy costs more than its six reads
-                a, b = s0 + k_out, s0 + r
-                adj.tets[a] = adj.tets[b]
-                adj.corner[a] = adj.corner[b]
-                for m in range(3):
-                    adj.opposite[a, m] = adj.opposite[b, m]
-                for m in range(adj.terms.shape[1]):
-                    adj.terms[a, m] = adj.terms[b, m]
+            if k_out != r:
+                _copy_slot(adj, s0 + k_out, s0 + r)
             k_out += 1
         adj.degree[i] = k_out
     for q in range(ids.shape[0]):
