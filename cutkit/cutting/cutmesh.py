@@ -173,26 +173,31 @@ class CutMesh:
                 b = np.zeros((new,) + a.shape[1:]); b[:cap] = a; setattr(self, name, b)
         d = -np.ones((new, 4), np.int64); d[:cap] = self._def_nodes; self._def_nodes = d
 
-    def _new_node(self, nodes, w):
+    def _new_node(self, nodes, w, lo=None):
         self._grow_nodes()
         i = self.n_points
         self.n_points += 1
-        self._set_node(i, nodes, w)
+        self._set_node(i, nodes, w, lo)
         self._delta["added_nodes"].append(i)
         return i
 
-    def _set_node(self, i, nodes, w):
-        """Define node i by weights w (k,) on original nodes (k,) and interpolate x, X, uvw."""
-        K.set_node(self._x, self._X, _NO_UVW if self._uvw is None else self._uvw, self._def_nodes, self._def_w,
-                   i, np.asarray(nodes, np.int64), np.asarray(w, np.float64))
+    def _set_node(self, i, nodes, w, lo=None):
+        """Define node i by weights w (k,) on original nodes (k,) and interpolate x, X, uvw; with
+        ``lo``, the weights are clamped to at least ``lo`` first (``_clamp_bary``), in the same call."""
+        uvw = _NO_UVW if self._uvw is None else self._uvw
+        nodes, w = np.asarray(nodes, np.int64), np.asarray(w, np.float64)
+        if lo is None:
+            K.set_node(self._x, self._X, uvw, self._def_nodes, self._def_w, i, nodes, w)
+        else:
+            K.set_node_clamped(self._x, self._X, uvw, self._def_nodes, self._def_w, i, nodes, w, float(lo))
 
-    def _move_node(self, i, nodes, w):
+    def _move_node(self, i, nodes, w, lo=None):
         # the rest position before the step's first move of the node: the tissue maps the
         # node's new place through the old shape of the tets around it
         moved_from = self._delta["moved_from"]
         if i not in moved_from:
             moved_from[i] = self._X[i].copy()
-        self._set_node(i, nodes, w)
+        self._set_node(i, nodes, w, lo)
         self._delta["moved_nodes"].append(i)
 
     @property
@@ -335,21 +340,21 @@ class CutMesh:
     def _update_face_node(self, f):
         """Create or move the node(s) of global face f after its cut state or crossing changed."""
         n = self.face_cut_count(f)
-        if n == 1:
-            fv = self.faces[f].tolist()
+        if n == 1:  # the notch node F: where the blade crossed the face
             b = self.face_bary.get(f)
             if b is None:
                 # default crack tip: halfway from the edge node to the opposite vertex
+                fv = self.faces[f].tolist()
                 e = next(e for e in self.face_edges[f].tolist() if self.edge_t[e] == self.edge_t[e])
                 b = [0.0, 0.0, 0.0]
                 a_, b_ = self._edge_bary_on_face(e, fv, b, 0.5)
                 opp = [i for i in range(3) if fv[i] != a_ and fv[i] != b_][0]
                 b[opp] += 0.5
-            b = _clamp_bary(b, FACE_BARY_MIN)
-            if self.face_node[f, 0] < 0:
-                self.face_node[f, 0] = self._new_node(fv, b)
+            i = int(self.face_node[f, 0])
+            if i < 0:
+                self.face_node[f, 0] = self._new_node(self.faces[f], b, FACE_BARY_MIN)
             else:
-                self._move_node(self.face_node[f, 0], fv, b)
+                self._move_node(i, self.faces[f], b, FACE_BARY_MIN)
         elif n == 2 and self.centre_nodes:
             # centre node C on the cut line: midpoint of the two edge nodes (Fig. 2c)
             fv = self.faces[f].tolist()
@@ -372,31 +377,19 @@ class CutMesh:
         return self._set_face_crossing(f, bary)
 
     def _set_face_crossing(self, f, bary):
-        bary = np.asarray(bary, np.float64)
-        self.face_bary[f] = bary
-        if self.face_ncut[f] != 1:
-            return False
-        i = int(self.face_node[f, 0])
-        if i < 0:
+        self.face_bary[f] = np.asarray(bary, np.float64)
+        if self.face_ncut[f] == 1:
             self._update_face_node(f)
             return True
-        # the notch node F follows the blade (what _update_face_node does, in one kernel call)
-        moved_from = self._delta["moved_from"]
-        if i not in moved_from:
-            moved_from[i] = self._X[i].copy()
-        K.set_node_clamped(self._x, self._X, _NO_UVW if self._uvw is None else self._uvw, self._def_nodes,
-                           self._def_w, i, self.faces[f], bary, FACE_BARY_MIN)
-        self._delta["moved_nodes"].append(i)
-        return True
+        return False
 
     def move_tip_node(self, o):
         """Move the T node(s) of a cut tet to its recorded tip (no topology change)."""
         if self.tet_T[o, 0] < 0 or o not in self.tip_bary:
             return
-        tb = _clamp_bary(self.tip_bary[o], TET_BARY_MIN)
         for c in range(2):
             if self.tet_T[o, c] >= 0:
-                self._move_node(self.tet_T[o, c], self.orig_tets[o], tb)
+                self._move_node(self.tet_T[o, c], self.orig_tets[o], self.tip_bary[o], TET_BARY_MIN)
 
     # ------------------------------------------------------------------ subdivision
     def tet_mask(self, o):

@@ -88,6 +88,20 @@ def _copy_slot(adj, a, b):
 
 
 @njit(cache=True, nogil=True)
+def _runs(a):
+    """The distinct values of sorted ``a`` (k,) and how often each occurs: (u,), (u,) int64."""
+    values = np.empty(a.shape[0], np.int64)
+    counts = np.zeros(a.shape[0], np.int64)
+    u = -1
+    for q in range(a.shape[0]):
+        if q == 0 or a[q] != a[q - 1]:
+            u += 1
+            values[u] = a[q]
+        counts[u] += 1
+    return values[:u + 1], counts[:u + 1]
+
+
+@njit(cache=True, nogil=True)
 def make_room(adj, capacity, corners, used, slack, pool_size):
     """Give the row of every node in ``corners`` room for as many more slots as it occurs there.
 
@@ -110,38 +124,26 @@ def make_room(adj, capacity, corners, used, slack, pool_size):
     end : int
         The pool's slots in use afterwards; ``-end - 1`` when ``end > pool_size`` (nothing moved).
     """
-    nodes = np.sort(corners)
+    nodes, counts = _runs(np.sort(corners))
     end = used
     for q in range(nodes.shape[0]):
-        if q + 1 < nodes.shape[0] and nodes[q + 1] == nodes[q]:
-            continue  # the last of a run counts it
-        i = nodes[q]
-        count = 1
-        while q - count >= 0 and nodes[q - count] == i:
-            count += 1
-        need = adj.degree[i] + count
-        if need > capacity[i]:
-            end += max(2 * capacity[i], need + slack)
+        need = adj.degree[nodes[q]] + counts[q]
+        if need > capacity[nodes[q]]:
+            end += max(2 * capacity[nodes[q]], need + slack)
     if end > pool_size:
         return -end - 1
     pos = used
     for q in range(nodes.shape[0]):
-        if q + 1 < nodes.shape[0] and nodes[q + 1] == nodes[q]:
-            continue
         i = nodes[q]
-        count = 1
-        while q - count >= 0 and nodes[q - count] == i:
-            count += 1
-        need = adj.degree[i] + count
+        need = adj.degree[i] + counts[q]
         if need <= capacity[i]:
             continue
-        cap = max(2 * capacity[i], need + slack)
         s0 = adj.start[i]
         for k in range(adj.degree[i]):
             _copy_slot(adj, pos + k, s0 + k)
         adj.start[i] = pos
-        capacity[i] = cap
-        pos += cap
+        capacity[i] = max(2 * capacity[i], need + slack)
+        pos += capacity[i]
     return end
 
 
@@ -153,18 +155,12 @@ def remove_from_adjacency(adj, tets, ids, mark):
     tets are marked in ``mark`` (one flag per tet id, all False on entry and
     on return) and every slot is kept or dropped by its mark.
     """
-    k = 0
     corners = np.empty(4 * ids.shape[0], np.int64)
     for q in range(ids.shape[0]):
         mark[ids[q]] = True
         for c in range(4):
-            corners[k] = tets[ids[q], c]
-            k += 1
-    corners.sort()
-    for q in range(k):
-        if q > 0 and corners[q] == corners[q - 1]:
-            continue
-        i = corners[q]
+            corners[4 * q + c] = tets[ids[q], c]
+    for i in np.unique(corners):
         s0 = adj.start[i]
         k_out = 0
         for r in range(adj.degree[i]):
@@ -225,13 +221,7 @@ def tets_around(adj, nodes):
         for r in range(s0, s0 + adj.degree[nodes[q]]):
             found[k] = adj.tets[r]
             k += 1
-    found.sort()
-    k = 0
-    for r in range(total):
-        if r == 0 or found[r] != found[r - 1]:
-            found[k] = found[r]
-            k += 1
-    return found[:k].copy()
+    return np.unique(found)
 
 
 #: Blocks the nodes of :func:`awake_after_sweep` are split into for its threads.

@@ -30,13 +30,13 @@ from collections import namedtuple
 import numpy as np
 from numba import njit, prange
 
+from cutkit.mesh.topology import TET_EDGES
+
 #: tets (m, 4) int64, Dminv (m, 3, 3) float64, volume (m,) float64 (0: inactive), mu, lam (m,) float64 MPa
 Elements = namedtuple("Elements", ["tets", "Dminv", "volume", "mu", "lam"])
 
-#: Corner pairs (j, c) of a tet's six edges, in the order of the first six node-term columns.
-EDGE_PAIRS = ((0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3))
-_EDGE_PAIRS = np.array(EDGE_PAIRS, np.int64)
-#: Columns of a tet's node-term row: the six edge weights V mu b_j . b_c, then 1 / det Dm,
+#: Columns of a tet's node-term row: the six edge weights V mu b_j . b_c (corner pairs (j, c)
+#: in the order of the mesh core's local edges, ``TET_EDGES``), then 1 / det Dm,
 #: V (lam + mu) and V mu.
 NODE_TERMS = 9
 #: For corner c, the corners (j, k, l) with (j, c, k, l) an even permutation of (0, 1, 2, 3):
@@ -75,7 +75,7 @@ def node_term_rows(Dminv, volume, mu, lam):
             B[3, d] = Dminv[t, 2, d]
         vm = volume[t] * mu[t]
         for col in range(6):
-            j, c = _EDGE_PAIRS[col, 0], _EDGE_PAIRS[col, 1]
+            j, c = TET_EDGES[col, 0], TET_EDGES[col, 1]
             # summed in the order NumPy's einsum pairs them (0 and 2, then 1): the rows are
             # bit-identical to the NumPy version's (tests/_twins_elastic.node_term_rows)
             out[t, col] = vm * ((B[j, 0] * B[c, 0] + B[j, 2] * B[c, 2]) + B[j, 1] * B[c, 1])
