@@ -29,8 +29,71 @@ def available_cores() -> int:
         return max(1, os.cpu_count() or 1)
 
 
+#: How long :func:`busy_cores_now` watches the processor, seconds.  Long
+#: enough to see a running job (a few scheduler ticks), short enough not to
+#: be felt at a command's start; it is only paid when the load average
+#: says the cores are busy.
+BUSY_SAMPLE_S = 0.2
+
+#: The kernel's aggregate processor counters (Linux).
+PROC_STAT = "/proc/stat"
+
+
+def _cpu_times(path=PROC_STAT):
+    """(busy, total) jiffies of all processors since boot, or None where the file is not there."""
+    try:
+        with open(path) as f:
+            fields = f.readline().split()
+    except OSError:
+        return None
+    if not fields or fields[0] != "cpu" or len(fields) < 5:
+        return None
+    ticks = [int(v) for v in fields[1:]]
+    idle = ticks[3] + (ticks[4] if len(ticks) > 4 else 0)  # idle + iowait
+    return sum(ticks) - idle, sum(ticks)
+
+
+def busy_cores_now(interval=BUSY_SAMPLE_S, path=PROC_STAT):
+    """Cores busy over the next ``interval`` seconds (processor counters sampled twice), or None.
+
+    Unlike the load average, which remembers the last minute, this sees
+    only what runs now: a run that has just ended (ours, the previous
+    command) no longer counts.
+
+    Parameters
+    ----------
+    interval : float
+        Seconds between the two samples.
+    path : str
+        The counters file (Linux ``/proc/stat``); None is returned where it
+        cannot be read.
+
+    Returns
+    -------
+    busy : float or None
+        Busy cores of the whole machine (0 .. its processor count).
+    """
+    import time
+
+    first = _cpu_times(path)
+    if first is None:
+        return None
+    time.sleep(interval)
+    second = _cpu_times(path)
+    if second is None or second[1] <= first[1]:
+        return None
+    share = (second[0] - first[0]) / (second[1] - first[1])
+    return share * (os.cpu_count() or 1)
+
+
 def free_cores(cores: int | None = None) -> int:
-    """Cores not busy with other work: ``cores`` minus the 1-minute load average, at least 1.
+    """Cores not busy with other work, at least 1.
+
+    ``cores`` minus the 1-minute load average; where that says some cores
+    are busy, the processor is watched for :data:`BUSY_SAMPLE_S` and the
+    cores busy *now* are taken instead (the load average still counts a run
+    that ended seconds ago: a second command started right after a first
+    would otherwise get one thread on an idle 2-core machine).
 
     Parameters
     ----------
@@ -42,6 +105,10 @@ def free_cores(cores: int | None = None) -> int:
         load = os.getloadavg()[0]
     except (AttributeError, OSError):  # pragma: no cover - Windows
         return cores
+    if int(round(load)) > 0:
+        busy = busy_cores_now()
+        if busy is not None:
+            load = min(load, busy)
     return int(min(cores, max(1, cores - int(round(load)))))
 
 

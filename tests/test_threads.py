@@ -18,10 +18,60 @@ def _restore_threads():
 def test_default_is_free_cores_never_more_than_cores(monkeypatch):
     cores = available_cores()
     monkeypatch.setattr("os.getloadavg", lambda: (cores + 3.0, 0.0, 0.0))
+    monkeypatch.setattr("cutkit.threads.busy_cores_now", lambda: float(cores + 3))
     assert free_cores(cores) == 1
     monkeypatch.setattr("os.getloadavg", lambda: (0.0, 0.0, 0.0))
     assert free_cores(cores) == cores
     assert 1 <= default_threads() <= cores
+
+
+def test_a_load_that_has_ended_does_not_count(monkeypatch):
+    """The load average remembers a run that just ended; the cores busy now decide."""
+    calls = []
+
+    def idle_now():
+        calls.append(1)
+        return 0.1
+
+    monkeypatch.setattr("os.getloadavg", lambda: (4.0, 0.0, 0.0))
+    monkeypatch.setattr("cutkit.threads.busy_cores_now", idle_now)
+    assert free_cores(2) == 2 and calls
+    monkeypatch.setattr("cutkit.threads.busy_cores_now", lambda: 1.2)
+    assert free_cores(2) == 1
+    monkeypatch.setattr("cutkit.threads.busy_cores_now", lambda: None)  # no counters: the load average
+    assert free_cores(2) == 1
+    calls.clear()
+    monkeypatch.setattr("os.getloadavg", lambda: (0.2, 0.0, 0.0))
+    monkeypatch.setattr("cutkit.threads.busy_cores_now", idle_now)
+    assert free_cores(2) == 2 and not calls  # an idle load average is believed without a sample
+
+
+def test_busy_cores_now_reads_the_processor_counters(tmp_path):
+    import threading
+    import time
+
+    from cutkit.threads import _cpu_times, busy_cores_now
+
+    stat = tmp_path / "stat"
+    stat.write_text("cpu  100 5 50 800 45 0 0 0 0 0\ncpu0 1 2 3 4 5\n")
+    assert _cpu_times(stat) == (155, 1000)  # busy: user + nice + system; idle: idle + iowait
+    assert busy_cores_now(0.01, tmp_path / "missing") is None
+    stat.write_text("intr 1 2 3\n")
+    assert busy_cores_now(0.01, stat) is None
+    # a thread spinning through the sample keeps at least half a core busy, whatever else runs
+    stop = time.monotonic() + 0.6
+
+    def spin():
+        while time.monotonic() < stop:
+            pass
+
+    th = threading.Thread(target=spin)
+    th.start()
+    try:
+        busy = busy_cores_now(0.3)
+    finally:
+        th.join()
+    assert busy is not None and busy >= 0.5, busy
 
 
 def test_explicit_and_environment(monkeypatch):
