@@ -8,7 +8,11 @@ written (``to_model``):
   distribution over paths is reported);
 * lost edges: original edges the swept surface crossed strictly inside
   (parameter in [1e-6, 1 - 1e-6]) that are not cut, as a fraction of the
-  crossed ones;
+  crossed ones, and by reason (a face around the edge already had two cut
+  edges; deferred, see docs/cutting.md; other).  The blade is lifted and
+  the mesh rebased between strokes as the runtime does, so a stroke's
+  losses are counted on its own original edges (a second stroke crossing
+  the first cuts the first's sub-tetrahedra);
 * new tetrahedra per cut tetrahedron.
 
     python benchmarks/cut_quality.py [--json] [--paths 20]
@@ -23,59 +27,93 @@ import numpy as np
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "tests"))
 
-KINDS = ("straight", "curved", "reversal", "crossing", "vertex", "face", "guillotine")
+KINDS = ("straight", "curved", "reversal", "reentry", "crossing", "vertex", "face", "guillotine", "press")
 TREMORS = (0.0, 0.1, 0.3, 1.0)
 
 
-def measure(p, t, poses, blade_length=10.0):
-    from cutkit.cutting import CutMesh, cut_step, to_model
+def _crossed_edges(cm, prev, pose):
+    """Original edges of the current stroke that the step from ``prev`` to ``pose`` crossed strictly inside."""
     from cutkit.cutting._kernels import edge_cross
+
+    p = cm.points[:cm.n_orig_points]
+    out = set()
+    for tri in (np.array([prev[0], prev[1], pose[1]]), np.array([prev[0], pose[1], pose[0]])):
+        lo, hi = tri.min(axis=0), tri.max(axis=0)
+        a, b = p[cm.edges[:, 0]], p[cm.edges[:, 1]]
+        for e in np.flatnonzero(np.all((np.minimum(a, b) <= hi) & (np.maximum(a, b) >= lo), axis=1)):
+            s = edge_cross(p[cm.edges[e, 0]], p[cm.edges[e, 1]], tri)
+            if 1e-6 <= s <= 1 - 1e-6:
+                out.add(int(e))
+    return out
+
+
+def _stroke_losses(cm, crossed):
+    """Crossed edges of the stroke left uncut, by reason: (refused: a third cut edge on a face, deferred,
+    other); see ``tests/_cut_paths.uncut_reason``."""
+    from _cut_paths import uncut_reason
+
+    why = [uncut_reason(cm, e) for e in crossed - set(np.flatnonzero(np.isfinite(cm.edge_t)).tolist())]
+    return why.count("refused"), why.count("deferred"), why.count(None)
+
+
+def measure(p, t, poses, blade_length=10.0):
+    """Cut along ``poses``, as ``cutkit cut`` does: a stroke ends (the mesh is rebased) at each ``None``
+    (the blade lifted) and wherever the blade has left the tissue after cutting.
+
+    Returns (worst cut-made angle, its ratio to the model tet's, losses by reason (3,), crossed
+    edges, cut tets, new tets); losses and crossings are counted per stroke on its own original edges.
+    """
+    from cutkit.cutting import CutMesh, cut_step, to_model
+    from cutkit.cutting.rebase import blade_in_tissue, rebase_if_left
     from cutkit.mesh.quality import min_dihedral_angles
 
     cm = CutMesh(p, t, blade_length=blade_length)
-    crossed = set()
+    crossed, lost, n_crossed, cut, new = set(), np.zeros(3, np.int64), 0, 0, 0
+
+    def end_stroke():
+        nonlocal crossed, n_crossed, cut, new
+        lost[:] += _stroke_losses(cm, crossed)
+        n_crossed += len(crossed)
+        cut, new = cut + len(cm.subtets), new + sum(len(v) for v in cm.subtets.values())
+        crossed = set()
+
     for pose in poses:
         if pose is None:
-            # the blade leaves without a rebase: losses are counted on the original edges
-            cm.prev_pose, cm.tip_tet, cm.active_tets = None, -1, np.zeros(0, np.int64)
+            end_stroke()
+            cm.rebase()
             continue
         prev = cm.prev_pose
         cut_step(cm, *pose)
-        if prev is None:
-            continue
-        P1, Q1 = cm.prev_pose
-        for tri in (np.array([prev[0], prev[1], Q1]), np.array([prev[0], Q1, P1])):
-            lo, hi = tri.min(axis=0), tri.max(axis=0)
-            a, b = p[cm.edges[:, 0]], p[cm.edges[:, 1]]
-            for e in np.flatnonzero(np.all((np.minimum(a, b) <= hi) & (np.maximum(a, b) >= lo), axis=1)):
-                s = edge_cross(p[cm.edges[e, 0]], p[cm.edges[e, 1]], tri)
-                if 1e-6 <= s <= 1 - 1e-6:
-                    crossed.add(int(e))
+        if prev is not None:
+            crossed |= _crossed_edges(cm, prev, cm.prev_pose)
+        if not blade_in_tissue(cm):
+            end_stroke()
+            rebase_if_left(cm)
+    end_stroke()
     m = to_model(cm)
     is_new = m.cell_data["new_tet"] == 1
     worst = rel = None
     if is_new.any():
         ang = min_dihedral_angles(m.points, m.tets[is_new])
-        orig = min_dihedral_angles(p, t[cm.tet_origin[is_new]])
+        orig = min_dihedral_angles(p, t[cm.model_tet[cm.tet_origin[is_new]]])
         worst, rel = float(ang.min()), float((ang / orig).min())
-    lost = len(crossed - set(np.flatnonzero(np.isfinite(cm.edge_t)).tolist()))
-    return worst, rel, lost, len(crossed), len(cm.subtets), sum(len(v) for v in cm.subtets.values())
+    return worst, rel, lost, n_crossed, cut, new
 
 
 def run(n_paths):
     from _cut_paths import delaunay_ball, jittered_block, make_path
     from cutkit.mesh.generate import box_mesh
     from cutkit.cutting import CutMesh, cut_step
+    from cutkit.mesh.quality import min_dihedral_angles
 
     meshes = {"jittered block": jittered_block((5, 3, 3), 0.2, 0), "delaunay ball": delaunay_ball()}
     out = {}
     for name, (p, t) in meshes.items():
         L = p.max(axis=0)
-        from cutkit.mesh.quality import min_dihedral_angles
         out[f"{name}: original mesh"] = {"tets": int(len(t)),
                                          "worst_angle_deg": float(min_dihedral_angles(p, t).min())}
         for tremor in TREMORS:
-            worst, rels, lost, crossed, cut, new, by_kind = [], [], 0, 0, 0, 0, {}
+            worst, rels, lost, crossed, cut, new, by_kind = [], [], np.zeros(3, np.int64), 0, 0, 0, {}
             for kind in KINDS:
                 kl = kc = 0
                 for seed in range(n_paths):
@@ -84,7 +122,7 @@ def run(n_paths):
                         worst.append(w)
                         rels.append(r)
                     lost, crossed, cut, new = lost + lo, crossed + cr, cut + c, new + nw
-                    kl, kc = kl + lo, kc + cr
+                    kl, kc = kl + int(lo.sum()), kc + cr
                 by_kind[kind] = kl / max(kc, 1)
             w = np.array(worst)
             out[f"{name}, tremor {tremor} mm"] = {
@@ -93,7 +131,9 @@ def run(n_paths):
                 "paths_below_5_deg": int((w < 5).sum()),
                 "worst_angle_over_original_tet_min": float(np.min(rels)),
                 "worst_angle_over_original_tet_median": float(np.median(rels)),
-                "lost_edge_fraction": lost / max(crossed, 1), "lost_edge_fraction_by_kind": by_kind,
+                "lost_edge_fraction": int(lost.sum()) / max(crossed, 1), "lost_edge_fraction_by_kind": by_kind,
+                "lost_edges_by_reason": {"third_cut_edge_on_a_face": int(lost[0]), "deferred": int(lost[1]),
+                                         "other": int(lost[2])},
                 "new_tets_per_cut_tet": new / max(cut, 1)}
     # a long steady incision
     p, t = box_mesh((20, 4, 4))
@@ -116,7 +156,7 @@ def main():
     else:
         for k, r in res.items():
             print(k, ", ".join(f"{a} {b:.3g}" if not isinstance(b, dict) else
-                               f"{a} " + " ".join(f"{c}:{d:.3f}" for c, d in b.items()) for a, b in r.items()))
+                               f"{a} " + " ".join(f"{c}:{d:.3g}" for c, d in b.items()) for a, b in r.items()))
 
 
 if __name__ == "__main__":

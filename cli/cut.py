@@ -18,7 +18,8 @@ def command(model, trajectory, out_dir, blade_length, centre_nodes):
 
     from cutkit.io.atomic import check_writable
     from cutkit.cli._ui import console, progress
-    from cutkit.cutting import CutMesh, cut_step, to_model
+    from cutkit.cutting import CutMesh, cut_step, cut_surface_faces, to_model
+    from cutkit.cutting.rebase import rebase_if_left
     from cutkit.cutting.trajectory import read_trajectory
     from cutkit.errors import InputError
     from cutkit.io.model_h5 import read_model, write_model
@@ -35,33 +36,40 @@ def command(model, trajectory, out_dir, blade_length, centre_nodes):
     os.makedirs(out_dir, exist_ok=True)
 
     def frame_data():
-        tnode = np.zeros(cm.n_points, np.uint8)
-        tnode[cm.tet_T[cm.tet_T >= 0]] = 1
-        m = to_model(cm, tet_model, point_data={"cut_surface_node": tnode})  # no orphan node
+        on_cut = np.zeros(cm.n_points, np.uint8)
+        on_cut[cut_surface_faces(cm).ravel()] = 1  # every stroke's
+        m = to_model(cm, tet_model, point_data={"cut_surface_node": on_cut})  # no orphan node
         pd = {"new_node": m.point_data["new_node"], "cut_surface_node": m.point_data["cut_surface_node"]}
         if tet_model.texture is not None and m.texcoords is not None:
             pd["texture_rgb"] = np.asarray(tet_model.texture.sample_rgb(m.texcoords))
         return m, pd, {"new_tet": m.cell_data["new_tet"]}
 
+    strokes = 0
     with SeriesWriter(out_dir, "cut") as series, progress() as bar:
         task = bar.add_task("cutting", total=len(traj.t))
         for i in range(len(traj.t)):
             cut_step(cm, traj.tip[i], traj.a[i])
+            # the blade out of the tissue after a stroke that cut: the next stroke may cross it
+            strokes += rebase_if_left(cm)
             m, pd, cd = frame_data()
             series.write(float(traj.t[i]), m.points, m.tets, point_data=pd, cell_data=cd)
             bar.update(task, advance=1)
     m, _, _ = frame_data()
     write_model(os.path.join(out_dir, "model.h5"), m)
     # the worst angle of the written mesh: cut nodes move after their tets are made
-    new = m.tets[m.cell_data["new_tet"] == 1]
+    is_new = m.cell_data["new_tet"] == 1
+    new = m.tets[is_new]
     worst = float(min_dihedral_angles(m.points, new).min()) if len(new) else 180.0
-    if not cm.subtets:
+    # model tets cut, over every stroke (the cut-made tets' model tets; one truth, the written mesh)
+    n_cut = np.unique(cm.model_tet[cm.tet_origin[is_new]]).size
+    strokes += bool(cm.subtets)  # the last stroke, if it cut and did not end outside
+    if not len(new):
         lo, hi = tet_model.points.min(axis=0), tet_model.points.max(axis=0)
         console.print(f"[yellow]warning:[/] the blade never cut the tissue: no tet was cut (the model spans "
                       f"{', '.join(f'{a:g}..{b:g}' for a, b in zip(lo, hi))} mm in x, y, z; the trajectory "
                       f"{', '.join(f'{a:g}..{b:g}' for a, b in zip(traj.tip.min(axis=0), traj.tip.max(axis=0)))})")
         console.print(f"{len(traj.t)} poses, nothing cut -> {out_dir}/cut.pvd, {out_dir}/model.h5")
         return
-    console.print(f"{len(traj.t)} poses, {len(cm.subtets)} tets cut into "
-                  f"{sum(len(v) for v in cm.subtets.values())}, worst new dihedral {worst:.1f} deg "
+    console.print(f"{len(traj.t)} poses, {strokes} stroke{'s' * (strokes != 1)}, {n_cut} tets cut into "
+                  f"{len(new)}, worst new dihedral {worst:.1f} deg "
                   f"-> {out_dir}/cut.pvd, {out_dir}/model.h5")

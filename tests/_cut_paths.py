@@ -130,3 +130,20 @@ def crossing_strokes(rng, L, through=True, tremor=0.0):
 def lift(cm):
     """The blade leaves the tissue: the next pose starts a new sweep, which may cross this one (rebase)."""
     cm.rebase()
+
+
+def uncut_reason(cm, e):
+    """Why original edge ``e`` of the current stroke is not cut: "refused", "deferred" or None.
+
+    An edge and its coincident copies along an earlier stroke's cut
+    (``edge_twins``) are cut together or not at all (docs/cutting.md):
+    refused when a face around one of them already has two cut edges (a
+    third cannot be cut in one stroke), deferred when the cut is waiting
+    (two opposite cut edges alone in a tet).
+    """
+    group = [int(e)] + list(cm.edge_twins.get(int(e), ()))
+    if any(cm.face_ncut[f] >= 2 for g in group for f in cm.faces_of_edge(g)):
+        return "refused"
+    if any(g in cm.pending_edges for g in group):
+        return "deferred"
+    return None

@@ -56,3 +56,37 @@ def test_cut_cli_writes_no_orphan_node_and_reports_the_written_angle(tmp_path):
     worst = float(re.search(r"worst new dihedral ([0-9.]+) deg", r.output.replace("\n", " ")).group(1))
     new = m.tets[m.cell_data["new_tet"] == 1]
     assert worst == pytest.approx(min_dihedral_angles(m.points, new).min(), abs=0.06)
+
+
+def test_cut_cli_a_second_stroke_crosses_the_first(tmp_path):
+    """Two through-strokes in one trajectory, the blade lifted out between them: the second cuts
+    the first's sub-tetrahedra (the cut is rebased when the blade has left), four pieces."""
+    from _twins_cut import components
+
+    from cutkit.cutting.trajectory import Trajectory
+
+    p, t = box_mesh((6, 3, 3))
+    write_model(tmp_path / "m.h5", TetModel(points=p, tets=t, labels=np.ones(len(t), np.int32)))
+    down = np.array([0.0, 0.0, -1.0])
+    tips = [[x, 1.37, -0.5] for x in np.linspace(-0.5, 6.5, 15)]  # first stroke, through, along x
+    tips += [[6.5, 1.37, 5.0], [2.37, -0.5, 5.0], [2.37, -0.5, -0.5]]  # lifted out, over, down beside
+    tips += [[2.37, y, -0.5] for y in np.linspace(-0.5, 3.5, 9)[1:]]  # second stroke, along y
+    tips = np.array(tips)
+    k = len(tips)
+    traj = Trajectory(t=np.arange(k) * 0.01, tip=tips, a=np.tile(down, (k, 1)),
+                      n=np.tile([1.0, 0.0, 0.0], (k, 1)), blade_length=5.0)
+    write_trajectory(tmp_path / "x.csv", traj)
+    out = tmp_path / "out"
+    r = CliRunner().invoke(command, [str(tmp_path / "m.h5"), "--trajectory", str(tmp_path / "x.csv"),
+                                     "-o", str(out)])
+    assert r.exit_code == 0, r.output
+    assert "2 strokes" in r.output.replace("\n", " ")
+    m = read_model(out / "model.h5")
+    from cutkit.mesh.check import check_mesh
+    from cutkit.mesh.quality import signed_volumes
+
+    assert check_mesh(m.points, m.tets, m.labels).passed
+    assert signed_volumes(m.points, m.tets).sum() == pytest.approx(6 * 3 * 3, rel=1e-12)
+    assert components(m.tets) == 4
+    on_cut = m.point_data["cut_surface_node"] == 1
+    assert np.any(on_cut & (np.abs(m.points[:, 0] - 2.37) < 0.8)) and np.any(on_cut & (np.abs(m.points[:, 1] - 1.37) < 0.8))

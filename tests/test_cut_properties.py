@@ -15,10 +15,11 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
 
-from _cut_paths import KINDS, crossing_strokes, delaunay_ball, jittered_block, lift, make_path
+from _cut_paths import KINDS, crossing_strokes, delaunay_ball, jittered_block, lift, make_path, uncut_reason
 from cutkit.collision._swept_kernels import tri_tri  # noqa: F401  (compiled once for the oracle below)
 from cutkit.cutting import CutMesh, cut_step, to_model
 from cutkit.cutting._geometry import segment_triangle
+from cutkit.cutting.rebase import blade_in_tissue, rebase_if_left
 from cutkit.mesh.check import check_mesh
 from cutkit.mesh.generate import box_mesh
 from cutkit.mesh.quality import signed_volumes
@@ -69,11 +70,25 @@ def piece_volumes(cm):
     return np.bincount(lab, weights=signed_volumes(cm.points, t), minlength=k)
 
 
-def run_path(cm, poses, v0, check=True):
-    """Cut along ``poses``; returns the swept triangles of every step."""
-    swept = []
+def run_path(cm, poses, v0, check=True, end_strokes=False, on_stroke_end=None):
+    """Cut along ``poses``; returns the swept triangles of every step.
+
+    ``None`` lifts the blade (the mesh is rebased).  With ``end_strokes``
+    the stroke also ends wherever the blade has left the tissue
+    (:func:`~cutkit.cutting.rebase.rebase_if_left`, as ``cutkit cut`` does).
+    ``on_stroke_end(cm, swept)`` is called with each stroke's swept
+    triangles before its rebase and after the last step.
+    """
+    swept, stroke = [], []
+
+    def end():
+        if on_stroke_end is not None:
+            on_stroke_end(cm, stroke)
+        stroke.clear()
+
     for i, pose in enumerate(poses):
         if pose is None:
+            end()
             lift(cm)
             continue
         prev = cm.prev_pose
@@ -81,9 +96,14 @@ def run_path(cm, poses, v0, check=True):
         cut_step(cm, tip, a)
         if prev is not None:
             P1, Q1 = cm.prev_pose
-            swept += [(prev[0], prev[1], Q1), (prev[0], Q1, P1)]
+            stroke += [(prev[0], prev[1], Q1), (prev[0], Q1, P1)]
+            swept += stroke[-2:]
+        if end_strokes and not blade_in_tissue(cm):
+            end()
+            rebase_if_left(cm)
         if check:
             assert_clean(cm, v0, i)
+    end()
     return swept
 
 
@@ -93,7 +113,7 @@ def run_path(cm, poses, v0, check=True):
 def test_every_step_is_a_clean_mesh(name, kind, tremor, seed, blade_length):
     p, t, v0, L = mesh(name)
     cm = CutMesh(p, t, blade_length=blade_length)
-    run_path(cm, make_path(kind, np.random.default_rng(seed), L, tremor), v0)
+    run_path(cm, make_path(kind, np.random.default_rng(seed), L, tremor), v0, end_strokes=True)
 
 
 @pytest.mark.slow
@@ -119,23 +139,66 @@ def crossed_edges(p, edges, swept):
     return out
 
 
+#: Path kinds whose swept surface never folds over an edge or a face at tremor 0 (curved paths
+#: fold in tight bends, a blade pulled up and swept back in without leaving folds over its own
+#: cut, a blade pushed in along itself may stop with an edge deferred): every crossed edge is cut.
+UNFOLDED_KINDS = ["straight", "reversal", "crossing", "vertex", "edge", "face", "guillotine"]
+
+
+def stroke_losses(cm, stroke):
+    """(lost, refused, deferred): sets of this stroke's original edges crossed strictly inside and
+    left uncut; of those, the refused and the deferred (:func:`_cut_paths.uncut_reason`)."""
+    crossed = crossed_edges(cm.points[:cm.n_orig_points], cm.edges, stroke)
+    lost = crossed - set(np.flatnonzero(np.isfinite(cm.edge_t)).tolist())
+    why = {e: uncut_reason(cm, e) for e in lost}
+    return lost, {e for e in lost if why[e] == "refused"}, {e for e in lost if why[e] == "deferred"}
+
+
 @settings(max_examples=100, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-@given(st.sampled_from(["jittered", "delaunay"]), st.sampled_from(["straight", "guillotine"]),
-       st.integers(0, 2**31 - 1))
-def test_oracle_every_crossed_edge_is_cut(name, kind, seed):
-    """A steady straight blade cuts every original edge its swept surface crosses.
+@given(st.sampled_from(["jittered", "delaunay"]), st.sampled_from(UNFOLDED_KINDS),
+       st.integers(0, 2**31 - 1), st.sampled_from([2.5, 10.0]))
+def test_oracle_every_crossed_edge_is_cut(name, kind, seed, blade_length):
+    """A blade whose swept surface does not fold cuts every original edge it crosses, in every stroke.
 
     Curved paths and tremor can fold the swept surface over an edge or a
     face (a second crossing of an edge, a third cut edge on a face), which
-    one cut per edge cannot represent: those edges stay uncut (measured in
-    docs/cutting.md, ``benchmarks/cut_quality.py``).
+    one cut per edge and stroke cannot represent: those edges stay uncut
+    (measured in docs/cutting.md, ``benchmarks/cut_quality.py``; accounted
+    for by the next test).  The one exception here: an edge deferred (two
+    opposite cut edges alone in a tet) waits for the blade to move on, so a
+    blade that stops in the tissue may leave it uncut.
     """
     p, t, v0, L = mesh(name)
-    cm = CutMesh(p, t, blade_length=10.0)
-    swept = run_path(cm, make_path(kind, np.random.default_rng(seed), L), v0, check=False)
-    crossed = crossed_edges(p, cm.edges, swept)
-    cut = set(np.flatnonzero(np.isfinite(cm.edge_t)).tolist())
-    assert crossed <= cut, sorted(crossed - cut)[:10]
+    cm = CutMesh(p, t, blade_length=blade_length)
+    lost = []
+
+    def account(cm, stroke):
+        lost_now, _, deferred = stroke_losses(cm, stroke)
+        lost.extend(lost_now - deferred)
+
+    run_path(cm, make_path(kind, np.random.default_rng(seed), L), v0, check=False, end_strokes=True,
+             on_stroke_end=account)
+    assert not lost, sorted(lost)[:10]
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.sampled_from(["jittered", "delaunay"]), st.sampled_from(KINDS), st.sampled_from([0.0, 0.3, 1.0]),
+       st.integers(0, 2**31 - 1), st.sampled_from([2.5, 10.0]))
+def test_every_lost_edge_is_a_documented_refusal(name, kind, tremor, seed, blade_length):
+    """Any path: a crossed edge left uncut is one a face around which (or around a coincident copy
+    along an earlier stroke's cut) had two cut edges already (a third cannot be cut in one stroke)
+    or one deferred (two opposite cut edges alone in a tet)."""
+    p, t, v0, L = mesh(name)
+    cm = CutMesh(p, t, blade_length=blade_length)
+    other = []
+
+    def account(cm, stroke):
+        lost, refused, deferred = stroke_losses(cm, stroke)
+        other.extend(lost - refused - deferred)
+
+    run_path(cm, make_path(kind, np.random.default_rng(seed), L, tremor), v0, check=False, end_strokes=True,
+             on_stroke_end=account)
+    assert not other, sorted(other)[:10]
 
 
 def test_through_cut_gives_two_pieces():
