@@ -198,19 +198,24 @@ def best_cone_apex_twin(x, corners, tb, blends, tris, bary_min):
 
 def best_compact_split_twin(x, candidates, vol_min, n_rotations):
     """The compact split choice by plain loops: ``candidates`` is a list of (rotation, side, tets);
-    returns the two picked candidates' indices and the worse side's angle, or (-1, -1, 0.0)."""
+    returns the two picked candidates' indices and the worse side's angle, or (-1, -1, 0.0).
+    Scores within ``tie`` degrees are equal (the first kept); rotations whose worse sides tie are
+    ranked by their better sides."""
+    from cutkit.cutting._kernels_split import SCORE_TIE_DEG as tie
+
     best = {}  # (rotation, side) -> (score, index); the first of equals kept
     for i, (r, s, tets) in enumerate(candidates):
         vols = [np.linalg.det(x[list(t[1:])] - x[t[0]]) / 6.0 for t in tets]
         angle = min(min(_dihedrals_twin(x[list(t)])) for t in tets)
         score = angle if min(vols) >= vol_min else -1.0
-        if score > best.get((r, s), (-1.0, -1))[0]:
+        if score > best.get((r, s), (-1.0, -1))[0] + tie:
             best[(r, s)] = (score, i)
-    pick, worse_best = None, -np.inf
+    pick, worse_best, other_best = None, -np.inf, -np.inf
     for r in range(n_rotations):
-        worse = min(best.get((r, 0), (-1.0, -1))[0], best.get((r, 1), (-1.0, -1))[0])
-        if worse > worse_best:
-            worse_best, pick = worse, r
+        pair = [best.get((r, 0), (-1.0, -1))[0], best.get((r, 1), (-1.0, -1))[0]]
+        worse, other = min(pair), max(pair)
+        if worse > worse_best + tie or (abs(worse - worse_best) <= tie and other > other_best + tie):
+            worse_best, other_best, pick = worse, other, r
     if worse_best < 0.0:
         return -1, -1, 0.0
     return best[(pick, 0)][1], best[(pick, 1)][1], worse_best

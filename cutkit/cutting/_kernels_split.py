@@ -119,6 +119,13 @@ def face_triangles(ct, o, mask, centre_nodes):
     return tris[:k], corner[:k], face[:k]
 
 
+#: Scores (degrees) closer than this are equal: the first candidate is kept, so a tie is broken by
+#: the candidates' order and never by the last bits of rounding (which differ between this kernel
+#: and NumPy, and between platforms).  Rotations whose worse sides tie are told apart by their
+#: better sides.
+SCORE_TIE_DEG = 1e-9
+
+
 @njit(cache=True, nogil=True)
 def best_compact_split(x, tets, starts, rotation, side, n_rotations, vol_min):
     """The compact split whose worse side is best shaped, among candidate cones.
@@ -129,7 +136,9 @@ def best_compact_split(x, tets, starts, rotation, side, n_rotations, vol_min):
     angle, or -1 when a tet has a signed volume below ``vol_min`` (the
     paper's Fig. 4 penetration test).  Each side of each rotation takes its
     best candidate (the first of equals); the rotation whose worse side
-    scores best wins (the first of equals).
+    scores best wins, and among rotations whose worse sides tie, the one whose
+    better side scores best (the first of equals; equal within
+    :data:`SCORE_TIE_DEG`).
 
     Parameters
     ----------
@@ -163,15 +172,17 @@ def best_compact_split(x, tets, starts, rotation, side, n_rotations, vol_min):
                 worst = min(worst, angles[t, e])
         score = worst if lowest >= vol_min else -1.0
         r, s = rotation[i], side[i]
-        if score > side_best[r, s]:
+        if score > side_best[r, s] + SCORE_TIE_DEG:
             side_best[r, s] = score
             side_pick[r, s] = i
     best_r = -1
     best = -np.inf
+    best_other = -np.inf
     for r in range(n_rotations):
         worse = min(side_best[r, 0], side_best[r, 1])
-        if worse > best:
-            best, best_r = worse, r
+        other = max(side_best[r, 0], side_best[r, 1])
+        if worse > best + SCORE_TIE_DEG or (worse >= best - SCORE_TIE_DEG and other > best_other + SCORE_TIE_DEG):
+            best, best_other, best_r = worse, other, r
     if best < 0.0:
         return -1, -1, 0.0
     return side_pick[best_r, 0], side_pick[best_r, 1], best
