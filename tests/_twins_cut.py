@@ -354,7 +354,7 @@ def _best_twin(x, cands, vol_min, n_rot):
 
 # ---- the Fig. 2 face patterns, as first written: cutkit.cutting._kernels_split.face_triangles
 
-def _face_pattern_twin(gv, cut, edge_copy, face_node, centre_nodes):
+def _face_pattern_twin(gv, cut, edge_copy, face_node, centre_nodes, diag=-1):
     """Triangles of one face by the Fig. 2 patterns.
 
     Parameters
@@ -394,7 +394,7 @@ def _face_pattern_twin(gv, cut, edge_copy, face_node, centre_nodes):
                 ((Cp, edge_copy(k1, q), q), q), ((Cp, q, r), q), ((Cp, r, edge_copy(k2, r)), r)]
     tris = [((p, edge_copy(k1, p), edge_copy(k2, p)), p)]
     E1, E2 = edge_copy(k1, q), edge_copy(k2, r)
-    if q < r:
+    if (diag if diag >= 0 else min(q, r)) == q:  # the quad's diagonal through the fixed vertex
         tris += [((E1, q, E2), q), ((q, r, E2), q)]
     else:
         tris += [((E1, q, r), q), ((E1, r, E2), r)]
@@ -423,5 +423,6 @@ def face_triangles_twin(cm, o, mask):
         def f_node(side, f=f):
             return int(cm.face_node[f, side])
 
-        tris.extend((tri, ow, lf) for tri, ow in _face_pattern_twin(gv, cut, edge_copy, f_node, cm.centre_nodes))
+        tris.extend((tri, ow, lf) for tri, ow in _face_pattern_twin(gv, cut, edge_copy, f_node, cm.centre_nodes,
+                                                                    int(cm.face_diag[f])))
     return tris

@@ -290,3 +290,53 @@ def test_surface_entry_follows_a_deformed_mesh():
         assert r.tip_tet == -1
     assert np.isfinite(cm.edge_t).any()
     check_mesh(cm, v0)
+
+
+def _best_prism_split(X, E):
+    """Smallest dihedral angle of the best of the six 3-tet splits of the prism (X[1], X[2], X[3]) below
+    (E[1], E[2], E[3]) (slow reference: every apex and diagonal, no conformity asked)."""
+    from cutkit.mesh.quality import min_dihedral_angles
+
+    def worst(tets):
+        return float(min_dihedral_angles(np.array([q for t in tets for q in t]),
+                                         np.arange(4 * len(tets)).reshape(-1, 4)).min())
+
+    best = -1.0
+    for apex in (1, 2, 3):
+        r, s = [j for j in (1, 2, 3) if j != apex]
+        for d in (0, 1):
+            far = [[X[apex], X[r], E[r], E[s]], [X[apex], X[r], X[s], E[s]]] if d == 0 else \
+                  [[X[apex], X[s], E[s], E[r]], [X[apex], X[s], X[r], E[r]]]
+            best = max(best, worst([[X[apex], E[apex], E[r], E[s]]] + far))
+    return best
+
+
+def test_corner_split_takes_its_best_diagonals():
+    """A lone tet with a corner cut off: its split is at least as well shaped as the best of the six
+    prism splits of its three-vertex side (the quads' diagonals are free: no neighbour has fixed them)."""
+    from cutkit.mesh.quality import min_dihedral_angles, signed_volumes
+    from cutkit.mesh.topology import TET_EDGES
+
+    one = np.array([[0, 1, 2, 3]])
+    checked = 0
+    for seed in range(40):
+        rng = np.random.default_rng(seed)
+        X = rng.normal(size=(4, 3))
+        if signed_volumes(X, one)[0] < 0:
+            X = X[[0, 2, 1, 3]]
+        if min_dihedral_angles(X, one)[0] < 15.0:
+            continue  # a poorly shaped tet: its own angles bound the split
+        s = rng.choice([0.25, 0.4, 0.6, 0.75], 3)  # along edges 0-1, 0-2, 0-3
+        cm = CutMesh(X, one, blade_length=10.0)
+        for k in range(3):  # TET_EDGES[0:3] are 0-1, 0-2, 0-3
+            assert TET_EDGES[k, 0] == 0
+            cm.try_cut_edge(cm.tet_edges[0, k], s[k])
+        cm.resubdivide(0)
+        got = float(min_dihedral_angles(cm.points, cm.tets).min())
+        E = {j: (1 - s[j - 1]) * X[0] + s[j - 1] * X[j] for j in (1, 2, 3)}
+        corner = float(min_dihedral_angles(np.array([X[0], E[1], E[2], E[3]]), one)[0])
+        assert got >= min(corner, _best_prism_split(X, E)) - 1e-9, seed
+        if seed == 15:  # the smaller-id diagonals give 3.3 degrees here
+            assert got > 10.0
+        checked += 1
+    assert checked >= 20

@@ -274,20 +274,23 @@ def test_subdivision_kernels_match_twins_along_cut_paths(monkeypatch):
     from _cut_paths import delaunay_ball, jittered_block, make_path
     from _twins_cut import compact_split_twin, face_triangles_twin
 
-    import cutkit.cutting.cutmesh as CM
     import cutkit.cutting.splits as SP
     from cutkit.cutting import cut_step
     from cutkit.cutting import subdivision as S
 
-    kernel = CM.compact_split
+    kernel = KP.compact_split
     calls = {"made": 0, "refused": 0, "faces": 0}
+    current = {}
 
     def as_list(cm, o, tris, corner, face):
         v = cm.orig_tets[o].tolist()
         return [(tuple(t), v[c], f) for t, c, f in zip(tris.tolist(), corner.tolist(), face.tolist())]
 
-    def both(cm, ct, o, tris, corner, face, group):
-        got = kernel(cm, ct, o, tris, corner, face, group)
+    def both(ct, x, o, tris, corner, face, group, vol_min):
+        # every call: each combination of free split-face diagonals the split tries
+        cm = current["cm"]
+        got = kernel(ct, x, o, tris, corner, face, group, vol_min)
+        got = (None if got[0].shape[0] == 0 else got[0], got[1])
         v = cm.orig_tets[o].tolist()
         want = compact_split_twin(cm, o, as_list(cm, o, tris, corner, face), {v[i]: int(group[i]) for i in range(4)},
                                   SP.COMPACT_VOL_MIN)
@@ -296,15 +299,15 @@ def test_subdivision_kernels_match_twins_along_cut_paths(monkeypatch):
             assert [tuple(q) for q in got[0].tolist()] == [tuple(int(a) for a in q) for q in want[0]]
             assert got[1] == pytest.approx(want[1], abs=1e-9)
         calls["made" if got[0] is not None else "refused"] += 1
-        return got
+        return kernel(ct, x, o, tris, corner, face, group, vol_min)
 
-    monkeypatch.setattr(CM, "compact_split", both)
+    monkeypatch.setattr(KP, "compact_split", both)
     for (p, t), floor, centre in ((jittered_block(), SP.COMPACT_VOL_MIN, False), (delaunay_ball(), 0.05, False),
                                   (jittered_block(seed=3), SP.COMPACT_VOL_MIN, True)):
         monkeypatch.setattr(SP, "COMPACT_VOL_MIN", floor)
         L = p.max(axis=0)
         for seed, (kind, tremor) in enumerate([("straight", 0.0), ("tremor", 0.3), ("crossing", 1.0)]):
-            cm = CutMesh(p, t, centre_nodes=centre)
+            cm = current["cm"] = CutMesh(p, t, centre_nodes=centre)
             for pose in make_path(kind, np.random.default_rng(seed), L, tremor):
                 if pose is None:
                     cm.rebase()

@@ -110,21 +110,36 @@ def test_cut_model_is_valid_in_rest_positions(run):
 
 
 def test_each_cut_goes_through_the_depth_past_where_it_started(run):
-    """Beyond the press-in points each stroke's cut splits the slab; the second one crosses the first.
+    """Beyond the press-in points each stroke cuts through the whole depth; the second one crosses the first.
 
     Near where a stroke presses in the tissue holds together (the sweep
     starts where the blade starts to cut, docs/simulate.md), so the model
-    as a whole stays one piece.
+    as a whole stays one piece.  With the element model (the default) each
+    cut splits the slab beyond its press-in point.  With the paper's springs
+    the scalpel may stay *static* after it has crossed the first wound (its
+    friction model: the reaction of the loose wound edges stays below the
+    force that starts a cut), and whether the second cut then reaches the
+    far side is decided by details far below the mesh size: moving both cut
+    lines by 10 um turned a split slab into one piece (measured on the code
+    before the cut's face diagonals were chosen by shape).  For springs the
+    test asks that each stroke cut through every layer of the depth past its
+    press-in point.
     """
     from _twins_cut import components
 
-    out, _ = run
+    out, s = run
     m = read_model(out / "model.h5")
     c = m.points[m.tets].mean(axis=1)
     beyond = START + 5.0
-    assert components(m.tets[c[:, 0] > beyond]) == 2  # the first cut, across x
-    assert components(m.tets[c[:, 2] > beyond]) == 2  # the second cut, across z, through the first
-    assert components(m.tets[(c[:, 0] > beyond) & (c[:, 2] > beyond)]) >= 3
+    new = m.cell_data["new_tet"] == 1
+    for along, across, at in ((0, 2, Z_CUT), (2, 0, X_CUT)):  # the first cut, across x; the second, across z
+        near = new & (np.abs(c[:, across] - at) < H) & (c[:, along] > beyond)
+        assert np.unique(np.floor(c[near, 1] / H)).size == SHAPE[1]  # every layer of the depth is cut
+    assert s["material_model"] in ("neohookean", "springs")
+    if s["material_model"] == "neohookean":
+        assert components(m.tets[c[:, 0] > beyond]) == 2  # the first cut, across x
+        assert components(m.tets[c[:, 2] > beyond]) == 2  # the second cut, across z, through the first
+        assert components(m.tets[(c[:, 0] > beyond) & (c[:, 2] > beyond)]) >= 3
 
 
 #: How far past the far side each side-entry stroke draws the blade, mm: the slab bends away

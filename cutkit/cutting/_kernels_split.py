@@ -47,7 +47,9 @@ def face_triangles(ct, o, mask, centre_nodes):
     node), so the two tets sharing it agree: no cut edge, the face; one
     (notch, Fig. 2b), four triangles around the face node F; two (complete,
     Fig. 2c), the lone vertex's triangle and the quad split by its diagonal
-    through the smaller global vertex id, or with ``centre_nodes`` five
+    through the vertex ``face_diag`` names (fixed by the first tet that used
+    the face, :func:`cutkit.cutting.splits.fix_diagonals`; by default the
+    smaller global vertex id), or with ``centre_nodes`` five
     triangles around the centre node's two copies.
 
     Parameters
@@ -110,7 +112,10 @@ def face_triangles(ct, o, mask, centre_nodes):
             else:
                 k = _put(tris, corner, face, k, p, _edge_copy(ct, e1, p), _edge_copy(ct, e2, p), cp, lf)
                 E1, E2 = _edge_copy(ct, e1, q), _edge_copy(ct, e2, r)
-                if q < r:  # the quad's diagonal through its vertex of smaller global id
+                d = ct.face_diag[f]  # the vertex the quad's diagonal passes through
+                if d < 0:  # not fixed yet: the vertex of smaller global id
+                    d = min(q, r)
+                if d == q:
                     k = _put(tris, corner, face, k, E1, q, E2, cq, lf)
                     k = _put(tris, corner, face, k, q, r, E2, cq, lf)
                 else:

@@ -392,7 +392,7 @@ def best_cone_apex(x, corners, tb, blends, tris, bary_min, spare):
 #: edge_node (E, 2) (the cut node's copy at either end), face_node (F, 2), face_ncut (F,) int64;
 #: def_nodes (N, 4) int64, def_w (N, 4) float64 (each node's defining original nodes and weights).
 CutTables = namedtuple("CutTables", ["orig_tets", "tet_edges", "tet_faces", "edges", "edge_t", "edge_node",
-                                     "face_node", "face_ncut", "def_nodes", "def_w"])
+                                     "face_node", "face_ncut", "def_nodes", "def_w", "face_diag"])
 
 
 

@@ -29,7 +29,7 @@ from cutkit.cutting import subdivision as S
 from cutkit.cutting import _kernels_split as KP
 from cutkit.cutting import _kernels_step as K
 from cutkit.cutting.rebase import cut_twins, init_records, rebase, twin_face_bary
-from cutkit.cutting.splits import COMPACT_VOL_MIN, SPLIT_ANGLE_GAIN, SPLIT_ANGLE_GOOD, compact_split
+from cutkit.cutting.splits import COMPACT_VOL_MIN, SPLIT_ANGLE_GAIN, SPLIT_ANGLE_GOOD, compact_split, fix_diagonals
 
 #: Edge intersection parameters are clamped into [EDGE_SNAP, 1 - EDGE_SNAP]
 #: (a crossing near a vertex, or through it, becomes a crossing near it).
@@ -132,6 +132,7 @@ class CutMesh:
         self.edge_node = -np.ones((self.edges.shape[0], 2), np.int64)
         self.face_node = -np.ones((self.faces.shape[0], 2), np.int64)
         self.face_ncut = np.zeros(self.faces.shape[0], np.int64)  # cut edges per face (kept by try_cut_edge)
+        self.face_diag = -np.ones(self.faces.shape[0], np.int64)  # split face: its quad's diagonal vertex (splits.py)
         self.pending_edges = {}  # edge -> first parameter, deferred (see try_cut_edge)
         self.retried_edges = []  # deferred edges cut later (drained by cut_step)
         self.face_bary = {}  # face -> (3,) bary of the latest blade crossing
@@ -396,10 +397,14 @@ class CutMesh:
         """6-bit mask of the cut edges of original tet o (bit k = local edge TET_EDGES[k])."""
         return int(K.tet_mask(self.tet_edges, self.edge_t, o))
 
+    def completely_split(self, o):
+        """Whether original tet ``o``'s cut edges split it in two (Fig. 3 corner or quad)."""
+        return S.CLASSIFY_TABLE[S.REDUCE_TABLE[self.tet_mask(o)]][0] in ("corner", "quad")
+
     def cut_tables(self):
         """The cut state as the step kernels read it (``_kernels_step.CutTables``; views, no copy)."""
         return K.CutTables(self.orig_tets, self.tet_edges, self.tet_faces, self.edges, self.edge_t, self.edge_node,
-                           self.face_node, self.face_ncut, self._def_nodes, self._def_w)
+                           self.face_node, self.face_ncut, self._def_nodes, self._def_w, self.face_diag)
 
     def resubdivide(self, o):
         """Re-subdivide original tet ``o`` from scratch from its cut state."""
@@ -417,17 +422,18 @@ class CutMesh:
         tb = _clamp_bary(tb, TET_BARY_MIN)
         complete = case in ("corner", "quad")
         group = np.array(group, np.int64)  # side of each corner
-        tris, corner, face = KP.face_triangles(ct, o, mask, self.centre_nodes)
-        new = None
+        new, choice = None, []
         if complete and self.compact_splits:
-            new, angle = compact_split(self, ct, o, tris, corner, face, group)
+            tris, corner, face, new, angle, choice = compact_split(self, ct, o, mask, group)
             if new is not None and angle < SPLIT_ANGLE_GOOD:
                 # a poor compact cone: the T-cone may be better (more tets, but no sliver)
                 tb_c, cone = self._best_T(v, tb, tris, free_T)
                 if cone > angle + SPLIT_ANGLE_GAIN:
                     new, tb = None, tb_c
-        elif free_T:
-            tb, _ = self._best_T(v, tb, tris, free_T)
+        else:
+            tris, corner, face = KP.face_triangles(ct, o, mask, self.centre_nodes)
+            if free_T:
+                tb, _ = self._best_T(v, tb, tris, free_T)
         if new is None:
             for c in range(2 if complete else 1):
                 if self.tet_T[o, c] < 0:
@@ -445,6 +451,9 @@ class CutMesh:
         ids = self._add_tets(new, o)
         self.subtets[o] = ids
         self._delta["added_tets"].extend(ids)
+        # a partly cut tet across a split face follows the diagonal this split chose
+        for nb in fix_diagonals(self, o, choice):
+            self.resubdivide(nb)
 
     def _vol0(self, o):
         """Signed volume of original tet o at the current positions."""

@@ -19,7 +19,11 @@ avoids slivers where a better choice exists.
 
 from __future__ import annotations
 
+import numpy as np
+
 from cutkit.cutting import _kernels_split as KP
+from cutkit.cutting.subdivision import FACE_EDGES
+from cutkit.mesh.topology import TET_EDGES
 
 #: Compact complete splits accept only sub-tets of at least this fraction
 #: of the original tet's volume (else the always-valid T-cone is used).
@@ -35,23 +39,100 @@ SPLIT_ANGLE_GOOD = 6.0
 SPLIT_ANGLE_GAIN = 2.0
 
 
-def compact_split(cm, ct, o, tris, corner, face, group):
-    """Best compact tetrahedralisation of the complete split of original tet ``o``.
+def compact_split(cm, ct, o, mask, group):
+    """Best compact tetrahedralisation of the complete split of original tet ``o``, with its face patterns.
+
+    The quad of a split face may be cut by either diagonal as long as both
+    tetrahedra sharing the face agree.  A partly cut tetrahedron is coned to
+    its node T and takes either, so only complete splits fix a face's
+    diagonal (:func:`fix_diagonals`); the first to be made chooses.  Every
+    combination of the free diagonals of this tet's split faces is tried
+    with the cones and the best-shaped split kept (the smaller-id diagonals
+    first, so equals keep them).  Three split faces give eight
+    combinations; a corner cut off near a vertex by a tilted blade, whose
+    smaller-id diagonals left 2 degrees on the knee, can then take its best
+    prism split.  (Searching only below ``SPLIT_ANGLE_GOOD`` cost as much on
+    the knee and left more slivers on the block: the splits made first then
+    fix diagonals their neighbours would have chosen otherwise.)
 
     Parameters
     ----------
     cm : CutMesh
     ct : CutTables  its cut state (``cm.cut_tables()``)
     o : int  original tet
-    tris, corner, face : (k, 3), (k,), (k,) int64  its Fig. 2 face triangles, the local corner
-        owning each and the local face each lies on (``_kernels_split.face_triangles``)
+    mask : int  its cut edges (6-bit, reduced)
     group : (4,) int64  side (0 or 1) of each corner of the tet
 
     Returns
     -------
-    (tets, angle) : (p, 4) int64 and their smallest dihedral angle in
-        degrees, or (None, 0.0) when no choice passes the volume test
-        (``_kernels_split.compact_split``).
+    (tris, corner, face, tets, angle, choice)
+        Its Fig. 2 face triangles (k, 3), the local corner owning each (k,)
+        and the local face each lies on (k,) (``_kernels_split.face_triangles``,
+        with the chosen diagonals); the split's tets (p, 4) int64 and their
+        smallest dihedral angle in degrees, or (None, 0.0) when no choice
+        passes the volume test (``_kernels_split.compact_split``); and the
+        chosen diagonals, a list of (face, vertex id), left unfixed.
     """
-    tets, angle = KP.compact_split(ct, cm._x, o, tris, corner, face, group, COMPACT_VOL_MIN * float(cm._vol0(o)))
-    return (None, 0.0) if tets.shape[0] == 0 else (tets, float(angle))
+    free = _free_diagonals(cm, o, mask)
+    vol_min = COMPACT_VOL_MIN * float(cm._vol0(o))
+    best = None
+    for bits in range(1 << len(free)):
+        _set_diagonals(cm, free, bits)
+        tris, corner, face = KP.face_triangles(ct, o, mask, cm.centre_nodes)
+        tets, angle = KP.compact_split(ct, cm._x, o, tris, corner, face, group, vol_min)
+        if tets.shape[0] and (best is None or angle > best[5] + KP.SCORE_TIE_DEG):
+            best = (bits, tris, corner, face, tets, float(angle))
+    if best is None:
+        _set_diagonals(cm, free, 0)
+        best = (0, *KP.face_triangles(ct, o, mask, cm.centre_nodes), None, 0.0)
+    choice = [(f, hi if best[0] >> i & 1 else lo) for i, (f, lo, hi) in enumerate(free)]
+    cm.face_diag[[f for f, _, _ in free]] = -1
+    return (*best[1:], choice)
+
+
+def _set_diagonals(cm, free, bits):
+    for i, (f, lo, hi) in enumerate(free):
+        cm.face_diag[f] = hi if bits >> i & 1 else lo
+
+
+def _free_diagonals(cm, o, mask):
+    """[(face, smaller, larger vertex id of its quad's base)] for the split faces of ``o`` whose diagonal
+    is not fixed yet (none with centre nodes, nor on a face with copies along an earlier cut)."""
+    if cm.centre_nodes:
+        return []
+    out = []
+    for lf in range(4):
+        f = int(cm.tet_faces[o, lf])
+        if cm.face_diag[f] >= 0 or f in cm.face_twins:
+            continue
+        uncut = [k for k in FACE_EDGES[lf].tolist() if not mask >> k & 1]
+        if len(uncut) == 1:  # two cut edges: split
+            a, b = (int(q) for q in cm.orig_tets[o, TET_EDGES[uncut[0]]])
+            out.append((f, min(a, b), max(a, b)))
+    return out
+
+
+def fix_diagonals(cm, o, choice):
+    """Fix the diagonals ``choice`` [(face, vertex id)] a complete split of ``o`` was made with.
+
+    Returns
+    -------
+    redo : list of int
+        The cut tets across a face whose diagonal is now not the default
+        (smaller-id) one they were subdivided with: re-subdivide them.
+    """
+    redo = []
+    for f, d in choice:
+        cm.face_diag[f] = d
+        other = [int(t) for t in cm.face_tets[f] if t >= 0 and t != o]
+        if other and other[0] in cm.subtets and d != _default_diagonal(cm, f):
+            redo.append(other[0])
+    return redo
+
+
+def _default_diagonal(cm, f):
+    """The vertex an unfixed split face's quad diagonal passes through: the smaller id of its uncut edge."""
+    for e in cm.face_edges[f].tolist():
+        if not np.isfinite(cm.edge_t[e]):
+            return int(cm.edges[e].min())
+    return -1

@@ -50,8 +50,8 @@ class StepResult:
     added_nodes : (a,) int64   new node ids
     moved_nodes : (b,) int64   existing cut nodes re-interpolated (tip/front)
     moved_from : (b, 3) float64  their rest positions before the step
-    removed_tets : (r,) int64  tet ids (CutMesh numbering) no longer alive
-    added_tets : (c,) int64    new tet ids
+    removed_tets : (r,) int64  tet ids (CutMesh numbering) alive before the step, not after
+    added_tets : (c,) int64    new tet ids alive after the step (net of tets made and unmade in it)
     cut_edges : (e,) int64     original edges cut in this step
     active_tets : (k,) int64   original tets the blade touches now
     tip_tet : int              original tet containing the tip, -1 if outside
@@ -231,7 +231,8 @@ def cut_step(cm: CutMesh, tip, a) -> StepResult:
             cm.move_tip_node(tip_tet)
     # where the tip left a tet, its T node simply stays (freezes)
     # 3. re-subdivide every original tet whose cut state changed
-    for o in sorted(changed):
+    # (complete splits first: they choose the diagonals of their split faces, splits.compact_split)
+    for o in sorted(changed, key=lambda o: (not cm.completely_split(o), o)):
         cm.resubdivide(o)
     cm.previous_active_tets = cm.active_tets
     cm.active_tets = np.unique(active)
@@ -239,12 +240,16 @@ def cut_step(cm: CutMesh, tip, a) -> StepResult:
     cm.prev_pose = (P1, Q1)
     d = cm._delta
     moved = np.unique(np.array(d["moved_nodes"], np.int64))
+    # net change: a tet made and unmade within the step (re-subdivided twice) is in neither
+    added = np.array(d["added_tets"], np.int64)
+    removed = np.array(d["removed_tets"], np.int64)
+    transient = added[~cm._alive[added]]
     return StepResult(
         added_nodes=np.array(d["added_nodes"], np.int64),
         moved_nodes=moved,
         moved_from=np.array([d["moved_from"][i] for i in moved.tolist()], np.float64).reshape(-1, 3),
-        removed_tets=np.array(d["removed_tets"], np.int64),
-        added_tets=np.array(d["added_tets"], np.int64),
+        removed_tets=removed[~np.isin(removed, transient)],
+        added_tets=added[cm._alive[added]],
         cut_edges=np.array(cut_edges, np.int64),
         active_tets=cm.active_tets,
         tip_tet=int(tip_tet),
