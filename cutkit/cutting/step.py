@@ -243,13 +243,15 @@ def cut_step(cm: CutMesh, tip, a) -> StepResult:
     # net change: a tet made and unmade within the step (re-subdivided twice) is in neither
     added = np.array(d["added_tets"], np.int64)
     removed = np.array(d["removed_tets"], np.int64)
-    transient = added[~cm._alive[added]]
+    if added.size and not cm._alive[added].all():
+        transient = added[~cm._alive[added]]
+        added, removed = added[cm._alive[added]], removed[~np.isin(removed, transient)]
     return StepResult(
         added_nodes=np.array(d["added_nodes"], np.int64),
         moved_nodes=moved,
         moved_from=np.array([d["moved_from"][i] for i in moved.tolist()], np.float64).reshape(-1, 3),
-        removed_tets=removed[~np.isin(removed, transient)],
-        added_tets=added[cm._alive[added]],
+        removed_tets=removed,
+        added_tets=added,
         cut_edges=np.array(cut_edges, np.int64),
         active_tets=cm.active_tets,
         tip_tet=int(tip_tet),
