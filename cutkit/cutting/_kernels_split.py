@@ -47,9 +47,9 @@ def face_triangles(ct, o, mask, centre_nodes):
     node), so the two tets sharing it agree: no cut edge, the face; one
     (notch, Fig. 2b), four triangles around the face node F; two (complete,
     Fig. 2c), the lone vertex's triangle and the quad split by its diagonal
-    through the vertex ``face_diag`` names (fixed by the first tet that used
-    the face, :func:`cutkit.cutting.splits.fix_diagonals`; by default the
-    smaller global vertex id), or with ``centre_nodes`` five
+    through the vertex ``face_diag`` names (fixed by the first complete split
+    that used the face, :func:`cutkit.cutting.splits.fix_diagonals`; until
+    then the smaller global vertex id), or with ``centre_nodes`` five
     triangles around the centre node's two copies.
 
     Parameters

@@ -19,8 +19,6 @@ avoids slivers where a better choice exists.
 
 from __future__ import annotations
 
-import numpy as np
-
 from cutkit.cutting import _kernels_split as KP
 from cutkit.cutting.subdivision import FACE_EDGES
 from cutkit.mesh.topology import TET_EDGES
@@ -71,7 +69,8 @@ def compact_split(cm, ct, o, mask, group):
         with the chosen diagonals); the split's tets (p, 4) int64 and their
         smallest dihedral angle in degrees, or (None, 0.0) when no choice
         passes the volume test (``_kernels_split.compact_split``); and the
-        chosen diagonals, a list of (face, vertex id), left unfixed.
+        chosen diagonals, a list of (face, vertex id, the smaller-id vertex
+        it would default to), left unfixed.
     """
     free = _free_diagonals(cm, o, mask)
     vol_min = COMPACT_VOL_MIN * float(cm._vol0(o))
@@ -85,7 +84,7 @@ def compact_split(cm, ct, o, mask, group):
     if best is None:
         _set_diagonals(cm, free, 0)
         best = (0, *KP.face_triangles(ct, o, mask, cm.centre_nodes), None, 0.0)
-    choice = [(f, hi if best[0] >> i & 1 else lo) for i, (f, lo, hi) in enumerate(free)]
+    choice = [(f, hi if best[0] >> i & 1 else lo, lo) for i, (f, lo, hi) in enumerate(free)]
     cm.face_diag[[f for f, _, _ in free]] = -1
     return (*best[1:], choice)
 
@@ -113,7 +112,7 @@ def _free_diagonals(cm, o, mask):
 
 
 def fix_diagonals(cm, o, choice):
-    """Fix the diagonals ``choice`` [(face, vertex id)] a complete split of ``o`` was made with.
+    """Fix the diagonals ``choice`` [(face, vertex id, default vertex id)] a complete split of ``o`` was made with.
 
     Returns
     -------
@@ -122,17 +121,9 @@ def fix_diagonals(cm, o, choice):
         (smaller-id) one they were subdivided with: re-subdivide them.
     """
     redo = []
-    for f, d in choice:
+    for f, d, default in choice:
         cm.face_diag[f] = d
         other = [int(t) for t in cm.face_tets[f] if t >= 0 and t != o]
-        if other and other[0] in cm.subtets and d != _default_diagonal(cm, f):
+        if d != default and other and other[0] in cm.subtets:
             redo.append(other[0])
     return redo
-
-
-def _default_diagonal(cm, f):
-    """The vertex an unfixed split face's quad diagonal passes through: the smaller id of its uncut edge."""
-    for e in cm.face_edges[f].tolist():
-        if not np.isfinite(cm.edge_t[e]):
-            return int(cm.edges[e].min())
-    return -1
