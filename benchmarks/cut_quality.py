@@ -9,8 +9,8 @@ written (``to_model``):
 * lost edges: original edges the swept surface crossed strictly inside
   (parameter in [1e-6, 1 - 1e-6]) that are not cut, as a fraction of the
   crossed ones, and by reason (a face around the edge already had two cut
-  edges; deferred, see docs/cutting.md; other).  The blade is lifted and
-  the mesh rebased between strokes as the runtime does, so a stroke's
+  edges; deferred, see docs/cutting.md; other).  A stroke ends where the
+  blade is lifted or has left the tissue, as in ``cutkit cut``, so a stroke's
   losses are counted on its own original edges (a second stroke crossing
   the first cuts the first's sub-tetrahedra);
 * new tetrahedra per cut tetrahedron.
@@ -31,22 +31,6 @@ KINDS = ("straight", "curved", "reversal", "reentry", "crossing", "vertex", "fac
 TREMORS = (0.0, 0.1, 0.3, 1.0)
 
 
-def _crossed_edges(cm, prev, pose):
-    """Original edges of the current stroke that the step from ``prev`` to ``pose`` crossed strictly inside."""
-    from cutkit.cutting._kernels import edge_cross
-
-    p = cm.points[:cm.n_orig_points]
-    out = set()
-    for tri in (np.array([prev[0], prev[1], pose[1]]), np.array([prev[0], pose[1], pose[0]])):
-        lo, hi = tri.min(axis=0), tri.max(axis=0)
-        a, b = p[cm.edges[:, 0]], p[cm.edges[:, 1]]
-        for e in np.flatnonzero(np.all((np.minimum(a, b) <= hi) & (np.maximum(a, b) >= lo), axis=1)):
-            s = edge_cross(p[cm.edges[e, 0]], p[cm.edges[e, 1]], tri)
-            if 1e-6 <= s <= 1 - 1e-6:
-                out.add(int(e))
-    return out
-
-
 def _stroke_losses(cm, crossed):
     """Crossed edges of the stroke left uncut, by reason: (refused: a third cut edge on a face, deferred,
     other); see ``tests/_cut_paths.uncut_reason``."""
@@ -63,6 +47,7 @@ def measure(p, t, poses, blade_length=10.0):
     Returns (worst cut-made angle, its ratio to the model tet's, losses by reason (3,), crossed
     edges, cut tets, new tets); losses and crossings are counted per stroke on its own original edges.
     """
+    from _cut_paths import crossed_edges
     from cutkit.cutting import CutMesh, cut_step, to_model
     from cutkit.cutting.rebase import blade_in_tissue, rebase_if_left
     from cutkit.mesh.quality import min_dihedral_angles
@@ -85,7 +70,8 @@ def measure(p, t, poses, blade_length=10.0):
         prev = cm.prev_pose
         cut_step(cm, *pose)
         if prev is not None:
-            crossed |= _crossed_edges(cm, prev, cm.prev_pose)
+            (P1, Q1), (P0, Q0) = cm.prev_pose, prev
+            crossed |= crossed_edges(cm.points[:cm.n_orig_points], cm.edges, [(P0, Q0, Q1), (P0, Q1, P1)])
         if not blade_in_tissue(cm):
             end_stroke()
             rebase_if_left(cm)

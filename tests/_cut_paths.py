@@ -11,6 +11,10 @@ import numpy as np
 from cutkit.mesh.generate import box_mesh
 from cutkit.mesh.quality import signed_volumes
 
+#: An edge counts as crossed strictly inside when the swept surface meets it
+#: at a parameter in [ORACLE_EPS, 1 - ORACLE_EPS] (not at or next to a vertex).
+ORACLE_EPS = 1e-6
+
 KINDS = ("straight", "curved", "tremor", "reversal", "reentry", "crossing", "vertex", "edge", "face",
          "guillotine", "press")
 
@@ -147,3 +151,21 @@ def uncut_reason(cm, e):
     if any(g in cm.pending_edges for g in group):
         return "deferred"
     return None
+
+
+def crossed_edges(p, edges, swept):
+    """Original edges (set of ids into ``edges`` (m, 2)) over positions ``p`` (n, 3) met strictly inside by
+    one of the ``swept`` triangles (each three (3,) points): the slow reference."""
+    from cutkit.cutting._geometry import segment_triangle
+
+    out = set()
+    for tri in swept:
+        tri = [np.asarray(q, float) for q in tri]
+        lo, hi = np.min(tri, axis=0), np.max(tri, axis=0)
+        a, b = p[edges[:, 0]], p[edges[:, 1]]
+        near = np.all((np.minimum(a, b) <= hi) & (np.maximum(a, b) >= lo), axis=1)
+        for e in np.flatnonzero(near):
+            s = segment_triangle(p[edges[e, 0]], p[edges[e, 1]], *tri)
+            if ORACLE_EPS <= s <= 1 - ORACLE_EPS:
+                out.add(int(e))
+    return out

@@ -15,10 +15,10 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
 
-from _cut_paths import KINDS, crossing_strokes, delaunay_ball, jittered_block, lift, make_path, uncut_reason
+from _cut_paths import (KINDS, crossed_edges, crossing_strokes, delaunay_ball, jittered_block, lift, make_path,
+                        uncut_reason)
 from cutkit.collision._swept_kernels import tri_tri  # noqa: F401  (compiled once for the oracle below)
 from cutkit.cutting import CutMesh, cut_step, to_model
-from cutkit.cutting._geometry import segment_triangle
 from cutkit.cutting.rebase import blade_in_tissue, rebase_if_left
 from cutkit.mesh.check import check_mesh
 from cutkit.mesh.generate import box_mesh
@@ -26,9 +26,6 @@ from cutkit.mesh.quality import signed_volumes
 
 #: Volume is conserved exactly up to rounding: relative tolerance of the check.
 VOLUME_REL_TOL = 1e-12
-#: An edge counts as crossed strictly inside when the swept surface meets it
-#: at a parameter in [ORACLE_EPS, 1 - ORACLE_EPS] (not at or next to a vertex).
-ORACLE_EPS = 1e-6
 
 #: Crossing through-cuts: pieces beyond the four below this fraction of the
 #: volume are crumbs of the snapped surfaces' crossing (a few tetrahedra).
@@ -122,21 +119,6 @@ def test_every_step_is_a_clean_mesh(name, kind, tremor, seed, blade_length):
        st.integers(0, 2**31 - 1), st.sampled_from([2.5, 10.0]))
 def test_every_step_is_a_clean_mesh_many(name, kind, tremor, seed, blade_length):
     test_every_step_is_a_clean_mesh.hypothesis.inner_test(name, kind, tremor, seed, blade_length)
-
-
-def crossed_edges(p, edges, swept):
-    """Original edges met strictly inside by a swept triangle (slow reference)."""
-    out = set()
-    for tri in swept:
-        tri = [np.asarray(q, float) for q in tri]
-        lo, hi = np.min(tri, axis=0), np.max(tri, axis=0)
-        a, b = p[edges[:, 0]], p[edges[:, 1]]
-        near = np.all((np.minimum(a, b) <= hi) & (np.maximum(a, b) >= lo), axis=1)
-        for e in np.flatnonzero(near):
-            s = segment_triangle(p[edges[e, 0]], p[edges[e, 1]], *tri)
-            if ORACLE_EPS <= s <= 1 - ORACLE_EPS:
-                out.add(int(e))
-    return out
 
 
 #: Path kinds whose swept surface never folds over an edge or a face at tremor 0 (curved paths
