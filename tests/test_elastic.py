@@ -8,6 +8,7 @@ import _twins_elastic as T
 from cutkit.mesh.generate import box_mesh
 from cutkit.model.tetmodel import Materials, Prestress, TetModel
 from cutkit.relax import _elastic_kernels as K
+from cutkit.relax import elastic
 from cutkit.relax.materials import lame
 from cutkit.relax.elastic import ElementState, build_element_model, rest_shape
 from cutkit.relax.vbd import elastic_energy, elastic_forces, implicit_step, local_step, static_solve
@@ -318,7 +319,7 @@ def test_local_step_bookkeeping_matches_the_twins(deformed):
         np.testing.assert_array_equal(KA.tets_around(em.adjacency, nodes), want)
 
 
-def test_rest_shapes_match_the_twin_with_prestrain_and_degenerate_tets():
+def test_rest_shapes_match_the_twin_with_prestrain_and_degenerate_tets(monkeypatch):
     """The kernel against NumPy's det and inv: random tets, one inverted, one flat, one a
     sliver just below MIN_ELEMENT_QUALITY; with and without a prestrain along a fibre."""
     from cutkit.relax._shape_kernels import corner_edge_inverses
@@ -335,11 +336,13 @@ def test_rest_shapes_match_the_twin_with_prestrain_and_degenerate_tets():
     f = rng.normal(size=(tets_s.shape[0], 3))
     f /= np.linalg.norm(f, axis=1, keepdims=True)
     for pre, fib in ((None, None), (p, f)):
-        got = rest_shape(Xs, tets_s, pre, fib)
         want = T.rest_shape(Xs, tets_s, pre, fib, MIN_ELEMENT_QUALITY)
-        for g, w in zip(got, want):
-            np.testing.assert_allclose(g, w, rtol=1e-10, atol=1e-12)
-        assert got[1][-1] == 0.0 and got[1][-2] == 0.0 and np.all(got[0][-1] == 0.0)  # sliver, flat: no energy
+        for parallel_from in (1, 10**9):  # the thread pool's kernel and the calling thread's
+            monkeypatch.setattr(elastic, "PARALLEL_MIN_TETS", parallel_from)
+            got = rest_shape(Xs, tets_s, pre, fib)
+            for g, w in zip(got, want):
+                np.testing.assert_allclose(g, w, rtol=1e-10, atol=1e-12)
+            assert got[1][-1] == 0.0 and got[1][-2] == 0.0 and np.all(got[0][-1] == 0.0)  # sliver, flat: no energy
     corners = Xs[tets_s]
     Tinv = np.zeros((len(tets_s), 3, 3))
     ok = corner_edge_inverses(corners, Tinv)

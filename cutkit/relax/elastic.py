@@ -41,6 +41,9 @@ ADJACENCY_SLACK = 8
 #: Pool slots kept spare beyond those the elements and the rows' slack take, as a fraction:
 #: cuts move rows to the pool's end, and growing the pool copies it (a stall in a live session).
 ADJACENCY_POOL_SPARE = 0.25
+#: Fewer tets than this get their rest shapes on the calling thread (a cut step's new tets):
+#: below it, waking the thread pool costs more than the arithmetic it shares out.
+PARALLEL_MIN_TETS = 2048
 
 def rest_shape(X, tets, prestrain=None, fibre=None):
     """Inverse rest shapes and volumes of tetrahedra, with an optional prestrain along a fibre.
@@ -73,8 +76,9 @@ def rest_shape(X, tets, prestrain=None, fibre=None):
     if prestrain is None:
         prestrain, fibre = np.zeros(m), np.zeros((m, 3))
     Dminv, volume, rest_volume = np.empty((m, 3, 3)), np.empty(m), np.empty(m)
-    KS.rest_shapes(X, tets, np.ascontiguousarray(prestrain, np.float64), np.ascontiguousarray(fibre, np.float64),
-                   MIN_ELEMENT_QUALITY, Dminv, volume, rest_volume)
+    kernel = KS.rest_shapes if m >= PARALLEL_MIN_TETS else KS.rest_shapes_serial
+    kernel(X, tets, np.ascontiguousarray(prestrain, np.float64), np.ascontiguousarray(fibre, np.float64),
+           MIN_ELEMENT_QUALITY, Dminv, volume, rest_volume)
     return Dminv, volume, rest_volume
 
 
