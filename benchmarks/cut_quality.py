@@ -100,21 +100,25 @@ def run(n_paths):
                                          "worst_angle_deg": float(min_dihedral_angles(p, t).min())}
         for tremor in TREMORS:
             worst, rels, lost, crossed, cut, new, by_kind = [], [], np.zeros(3, np.int64), 0, 0, 0, {}
+            angle_by_kind = {}
             for kind in KINDS:
                 kl = kc = 0
+                kw = []
                 for seed in range(n_paths):
                     w, r, lo, cr, c, nw = measure(p, t, make_path(kind, np.random.default_rng(seed), L, tremor))
                     if w is not None:
                         worst.append(w)
                         rels.append(r)
+                        kw.append(w)
                     lost, crossed, cut, new = lost + lo, crossed + cr, cut + c, new + nw
                     kl, kc = kl + int(lo.sum()), kc + cr
                 by_kind[kind] = kl / max(kc, 1)
+                angle_by_kind[kind] = [float(np.min(kw)), float(np.median(kw))] if kw else None
             w = np.array(worst)
             out[f"{name}, tremor {tremor} mm"] = {
                 "paths": len(KINDS) * n_paths, "worst_angle_min_deg": float(w.min()),
                 "worst_angle_p10_deg": float(np.percentile(w, 10)), "worst_angle_median_deg": float(np.median(w)),
-                "paths_below_5_deg": int((w < 5).sum()),
+                "paths_below_5_deg": int((w < 5).sum()), "worst_angle_min_median_by_kind_deg": angle_by_kind,
                 "worst_angle_over_original_tet_min": float(np.min(rels)),
                 "worst_angle_over_original_tet_median": float(np.median(rels)),
                 "lost_edge_fraction": int(lost.sum()) / max(crossed, 1), "lost_edge_fraction_by_kind": by_kind,
@@ -127,6 +131,12 @@ def run(n_paths):
     for x in np.linspace(-0.5, 20.5, 80):
         cut_step(cm, [x, 1.37, -0.5 + 0.3 * np.sin(x)], [0.1, 0.05, -1.0])
     out["long incision (20 x 4 x 4 bar)"] = {
+        "new_tets_per_cut_tet": sum(len(v) for v in cm.subtets.values()) / len(cm.subtets)}
+    # ... and a hidden one: the tip stays inside, the tets along its path stay partly cut
+    cm = CutMesh(p, t, blade_length=10.0)
+    for x in np.linspace(-0.5, 18.5, 80):
+        cut_step(cm, [x, 1.37, 1.9 + 0.3 * np.sin(x)], [0.1, 0.05, 1.0])
+    out["long hidden incision (20 x 4 x 4 bar, tip inside)"] = {
         "new_tets_per_cut_tet": sum(len(v) for v in cm.subtets.values()) / len(cm.subtets)}
     return out
 

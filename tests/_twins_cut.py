@@ -426,3 +426,19 @@ def face_triangles_twin(cm, o, mask):
         tris.extend((tri, ow, lf) for tri, ow in _face_pattern_twin(gv, cut, edge_copy, f_node, cm.centre_nodes,
                                                                     int(cm.face_diag[f])))
     return tris
+
+
+def best_face_apex_twin(x, tris, tri_face, face_nodes, vol_min):
+    """Each notched face's cone (its node to the other faces' triangles), its volume test and
+    smallest dihedral angle, and the first best: by plain loops."""
+    best_lf, best = -1, -1.0
+    for lf, F in enumerate(face_nodes):
+        if F < 0:
+            continue
+        cone = [(t[0], t[2], t[1], F) for t, f in zip(tris, tri_face) if f != lf]
+        if not cone or min_volume_twin(x, cone) < vol_min:
+            continue
+        worst = min(min(_dihedrals_twin(x[list(c)])) for c in cone)
+        if worst > best + 1e-9:
+            best_lf, best = lf, worst
+    return best_lf, best

@@ -7,6 +7,7 @@ from hypothesis import given, settings, strategies as st, HealthCheck
 from _twins_cut import boundary_edges_ok, components, hanging_nodes, volumes
 from cutkit.cutting import CutMesh, cut_step, find_trajectory_tetra, to_model
 from cutkit.cutting import subdivision as S
+from cutkit.cutting.cutmesh import TET_BARY_MIN
 from cutkit.errors import InputError
 from cutkit.mesh.check import check_mesh as check_tets
 from cutkit.mesh.generate import box_mesh
@@ -275,6 +276,43 @@ def test_long_incision_tets_per_cut_tet():
         counts[centre] = sum(len(v) for v in cm.subtets.values()) / len(cm.subtets)
     assert counts[False] <= 6.0  # the 1999 scheme makes 17
     assert counts[False] < counts[True]
+
+
+def _t_coned(cm, o):
+    """Whether original tet ``o``'s sub-tets are coned to its T node."""
+    return cm.tet_T[o, 0] >= 0 and cm.tet_T[o, 0] in cm._tets[cm.subtets[o]]
+
+
+def test_hidden_incision_cones_the_tets_behind_the_tip_to_notch_nodes():
+    """A blade that stays inside leaves the tets along its tip's path partly cut.  The tip's tet is
+    coned to its T node (which follows the tip), the tets the tip has left to a notch node F: no
+    interior node, fewer tets (a long hidden incision: 5.4 new tets per cut tet against 6.4 with
+    T-cones).  Drawn back, the blade's tip re-enters tets coned to F: each is coned to T again,
+    at the tip."""
+    p, t = box_mesh((20, 4, 4))
+    v0 = volumes(p, t).sum()
+    cm = CutMesh(p, t, blade_length=10.0)
+    for x in np.linspace(-0.5, 18.5, 80):
+        cut_step(cm, [x, 1.37, 1.9 + 0.3 * np.sin(x)], [0.1, 0.05, 1.0])
+    check_mesh(cm, v0)
+    assert sum(len(v) for v in cm.subtets.values()) / len(cm.subtets) <= 6.0
+    partial = [o for o in cm.subtets if not cm.completely_split(o)]
+    assert len(partial) > 40 and _t_coned(cm, cm.tip_tet)
+    assert sum(_t_coned(cm, o) for o in partial if o != cm.tip_tet) <= 0.1 * len(partial)
+    re_entered = set()
+    for x in np.linspace(18.5, 10.0, 30):
+        tip = np.array([x, 1.37, 1.9 + 0.3 * np.sin(18.5)])
+        cut_step(cm, tip, [0.1, 0.05, 1.0])
+        o = cm.tip_tet
+        if o in cm.subtets and not cm.completely_split(o):
+            re_entered.add(o)
+            assert _t_coned(cm, o)
+            T = cm.tet_T[o, 0]
+            tb = np.linalg.solve(np.vstack([cm.points[cm.orig_tets[o]].T, np.ones(4)]), np.append(tip, 1.0))
+            if tb.min() >= TET_BARY_MIN:  # T is the tip itself unless clamped off the faces
+                np.testing.assert_allclose(cm.points[T], tip, atol=1e-12)
+        check_mesh(cm, v0)
+    assert len(re_entered) >= 5
 
 
 def test_surface_entry_follows_a_deformed_mesh():

@@ -202,6 +202,44 @@ def test_best_cone_apex_matches_twin():
     np.testing.assert_allclose(one, clamp_bary_twin(tb, 0.15), atol=1e-15)
 
 
+def test_best_face_apex_matches_twin():
+    """The face-node cone of a partly cut tet: over random tets whose faces are fanned from a node
+    on each, and over random triangles (inverted and flat cones among them), the kernel picks the
+    twin's face with the twin's angle; every pick tiles the tet (cone volumes sum to its volume)."""
+    from _twins_cut import best_face_apex_twin, volumes
+
+    from cutkit.mesh.topology import TET_FACES
+
+    rng = np.random.default_rng(17)
+    picked = 0
+    for trial in range(60):
+        x = np.zeros((8, 3))
+        x[:4] = [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]] + rng.normal(0, 0.15, (4, 3))
+        tris, tri_face = [], []
+        for lf in range(4):  # each face fanned from a node on it (outward, as face_triangles gives)
+            a, b, c = TET_FACES[lf]
+            x[4 + lf] = rng.dirichlet(np.ones(3) * 2) @ x[[a, b, c]]
+            for p, q in ((a, b), (b, c), (c, a)):
+                tris.append((p, q, 4 + lf))
+                tri_face.append(lf)
+        tris, tri_face = np.array(tris, np.int64), np.array(tri_face, np.int64)
+        if trial % 3 == 2:  # random triangles: most cones fail the volume test
+            tris = np.array([rng.choice(8, 3, replace=False) for _ in range(12)], np.int64)
+        face_nodes = np.where(rng.random(4) < 0.6, 4 + np.arange(4), -1).astype(np.int64)
+        vol_min = 1e-3 * abs(volumes(x, np.array([[0, 1, 2, 3]]))[0]) * rng.choice([0.0, 1.0, 50.0])
+        lf, angle = KP.best_face_apex(x, tris, tri_face, face_nodes, vol_min)
+        lf_t, angle_t = best_face_apex_twin(x, tris, tri_face, face_nodes, vol_min)
+        assert lf == lf_t
+        assert angle == pytest.approx(angle_t, abs=1e-9)
+        if lf >= 0 and trial % 3 != 2:
+            picked += 1
+            sel = tris[tri_face != lf]
+            cone = np.column_stack([sel[:, 0], sel[:, 2], sel[:, 1], np.full(len(sel), face_nodes[lf])])
+            v = volumes(x, cone)
+            assert v.min() > 0 and v.sum() == pytest.approx(volumes(x, np.array([[0, 1, 2, 3]]))[0], rel=1e-12)
+    assert picked >= 10
+
+
 def test_best_compact_split_matches_twin():
     """The compact split choice: over random candidate cones (some inverted, some flat) the
     kernel picks the twin's candidates with the twin's angle; a rotation with a side whose

@@ -391,3 +391,58 @@ def compact_split(ct, x, o, tris, tri_corner, tri_face, group, vol_min):
     out[:n0] = flat[starts[p0]:starts[p0 + 1]]
     out[n0:] = flat[starts[p1]:starts[p1 + 1]]
     return out, angle
+
+
+@njit(cache=True, nogil=True)
+def best_face_apex(x, tris, tri_face, face_nodes, vol_min):
+    """The notched face whose node F is the best apex of a cone over the other faces' triangles.
+
+    A tetrahedron is star-shaped from any point of a face, and the cut's
+    triangles inside it become a fan from F: the cone of every triangle not
+    on F's face to F tiles a partly cut tet without its interior node T,
+    with the triangles of F's own face left out (fewer tets than the T-cone;
+    :meth:`cutkit.cutting.cutmesh.CutMesh.resubdivide`).
+
+    Parameters
+    ----------
+    x : (n, 3) float64
+    tris : (k, 3) int64
+        The tet's face triangles (Fig. 2 patterns), outward.
+    tri_face : (k,) int64
+        Local face each triangle lies on.
+    face_nodes : (4,) int64
+        The node F of each local face that is notched, -1 for the others.
+    vol_min : float
+        Smallest signed volume a tet of the cone may have, mm^3.
+
+    Returns
+    -------
+    (lf, angle) : int, float
+        The local face whose F is the apex (-1: none passes the volume test)
+        and its cone's smallest dihedral angle, degrees; the first best wins a
+        tie (:data:`SCORE_TIE_DEG`).
+    """
+    k = tris.shape[0]
+    cone = np.empty((k, 4), np.int64)
+    normals = np.empty((4, 3))
+    angles = np.empty((k, 6))
+    best_lf, best = -1, -1.0
+    for lf in range(4):
+        F = face_nodes[lf]
+        if F < 0:
+            continue
+        m = 0
+        for j in range(k):
+            if tri_face[j] != lf:
+                cone[m, 0], cone[m, 1], cone[m, 2], cone[m, 3] = tris[j, 0], tris[j, 2], tris[j, 1], F
+                m += 1
+        if m == 0 or min_volume(x, cone[:m]) < vol_min:
+            continue
+        worst = np.inf
+        for j in range(m):
+            tet_dihedrals(x, cone, j, normals, angles)
+            for e in range(6):
+                worst = min(worst, angles[j, e])
+        if worst > best + SCORE_TIE_DEG:
+            best_lf, best = lf, worst
+    return best_lf, best

@@ -229,14 +229,17 @@ def cut_step(cm: CutMesh, tip, a) -> StepResult:
         cm.tip_bary[tip_tet] = tb
         if tip_tet not in changed:
             cm.move_tip_node(tip_tet)
-    # where the tip left a tet, its T node simply stays (freezes)
+    # where the tip left a tet, its T node stays (freezes) and the tet may cone to a notch node
+    # instead (CutMesh._face_apex_cone); a cut tet the tip enters is coned to T again
+    if tip_tet != cm.tip_tet:
+        changed.update(o for o in (cm.tip_tet, tip_tet) if o in cm.subtets and not cm.completely_split(o))
+    cm.tip_tet = tip_tet
     # 3. re-subdivide every original tet whose cut state changed
     # (complete splits first: they choose the diagonals of their split faces, splits.compact_split)
     for o in sorted(changed, key=lambda o: (not cm.completely_split(o), o)):
         cm.resubdivide(o)
     cm.previous_active_tets = cm.active_tets
     cm.active_tets = np.unique(active)
-    cm.tip_tet = tip_tet
     cm.prev_pose = (P1, Q1)
     d = cm._delta
     moved = np.unique(np.array(d["moved_nodes"], np.int64))
