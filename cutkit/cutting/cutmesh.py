@@ -433,8 +433,9 @@ class CutMesh:
         else:
             tris, corner, face = KP.face_triangles(ct, o, mask, self.centre_nodes)
             if o != self.tip_tet:  # no tip inside: the crack front may run between notch nodes
-                tb, cone = self._best_T(v, tb, tris, free_T)
-                new = self._face_apex_cone(o, tris, face, cone)
+                new, tb = self._face_apex_cone(o, v, tb, free_T, tris, face)
+            elif free_T:
+                tb, _ = self._best_T(v, tb, tris, free_T)
         if new is None:
             for c in range(2 if complete else 1):
                 if self.tet_T[o, c] < 0:
@@ -456,28 +457,32 @@ class CutMesh:
         for nb in fix_diagonals(self, o, choice):
             self.resubdivide(nb)
 
-    def _face_apex_cone(self, o, tris, face, cone):
-        """The cone of a partly cut tet no tip is in from one of its notch nodes F, or None.
+    def _face_apex_cone(self, o, v, tb, free_T, tris, face):
+        """The cone of a partly cut tet no tip is in from one of its notch nodes F, or the T-cone.
 
         The tip's path crossed the tet and left it, so its crack front runs
         between its notched faces' nodes: the cone from one of them over the
         other faces' triangles (``_kernels_split.best_face_apex``) tiles the tet
         without T and with fewer tets (a notched face's four triangles are not
         coned).  It is kept unless it is poor (below ``SPLIT_ANGLE_GOOD``) and the
-        T-cone, of smallest angle ``cone``, is better by ``SPLIT_ANGLE_GAIN``: the
-        rule of the complete splits' compact cones.
+        T-cone is better by ``SPLIT_ANGLE_GAIN``: the rule of the complete splits'
+        compact cones.  Returns ``(cone, tb)``: the F-cone's tets (k, 4) or None
+        for the T-cone, and T's barycentric weights (placed by
+        :meth:`_best_T` where it was looked at).
         """
-        fn = self.face_node[self.tet_faces[o], 0]
-        face_nodes = np.where(self.face_ncut[self.tet_faces[o]] == 1, fn, -1).astype(np.int64)
-        if (face_nodes < 0).all():
-            return None
-        lf, angle = KP.best_face_apex(self._x, tris, face, face_nodes, COMPACT_VOL_MIN * float(self._vol0(o)))
-        if lf < 0 or (angle < SPLIT_ANGLE_GOOD and cone > angle + SPLIT_ANGLE_GAIN):
-            return None
+        f = self.tet_faces[o]
+        face_nodes = np.where(self.face_ncut[f] == 1, self.face_node[f, 0], -1)
+        lf, angle = -1, -1.0
+        if (face_nodes >= 0).any():
+            lf, angle = KP.best_face_apex(self._x, tris, face, face_nodes, COMPACT_VOL_MIN * float(self._vol0(o)))
+        if lf < 0 or angle < SPLIT_ANGLE_GOOD:
+            tb, cone = self._best_T(v, tb, tris, free_T)
+            if lf < 0 or cone > angle + SPLIT_ANGLE_GAIN:
+                return None, tb
         sel = tris[face != lf]
         new = np.empty((sel.shape[0], 4), np.int64)
         new[:, 0], new[:, 1], new[:, 2], new[:, 3] = sel[:, 0], sel[:, 2], sel[:, 1], face_nodes[lf]
-        return new
+        return new, tb
 
     def _vol0(self, o):
         """Signed volume of original tet o at the current positions."""
