@@ -18,7 +18,7 @@ Prints one JSON object with ``--json``:
   and the springs (uniform Gauss-Seidel steps and adaptive node lists), and the sweeps or node
   updates each took: the equal-accuracy comparison of docs/relaxation.md; and ``simulate``'s
   simulated/wall on it with the shipped incision, for both material models (knee.simulate), and
-  for the element model over the incision shifted by 0 .. 5 um (the cut follows the tissue, so
+  for the element model over the incision shifted by 0 .. 5 um (``--knee-paths``; the cut follows the tissue, so
   the work changes from path to path).  ``--knee-simulate MODEL.h5`` runs knee.simulate alone.
 """
 
@@ -140,7 +140,9 @@ def knee_simulate(model, paths: int = KNEE_PATHS) -> dict:
     res["neohookean_shifted_paths"] = {
         "shift_mm": [1e-3 * k for k in range(paths)], "runs": shifted,
         "simulated_per_wall_median": float(np.median(ratio)), "simulated_per_wall_min": float(ratio.min()),
-        "simulated_per_wall_max": float(ratio.max())}
+        "simulated_per_wall_max": float(ratio.max()),
+        "sweeps_median": float(np.median([r["sweeps"] for r in shifted])),
+        "steps_capped_median": float(np.median([r["steps_capped"] for r in shifted]))}
     return res
 
 
@@ -200,12 +202,14 @@ def main(argv=None):
     ap.add_argument("--knee", help="model file for the equal-accuracy comparison (e.g. cutkit-demo/knee.h5)")
     ap.add_argument("--rtol", type=float, default=1e-4, help="relative residual of the equal-accuracy comparison")
     ap.add_argument("--knee-simulate", metavar="MODEL", help="only simulate's simulated/wall on this model (knee.simulate)")
+    ap.add_argument("--knee-paths", type=int, default=KNEE_PATHS,
+                    help="incisions of knee.simulate, each shifted by 1 um more (the stalls vary from path to path)")
     args = ap.parse_args(argv)
     out = {}
     if args.knee_simulate:
         from cutkit.io.model_h5 import read_model
 
-        out["knee"] = {"simulate": knee_simulate(read_model(args.knee_simulate))}
+        out["knee"] = {"simulate": knee_simulate(read_model(args.knee_simulate), args.knee_paths)}
         return _print(out, args.json)
 
     tm = block_model(args.big)
@@ -272,7 +276,7 @@ def main(argv=None):
         from cutkit.io.model_h5 import read_model
 
         out["knee"] = knee_to_residual(read_model(args.knee), args.rtol)
-        out["knee"]["simulate"] = knee_simulate(read_model(args.knee))
+        out["knee"]["simulate"] = knee_simulate(read_model(args.knee), args.knee_paths)
     import numba
 
     out["threads"] = numba.get_num_threads()
