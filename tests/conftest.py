@@ -15,6 +15,22 @@ def _sigpipe_ignored():
     yield
 
 
+@pytest.fixture(scope="session", autouse=True)
+def _settle_cache_of_this_run(tmp_path_factory):
+    """Settles are cached in a folder of this test run (shared by its tests and the commands
+    they start), never in the user's cache."""
+    import os
+
+    folder = tmp_path_factory.mktemp("settle-cache")
+    old = os.environ.get("CUTKIT_CACHE_DIR")
+    os.environ["CUTKIT_CACHE_DIR"] = str(folder)
+    yield folder
+    if old is None:
+        os.environ.pop("CUTKIT_CACHE_DIR", None)
+    else:
+        os.environ["CUTKIT_CACHE_DIR"] = old
+
+
 @pytest.fixture(scope="session")
 def demo_knee(tmp_path_factory):
     """The demo knee built once for the whole run: ``(folder, knee.h5, the build's report)``.
