@@ -117,13 +117,14 @@ def test_cli_threads_sets_numba(tmp_path, monkeypatch):
 
 @pytest.mark.skipif(numba.config.NUMBA_NUM_THREADS < 2, reason="numba's pool has one thread")
 @pytest.mark.parametrize("material_model", ["springs", None])  # None: the model's own (the default)
-def test_simulate_is_identical_with_one_and_two_threads(tmp_path, material_model):
+def test_simulate_is_identical_with_one_and_two_threads(tmp_path, monkeypatch, material_model):
     from cutkit.cutting.trajectory import straight_incision
     from cutkit.simulate import SimulateOptions, simulate
     from cutkit.sweep import slab_model
 
     traj = straight_incision([3.0, 0.0, 6.3], [13.0, 0.0, 6.3], inward=[0, 1, 0], depth=4.0, approach=2.0,
                              press_time=0.2, cut_time=0.3, rate=100)
+    monkeypatch.setenv("CUTKIT_CACHE_DIR", "off")  # each run settles: the settle is compared too
     out = {}
     for n in (1, 2):
         configure_threads(n)
