@@ -44,7 +44,7 @@ def cache(tmp_path, monkeypatch):
     return folder / "settle"
 
 
-def test_a_cached_settle_simulates_exactly_what_a_solved_one_does(tmp_path, cache):
+def test_a_cached_settle_simulates_exactly_what_a_solved_one_does(tmp_path, cache, monkeypatch):
     model = prestressed_block()
     first = cut(model, tmp_path / "a")
     assert first["settle"]["cached"] is False and first["settle"]["iterations"] >= 1
@@ -59,9 +59,7 @@ def test_a_cached_settle_simulates_exactly_what_a_solved_one_does(tmp_path, cach
         else:
             np.testing.assert_array_equal(a, b)  # to the bit
     # off: the same again, solved
-    import os
-
-    os.environ["CUTKIT_CACHE_DIR"] = "off"
+    monkeypatch.setenv("CUTKIT_CACHE_DIR", "off")
     assert settle_cache.cache_dir() is None
     third = cut(model, tmp_path / "c")
     assert third["settle"]["cached"] is False
@@ -85,11 +83,13 @@ def test_other_materials_or_prestress_settle_again(cache):
     assert settled(prestressed_block(prestrain=0.1))[0]["cached"] is True
 
 
-def test_a_corrupt_cache_file_is_solved_again_and_replaced(cache):
+@pytest.mark.parametrize("damage", ["foreign", "truncated"])
+def test_a_corrupt_cache_file_is_solved_again_and_replaced(cache, damage):
     model = prestressed_block()
     first, x_first = settled(model)
     (path,) = cache.glob("*.npz")
-    path.write_bytes(b"not a cache file")
+    data = path.read_bytes()
+    path.write_bytes(b"not a cache file" if damage == "foreign" else data[:len(data) // 2])
     again, x_again = settled(model)
     assert again["cached"] is False and again["iterations"] == first["iterations"]
     np.testing.assert_array_equal(x_first, x_again)

@@ -25,6 +25,7 @@ import hashlib
 import json
 import os
 import tempfile
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -88,7 +89,7 @@ def load(key: str) -> tuple[np.ndarray, dict] | None:
             positions = np.array(z["positions"], np.float64)
             info = json.loads(str(z["info"]))
         return positions, info
-    except (OSError, ValueError, KeyError):  # missing, truncated or foreign: settle again
+    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile):  # missing, truncated, foreign: settle again
         return None
 
 
