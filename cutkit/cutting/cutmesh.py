@@ -55,6 +55,14 @@ _TET_EDGES_L = TET_EDGES.tolist()
 _NO_UVW = np.zeros((0, 3))
 
 
+def _cone(tris, apex):
+    """(k, 4) int64 tets of outward triangles ``tris`` (k, 3) coned to ``apex`` (a node, or (k,)
+    one per triangle): positively oriented, since the apex lies inside of each triangle."""
+    new = np.empty((tris.shape[0], 4), np.int64)
+    new[:, 0], new[:, 1], new[:, 2], new[:, 3] = tris[:, 0], tris[:, 2], tris[:, 1], apex
+    return new
+
+
 def _vol(x, t):
     """Signed volume of the tet t (4,) over positions x (n, 3)."""
     return float(K.min_volume(x, np.asarray(t, np.int64).reshape(1, 4)))
@@ -443,9 +451,7 @@ class CutMesh:
                 else:
                     self._move_node(self.tet_T[o, c], v, tb)
             # the cone of the face triangles to T (each side's copy of T for a complete split)
-            new = np.empty((tris.shape[0], 4), np.int64)
-            new[:, 0], new[:, 1], new[:, 2] = tris[:, 0], tris[:, 2], tris[:, 1]
-            new[:, 3] = self.tet_T[o][group[corner]] if complete else self.tet_T[o, 0]
+            new = _cone(tris, self.tet_T[o][group[corner]] if complete else self.tet_T[o, 0])
         # replace the old sub-tets
         old = self.subtets.get(o, [o])
         self._alive[old] = False
@@ -479,10 +485,7 @@ class CutMesh:
             tb, cone = self._best_T(v, tb, tris, free_T)
             if lf < 0 or cone > angle + SPLIT_ANGLE_GAIN:
                 return None, tb
-        sel = tris[face != lf]
-        new = np.empty((sel.shape[0], 4), np.int64)
-        new[:, 0], new[:, 1], new[:, 2], new[:, 3] = sel[:, 0], sel[:, 2], sel[:, 1], face_nodes[lf]
-        return new, tb
+        return _cone(tris[face != lf], face_nodes[lf]), tb
 
     def _vol0(self, o):
         """Signed volume of original tet o at the current positions."""
