@@ -73,3 +73,7 @@ def command(model, trajectory, out_dir, blade_length, centre_nodes):
     console.print(f"{len(traj.t)} poses, {strokes} stroke{'s' * (strokes != 1)}, {n_cut} tets cut into "
                   f"{len(new)}, worst new dihedral {worst:.1f} deg "
                   f"-> {out_dir}/cut.pvd, {out_dir}/model.h5")
+    uncut = cm.edges_left_uncut()
+    if uncut:
+        console.print(f"[yellow]note:[/] {uncut} edge{'s' * (uncut != 1)} the blade met could not be cut in "
+                      "its stroke (the swept surface folded over a face) and stay joined; see docs/cutting.md")

@@ -56,6 +56,39 @@ def test_cut_cli_writes_no_orphan_node_and_reports_the_written_angle(tmp_path):
     worst = float(re.search(r"worst new dihedral ([0-9.]+) deg", r.output.replace("\n", " ")).group(1))
     new = m.tets[m.cell_data["new_tet"] == 1]
     assert worst == pytest.approx(min_dihedral_angles(m.points, new).min(), abs=0.06)
+    assert "could not be cut" not in r.output  # a steady incision cuts every edge it meets
+
+
+def test_cut_cli_reports_the_edges_a_folded_sweep_left_uncut(tmp_path):
+    """A blade swept back over its own cut with 1 mm tremor folds its swept surface over faces; the
+    edges it could not cut are reported, as many as the library counts (``CutMesh.edges_left_uncut``,
+    checked against the crossed edges in tests/test_cut_properties.py)."""
+    import re
+
+    from _cut_paths import make_path
+
+    from cutkit.cutting import CutMesh, cut_step
+    from cutkit.cutting.rebase import rebase_if_left
+    from cutkit.cutting.trajectory import Trajectory
+
+    p, t = box_mesh((6, 3, 3))
+    write_model(tmp_path / "m.h5", TetModel(points=p, tets=t, labels=np.ones(len(t), np.int32)))
+    poses = make_path("reversal", np.random.default_rng(1), p.max(axis=0), tremor=1.0)
+    tips, axes = np.array([q[0] for q in poses]), np.array([q[1] for q in poses])
+    normals = np.cross(axes, [0.0, 1.0, 0.0])
+    normals /= np.linalg.norm(normals, axis=1)[:, None]
+    traj = Trajectory(t=np.arange(len(poses)) * 0.01, tip=tips, a=axes, n=normals, blade_length=5.0)
+    write_trajectory(tmp_path / "f.csv", traj)
+    r = CliRunner().invoke(command, [str(tmp_path / "m.h5"), "--trajectory", str(tmp_path / "f.csv"),
+                                     "-o", str(tmp_path / "out")])
+    assert r.exit_code == 0, r.output
+    cm = CutMesh(p, t, blade_length=5.0)
+    for tip, a in zip(traj.tip, traj.a):
+        cut_step(cm, tip, a)
+        rebase_if_left(cm)
+    assert cm.edges_left_uncut() > 0
+    found = re.search(r"([0-9]+) edges? the blade met could not be cut", r.output.replace("\n", " "))
+    assert found and int(found.group(1)) == cm.edges_left_uncut(), r.output
 
 
 def test_cut_cli_a_second_stroke_crosses_the_first(tmp_path):

@@ -172,15 +172,20 @@ def test_every_lost_edge_is_a_documented_refusal(name, kind, tremor, seed, blade
     or one deferred (two opposite cut edges alone in a tet)."""
     p, t, v0, L = mesh(name)
     cm = CutMesh(p, t, blade_length=blade_length)
-    other = []
+    other, unreported, n_lost = [], [], [0]
 
     def account(cm, stroke):
         lost, refused, deferred = stroke_losses(cm, stroke)
         other.extend(lost - refused - deferred)
+        # ... and each is counted by edges_left_uncut (the summary's and `cutkit cut`'s figure)
+        unreported.extend(lost - cm.refused_edges - set(cm.pending_edges))
+        n_lost[0] += len(lost)
 
     run_path(cm, make_path(kind, np.random.default_rng(seed), L, tremor), v0, check=False, end_strokes=True,
              on_stroke_end=account)
     assert not other, sorted(other)[:10]
+    assert not unreported, sorted(unreported)[:10]
+    assert cm.edges_left_uncut() >= n_lost[0]
 
 
 def test_through_cut_gives_two_pieces():

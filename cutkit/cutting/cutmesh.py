@@ -143,6 +143,7 @@ class CutMesh:
         self.face_diag = -np.ones(self.faces.shape[0], np.int64)  # split face: its quad's diagonal vertex (splits.py)
         self.pending_edges = {}  # edge -> first parameter, deferred (see try_cut_edge)
         self.retried_edges = []  # deferred edges cut later (drained by cut_step)
+        self.refused_edges = set()  # edges the blade met whose cut the face rule refused (see edges_left_uncut)
         self.face_bary = {}  # face -> (3,) bary of the latest blade crossing
         self.tip_bary = {}  # original tet -> (4,) tip bary while inside
         self.tet_T = -np.ones((m0, 2), np.int64)
@@ -284,6 +285,7 @@ class CutMesh:
             return cut_twins(self, int(e), float(s), self.edge_twins[int(e)])
         faces = self.faces_of_edge(e)
         if any(self.face_ncut[f] >= 2 for f in faces):
+            self.refused_edges.add(int(e))
             return []
         if self._splits_a_sheet(e):
             self.pending_edges.setdefault(int(e), float(s))
@@ -292,6 +294,20 @@ class CutMesh:
         touched = self._cut_edge(e, s, faces)
         self._retry_pending(touched)
         return touched
+
+    def edges_left_uncut(self):
+        """Edges the blade met and the cut left uncut, over every stroke so far (int).
+
+        An edge is left uncut when cutting it would give a face a third cut
+        edge (the swept surface folded over the face: tremor, a tight curve,
+        a blade swept back over its own cut; one cut per edge and face in a
+        stroke cannot represent it, docs/cutting.md) or when it is still
+        deferred (two opposite cut edges alone in a tet) where the blade
+        stopped.  Edges met on their boundary (at an end) count too.  Such an
+        edge stays joined: a thin bridge across the wound.
+        """
+        mine = self.refused_edges.union(self.pending_edges)
+        return self.uncut_before + sum(1 for e in mine if not np.isfinite(self.edge_t[e]))
 
     def _retry_pending(self, touched):
         """Cut the deferred edges of the tets in ``touched`` (list, extended in place) that are now allowed."""
@@ -314,6 +330,7 @@ class CutMesh:
                 faces = self.faces_of_edge(e)
                 if any(self.face_ncut[f] >= 2 for f in faces):
                     del self.pending_edges[e]  # can never be cut now
+                    self.refused_edges.add(e)
                     continue
                 if self._splits_a_sheet(e):
                     continue

@@ -38,6 +38,8 @@ def init_records(cm, n_model_points, n_model_tets):
     * ``cut_faces_before`` : set of sorted (3,) tuples, faces of the original
       tets that are cut surface of earlier strokes.
     * ``n_rebases`` : int.
+    * ``uncut_before`` : int, edges the earlier strokes met and left uncut
+      (:meth:`~cutkit.cutting.cutmesh.CutMesh.edges_left_uncut`).
     """
     cm.n_model_points = int(n_model_points)
     cm.n_model_tets = int(n_model_tets)
@@ -46,6 +48,7 @@ def init_records(cm, n_model_points, n_model_tets):
     cm.model_node = np.arange(n_model_points, dtype=np.int64)
     cm.cut_faces_before = set()
     cm.n_rebases = 0
+    cm.uncut_before = 0
     cm.node_rep = np.arange(n_model_points, dtype=np.int64)  # see _node_reps
     cm.edge_twins, cm.face_twins = {}, {}  # see find_twins
 
@@ -127,6 +130,7 @@ def rebase(cm):
     fresh.model_node = model_node
     fresh.cut_faces_before = cut_faces
     fresh.n_rebases = cm.n_rebases + 1
+    fresh.uncut_before = cm.edges_left_uncut()
     fresh.step_count = cm.step_count
     fresh.node_rep = _node_reps(cm)
     find_twins(fresh)
@@ -231,6 +235,7 @@ def cut_twins(cm, e, s, twins):
     group = [e] + list(twins)
     faces = [cm.faces_of_edge(g) for g in group]
     if any(np.isfinite(cm.edge_t[g]) for g in group) or any(cm.face_ncut[f] >= 2 for fs in faces for f in fs):
+        cm.refused_edges.add(e)
         return []
     if any(cm._splits_a_sheet(g) for g in group):
         cm.pending_edges.setdefault(e, s)
