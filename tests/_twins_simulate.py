@@ -42,3 +42,31 @@ def step_tet_sets_twin(added, removed, around):
     added, removed = np.setdiff1d(added, both), np.setdiff1d(removed, both)
     again = np.setdiff1d(around, np.concatenate([added, removed]))
     return added, removed, again, np.union1d(removed, around)
+
+
+
+def nodes_near_blade_twin(x, blade, radius, nodes):
+    """The nodes of ``nodes`` within ``radius`` of the blade segment (``blade`` (3, 3): back end, unit
+    axis, [length, 0, 0]), by checking each."""
+    back, axis, length = blade[0], blade[1], blade[2, 0]
+    out = []
+    for i in nodes:
+        s = min(max(float(np.dot(x[i] - back, axis)) / length, 0.0), 1.0)
+        if np.linalg.norm(x[i] - (back + s * length * axis)) < radius:
+            out.append(int(i))
+    return sorted(out)
+
+
+
+def rest_displacement_twin(x, X, nodes, tip, axis, length, radius):
+    """The weighted mean displacement of ``nodes`` around the blade, node by node (None: no weight)."""
+    back = tip - length * axis
+    usum, wsum = np.zeros(3), 0.0
+    for i in nodes:
+        s = min(max(float(np.dot(x[i] - back, axis)) / length, 0.0), 1.0)
+        d = np.linalg.norm(x[i] - (back + s * length * axis))
+        if d < radius:
+            w = (1.0 - (d / radius) ** 2) ** 3
+            usum += w * (x[i] - X[i])
+            wsum += w
+    return usum / wsum if wsum > 0 else None

@@ -95,6 +95,10 @@ def test_both_strokes_cut_and_are_counted(run):
     assert s["cut_tets"] > 300 and s["new_tets"] > 2 * s["cut_tets"]
     assert s["tets_initial"] == slab().tets.shape[0]
     assert json.loads((out / "summary.json").read_text())["cut_tets"] == s["cut_tets"]
+    if s["material_model"] == "neohookean":
+        # a steady hand cuts every edge it meets: the blade's rest pose follows the hand smoothly
+        # (cutkit.simulate.rest_map; the mean over the active tets' corners left 9 edges uncut here)
+        assert s["edges_left_uncut"] == 0
 
 
 def test_cut_model_is_valid_in_rest_positions(run):
@@ -143,8 +147,9 @@ def test_each_cut_goes_through_the_depth_past_where_it_started(run):
 
 
 #: How far past the far side each side-entry stroke draws the blade, mm: the slab bends away
-#: from the blade by a few millimetres before it parts, so the hand goes on well past it.
-PAST_FAR_SIDE = 10.0
+#: from the blade before it parts (the tissue around the blade's end is dragged along by about
+#: 9 mm, and the blade cuts where that tissue is at rest), so the hand goes on well past it.
+PAST_FAR_SIDE = 15.0
 
 
 def base_held_slab():

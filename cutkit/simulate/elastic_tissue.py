@@ -37,6 +37,7 @@ from cutkit.relax.growable import append_rows
 from cutkit.relax.vbd import DEFAULT_ATOL_N, local_step
 from cutkit.relax.materials import material_of_tets, prestress_of_tets
 from cutkit.simulate._kernels import old_shape_corners, place_through_old_shape, step_tet_sets
+from cutkit.simulate.rest_map import rest_map_radius
 from cutkit.simulate.tissue_base import TissueBase
 
 #: Each implicit step of a simulation is solved until its residual is below
@@ -81,6 +82,7 @@ class ElasticTissue(TissueBase):
                  step_max_iterations: int = STEP_MAX_ITERATIONS):
         self.model = model
         self.cm = cm = CutMesh.from_model(model, blade_length=blade_length, centre_nodes=centre_nodes)
+        self.rest_map_radius = rest_map_radius(model.points, model.tets)
         self.step_s = float(step_s)
         self.step_rtol = float(step_rtol)
         self.step_max_iterations = int(step_max_iterations)

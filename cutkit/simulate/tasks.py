@@ -121,7 +121,10 @@ class ContactTask:
         if hit is None:
             return None
         fv = self.bvh.faces[hit.face]
-        x = self.tis.positions[fv]
+        # the face's rest orientation: the blade dimples the face it presses on (by 21 degrees on the
+        # springs' slab of tests/test_simulate_strokes.py), and the plane of a dimpled face, drawn along
+        # a stroke of 20 mm, never had the lifted hand outside it
+        x = self.tis.rest_positions[fv]
         normal = np.cross(x[1] - x[0], x[2] - x[0])
         b = np.cross(n, a)
         c = self.contact
@@ -134,7 +137,8 @@ class ContactTask:
         return c, self.rows[int(self.row_of_tet[self.face_tet[hit.face]])]
 
     def left(self, tip) -> bool:
-        """True once the hand's tip is more than :data:`LEAVE_MARGIN_MM` outside the entry face's plane."""
+        """True once the hand's tip is more than :data:`LEAVE_MARGIN_MM` outside the entry face's plane
+        (through the entry point, with the face's rest orientation)."""
         return bool(np.dot(np.asarray(tip) - self.contact.entry, self.contact.inward) < -LEAVE_MARGIN_MM)
 
     def refit(self) -> None:
@@ -250,8 +254,7 @@ class CutTask:
         """One geometry update; returns the (n, 3) forces on the tissue's nodes, N."""
         cm = self.tis.cm
         axis = out[O_N:O_N + 3].copy()
-        near = np.unique(cm.orig_tets[cm.active_tets]) if cm.active_tets.size else contact.face_nodes
-        blade_tip = self.tis.blade_to_rest(proxy, near)
+        blade_tip = self.tis.blade_to_rest(proxy, axis, cm.active_tets, contact.face_nodes)
         if self.pending:
             self._cut(blade_tip, axis, proxy)
         elif code != FREE:

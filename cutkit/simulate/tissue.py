@@ -35,6 +35,7 @@ from cutkit.relax.materials import material_of_tets, prestress_of_tets
 from cutkit.relax.model import STIFFNESS_CALIBRATION
 from cutkit.relax.topology import _recolour
 from cutkit.simulate._kernels import lookup_springs
+from cutkit.simulate.rest_map import rest_map_radius
 from cutkit.simulate.tissue_base import TissueBase
 
 
@@ -96,6 +97,7 @@ class Tissue(TissueBase):
         self.calibration = float(calibration)
         self.volume_stiffness = float(volume_stiffness)
         self.cm = cm = CutMesh.from_model(model, blade_length=blade_length, centre_nodes=centre_nodes)
+        self.rest_map_radius = rest_map_radius(model.points, model.tets)
         self.springs = sm = build_spring_model(model, calibration=calibration, volume_stiffness=volume_stiffness)
         self.state = initial_state(sm)
         tolerance = tolerance_fraction * float(np.mean(sm.rest_length))

@@ -23,6 +23,10 @@ class TissueBase:
     """
 
     cm: CutMesh
+    #: Radius of the neighbourhood whose displacement carries the blade (:mod:`cutkit.simulate.rest_map`), mm.
+    rest_map_radius: float
+    #: Its flood fill's buffers (:class:`cutkit.simulate.rest_map.BladeNeighbourhood`), made on first use.
+    _blade_hood = None
 
     def rebase(self, old_of_new: np.ndarray, old_orig: np.ndarray) -> None:
         """Follow :meth:`CutMesh.rebase <cutkit.cutting.CutMesh.rebase>` (called after it, between strokes).
@@ -56,25 +60,40 @@ class TissueBase:
         wsum = wz.sum(axis=1, keepdims=True)
         return np.where(valid, par, 0), wz / np.where(wsum > 0, wsum, 1.0), valid
 
-    def blade_to_rest(self, point, near_nodes: np.ndarray) -> np.ndarray:
-        """Carry a point of the deformed tissue into the rest configuration.
+    def blade_to_rest(self, point, axis, active_tets: np.ndarray, entry_nodes: np.ndarray) -> np.ndarray:
+        """Carry the blade's tip from the deformed tissue into the rest configuration, (3,) float64.
 
         The cut is made in the rest configuration, where no original
         tetrahedron is ever inverted, so the cut's topology does not depend
-        on how far the tissue has moved.  The blade is moved back by the mean
-        displacement of the nodes around it (first order: the local
-        rotation and stretch are neglected).
+        on how far the tissue has moved.  The blade is moved back by the
+        displacement of the tissue around it (:mod:`cutkit.simulate.rest_map`:
+        the smooth weighted mean over the nodes near the blade; first order,
+        the local rotation and stretch are neglected), or before the blade
+        has met a tetrahedron, by the mean displacement of the entry face's
+        nodes.
 
         Parameters
         ----------
-        point : (3,) float64
-        near_nodes : (k,) int64
-            Nodes around the blade.
+        point : (3,) float64  the tip (the proxy), deformed configuration, mm
+        axis : (3,) float64  unit vector along the blade, handle to tip
+        active_tets : (k,) int64  the last cut step's active (original) tets
+        entry_nodes : (q,) int64  the nodes of the face the blade entered through
         """
-        if len(near_nodes) == 0:
-            return np.asarray(point, np.float64).copy()
-        u = self.positions[near_nodes] - self.rest_positions[near_nodes]
-        return np.asarray(point, np.float64) - u.mean(axis=0)
+        from cutkit.simulate.rest_map import BladeNeighbourhood, rest_displacement
+
+        point, axis = np.asarray(point, np.float64), np.asarray(axis, np.float64)
+        if len(active_tets):
+            hood = self._blade_hood
+            if hood is None or hood.n_rebases != self.cm.n_rebases:  # the first, or the mesh was rebased
+                hood = self._blade_hood = BladeNeighbourhood(self.cm, self.rest_map_radius)
+            nodes = hood.nodes(self.cm, self.positions, active_tets, point, axis)
+            u = rest_displacement(self.positions, self.rest_positions, nodes, point, axis, self.cm.blade_length,
+                                  self.rest_map_radius)
+            if u is not None:
+                return point - u
+        if len(entry_nodes) == 0:
+            return point.copy()
+        return point - (self.positions[entry_nodes] - self.rest_positions[entry_nodes]).mean(axis=0)
 
     def alive_tets(self) -> tuple[np.ndarray, np.ndarray]:
         """(k, 4) int64 current tets and (k,) int64 their CutMesh ids."""

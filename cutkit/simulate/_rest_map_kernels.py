@@ -1,0 +1,76 @@
+"""Numba kernel of :mod:`cutkit.simulate.rest_map`: the nodes near the blade (twin in
+``tests/_twins_simulate.py``)."""
+
+from __future__ import annotations
+
+from numba import njit
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _seg_dist2(x, i, back, axis, length):
+    """Squared distance of node i (x[i]) to the segment from ``back`` along ``axis`` for ``length``."""
+    dx, dy, dz = x[i, 0] - back[0], x[i, 1] - back[1], x[i, 2] - back[2]
+    s = min(max((dx * axis[0] + dy * axis[1] + dz * axis[2]) / length, 0.0), 1.0) * length
+    dx, dy, dz = dx - s * axis[0], dy - s * axis[1], dz - s * axis[2]
+    return dx * dx + dy * dy + dz * dz
+
+
+@njit(cache=True, nogil=True)
+def nodes_near_blade(x, tets, neighbors, seeds, blade, radius, tet_stamp, node_stamp, mark, stack, out):
+    """The corners of tets within ``radius`` of the blade segment, found by a flood fill from ``seeds``.
+
+    Tets are visited over face neighbours while one of their corners lies
+    within ``radius`` of the blade: the blade's neighbourhood (a capsule) is
+    face-connected, so no node inside it that is linked to the seeds
+    through it is missed.
+
+    Parameters
+    ----------
+    x : (n, 3) float64  node positions (deformed)
+    tets : (m, 4) int64
+    neighbors : (m, 4) int64  face neighbours, -1 on the boundary
+    seeds : (k,) int64  tets to start from (always visited)
+    blade : (3, 3) float64  rows: the back end, the unit axis towards the tip, [length, 0, 0]
+    radius : float
+    tet_stamp : (m,) int64, node_stamp : (n,) int64
+        Visit marks, never reset: visited when equal to ``mark``.
+    mark : int  a value no entry of the stamps has
+    stack : (m,) int64  work space
+    out : (n,) int64  written: the nodes within ``radius``, ``[:count]``
+
+    Returns
+    -------
+    count : int
+    """
+    back, axis, length = blade[0], blade[1], blade[2, 0]
+    r2 = radius * radius
+    n = 0
+    for j in range(seeds.shape[0]):
+        t = seeds[j]
+        if tet_stamp[t] != mark:
+            tet_stamp[t] = mark
+            stack[n] = t
+            n += 1
+    head = 0
+    count = 0
+    while head < n:
+        t = stack[head]
+        head += 1
+        for c in range(4):
+            i = tets[t, c]
+            if node_stamp[i] != mark:
+                node_stamp[i] = mark
+                if _seg_dist2(x, i, back, axis, length) < r2:
+                    out[count] = i
+                    count += 1
+        for f in range(4):
+            nb = neighbors[t, f]
+            if nb < 0 or tet_stamp[nb] == mark:
+                continue
+            tet_stamp[nb] = mark
+            for c in range(4):
+                if _seg_dist2(x, tets[nb, c], back, axis, length) < r2:
+                    stack[n] = nb
+                    n += 1
+                    break
+    return count

@@ -1,0 +1,113 @@
+"""Carry the blade from the deformed tissue into the rest configuration, where it cuts.
+
+The cut is made in the rest configuration (docs/simulate.md).  Every
+geometry update moves the blade back by the displacement of the tissue
+around it: the weighted mean over the original nodes within ``radius`` of
+the blade segment (deformed positions), a node at distance ``d`` weighing
+``(1 - (d / radius)^2)^3``.  The nodes are found by a flood fill from the
+last cut step's active tetrahedra (local work).  Every weight falls to zero
+at the radius, so the blade's rest pose moves continuously with the hand.
+First order: a translation; the local rotation and stretch are neglected.
+
+The plain mean over the corners of the step's active tetrahedra, used
+before, jumped whenever that set changed (a node's whole displacement over
+the set's size; the nodes on the two sides of an opened cut move apart):
+the rest pose of a steady hand wobbled, its swept surface folded and left
+edges uncut (docs/simulate.md).  A straight line fitted through samples
+along the blade, each carried by the nodes near it, would follow a tissue
+that bends along the blade; it was tried and not kept: where the blade
+leaves the tissue only a few samples near the surface remain, the fitted
+direction swings from step to step, and the swept surface folded again
+(10-21 edges left uncut on the side-entry slab of
+tests/test_simulate_strokes.py, none with the translation).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+#: Radius of the neighbourhood whose displacement carries the blade, in median edge lengths of the model.
+REST_MAP_RADIUS_EDGES = 2.0
+
+
+def rest_map_radius(points, tets) -> float:
+    """The blade's neighbourhood radius for a model, mm: :data:`REST_MAP_RADIUS_EDGES` times the median
+    length of the tets' edges (each edge once per tet around it).
+
+    Parameters
+    ----------
+    points : (n, 3) float64
+    tets : (m, 4) int64
+    """
+    from cutkit.mesh.topology import TET_EDGES
+
+    p, t = np.asarray(points, np.float64), np.asarray(tets, np.int64)
+    length = np.linalg.norm(p[t[:, TET_EDGES[:, 0]]] - p[t[:, TET_EDGES[:, 1]]], axis=2)
+    return REST_MAP_RADIUS_EDGES * float(np.median(length))
+
+
+class BladeNeighbourhood:
+    """The original nodes near the blade (kernel ``_rest_map_kernels.nodes_near_blade``).
+
+    Keeps the flood fill's visit marks and work space between calls; made
+    again after a rebase (``n_rebases``: the original tets have changed).
+
+    Parameters
+    ----------
+    cm : CutMesh
+    radius : float  mm (:func:`rest_map_radius`)
+    """
+
+    def __init__(self, cm, radius: float):
+        self.n_rebases = cm.n_rebases
+        self.radius = float(radius)
+        self.tet_stamp = np.zeros(cm.orig_tets.shape[0], np.int64)
+        self.node_stamp = np.zeros(cm.n_orig_points, np.int64)
+        self.stack = np.empty(cm.orig_tets.shape[0], np.int64)
+        self.out = np.empty(cm.n_orig_points, np.int64)
+        self.mark = 0
+
+    def nodes(self, cm, positions, seeds, tip, axis) -> np.ndarray:
+        """(k,) int64 the original nodes within the radius of the blade (deformed positions).
+
+        Parameters
+        ----------
+        cm : CutMesh
+        positions : (n, 3) float64  the tissue's nodes (cut mesh numbering)
+        seeds : (s,) int64  original tets to start from (the last cut step's active tets)
+        tip : (3,) float64  the blade's tip, mm
+        axis : (3,) float64  unit vector along the blade, handle to tip
+        """
+        from cutkit.simulate._rest_map_kernels import nodes_near_blade
+
+        self.mark += 1
+        length = cm.blade_length
+        blade = np.array([tip - length * axis, axis, [length, 0.0, 0.0]], np.float64)
+        n = nodes_near_blade(positions, cm.orig_tets, cm.neighbors, np.ascontiguousarray(seeds, np.int64), blade,
+                             self.radius, self.tet_stamp, self.node_stamp, self.mark, self.stack, self.out)
+        return self.out[:n]
+
+
+def rest_displacement(x, X, nodes, tip, axis, length, radius):
+    """The displacement (3,) float64 that carries the blade back into the rest configuration, or None
+    when no node is within ``radius`` of it: the mean over ``nodes``, each weighing
+    ``(1 - (d / radius)^2)^3`` by its distance d to the blade segment (none from ``radius`` on).
+
+    Parameters
+    ----------
+    x, X : (n, 3) float64  node positions (deformed) and rest positions
+    nodes : (k,) int64  the nodes near the blade (:meth:`BladeNeighbourhood.nodes`)
+    tip : (3,) float64  the blade's tip, deformed configuration, mm
+    axis : (3,) float64  unit vector along the blade, handle to tip
+    length : float  the blade's length, mm
+    radius : float  mm
+    """
+    xn = x[nodes]
+    back = tip - length * axis
+    s = np.clip((xn - back) @ axis / length, 0.0, 1.0)
+    d2 = np.sum((xn - back - s[:, None] * (length * axis)) ** 2, axis=1)
+    w = np.clip(1.0 - d2 / radius ** 2, 0.0, None) ** 3
+    total = w.sum()
+    if not total > 0.0:
+        return None
+    return w @ (xn - X[nodes]) / total
