@@ -1,6 +1,7 @@
 """Kinematic cutting of tetrahedral models (paper sections 3 and 4.2)."""
 
-from cutkit.cutting.cutmesh import COMPACT_VOL_MIN, EDGE_SNAP, FACE_BARY_MIN, TET_BARY_MIN, CutMesh
+from cutkit.cutting.cutmesh import EDGE_SNAP, FACE_BARY_MIN, TET_BARY_MIN, CutMesh
+from cutkit.cutting.splits import COMPACT_VOL_MIN
 from cutkit.cutting.export import compact_nodes, cut_surface_faces, to_model
 from cutkit.cutting.step import StepResult, cut_step, find_trajectory_tetra, surface_bvh
 

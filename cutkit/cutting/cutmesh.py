@@ -24,12 +24,11 @@ from __future__ import annotations
 import numpy as np
 
 from cutkit.errors import InputError
-from cutkit.mesh.topology import TET_EDGES, TET_FACES, unique_edges, unique_faces, tet_neighbors
+from cutkit.mesh.topology import TET_EDGES, unique_edges, unique_faces, tet_neighbors
 from cutkit.cutting import subdivision as S
-from cutkit.cutting import _kernels_split as KP
 from cutkit.cutting import _kernels_step as K
 from cutkit.cutting.rebase import cut_twins, init_records, rebase, twin_face_bary
-from cutkit.cutting.splits import COMPACT_VOL_MIN, SPLIT_ANGLE_GAIN, SPLIT_ANGLE_GOOD, compact_split, fix_diagonals
+from cutkit.cutting.resubdivision import resubdivide
 
 #: Edge intersection parameters are clamped into [EDGE_SNAP, 1 - EDGE_SNAP]
 #: (a crossing near a vertex, or through it, becomes a crossing near it).
@@ -43,24 +42,9 @@ FACE_BARY_MIN = 0.2
 TET_BARY_MIN = 0.15
 
 
-#: Where T may go when no tip is inside (fractions of the way from the cut
-#: nodes' centroid to the tet's centroid): the best-shaped cone is taken.  0
-#: keeps the cut surface flattest; further in, fewer slivers near the cut.
-T_BLENDS = (0.0, 0.35, 0.7)
-_T_BLENDS = np.array(T_BLENDS)
-_T_AT_CENTROID = np.zeros(1)
-
 _TET_EDGES_L = TET_EDGES.tolist()
 #: Texture coordinates placeholder for :func:`_kernels_step.set_node` (no texture).
 _NO_UVW = np.zeros((0, 3))
-
-
-def _cone(tris, apex):
-    """(k, 4) int64 tets of outward triangles ``tris`` (k, 3) coned to ``apex`` (a node, or (k,)
-    one per triangle): positively oriented, since the apex lies inside of each triangle."""
-    new = np.empty((tris.shape[0], 4), np.int64)
-    new[:, 0], new[:, 1], new[:, 2], new[:, 3] = tris[:, 0], tris[:, 2], tris[:, 1], apex
-    return new
 
 
 def _vol(x, t):
@@ -432,98 +416,12 @@ class CutMesh:
                            self.face_node, self.face_ncut, self._def_nodes, self._def_w, self.face_diag)
 
     def resubdivide(self, o):
-        """Re-subdivide original tet ``o`` from scratch from its cut state."""
-        mask = S.REDUCE_TABLE[self.tet_mask(o)]
-        case, group = S.CLASSIFY_TABLE[mask]
-        if case == "uncut":
-            return
-        v = self.orig_tets[o].tolist()
-        # tip / centre node T
-        tb = self.tip_bary.get(o)
-        free_T = tb is None  # no tip inside: T may go where its cone is best shaped
-        ct = self.cut_tables()
-        if free_T:  # the mean of the tet's cut nodes
-            tb = K.cut_nodes_centroid(ct, o, mask)
-        tb = _clamp_bary(tb, TET_BARY_MIN)
-        complete = case in ("corner", "quad")
-        group = np.array(group, np.int64)  # side of each corner
-        new, choice = None, []
-        if complete and self.compact_splits:
-            tris, corner, face, new, angle, choice = compact_split(self, ct, o, mask, group)
-            if new is not None and angle < SPLIT_ANGLE_GOOD:
-                # a poor compact cone: the T-cone may be better (more tets, but no sliver)
-                tb_c, cone = self._best_T(v, tb, tris, free_T)
-                if cone > angle + SPLIT_ANGLE_GAIN:
-                    new, tb = None, tb_c
-        else:
-            tris, corner, face = KP.face_triangles(ct, o, mask, self.centre_nodes)
-            if o != self.tip_tet:  # no tip inside: the crack front may run between notch nodes
-                new, tb = self._face_apex_cone(o, v, tb, free_T, tris, face)
-            elif free_T:
-                tb, _ = self._best_T(v, tb, tris, free_T)
-        if new is None:
-            for c in range(2 if complete else 1):
-                if self.tet_T[o, c] < 0:
-                    self.tet_T[o, c] = self._new_node(v, tb)
-                else:
-                    self._move_node(self.tet_T[o, c], v, tb)
-            # the cone of the face triangles to T (each side's copy of T for a complete split)
-            new = _cone(tris, self.tet_T[o][group[corner]] if complete else self.tet_T[o, 0])
-        # replace the old sub-tets
-        old = self.subtets.get(o, [o])
-        self._alive[old] = False
-        self._delta["removed_tets"].extend(old)
-        ids = self._add_tets(new, o)
-        self.subtets[o] = ids
-        self._delta["added_tets"].extend(ids)
-        # a partly cut tet across a split face follows the diagonal this split chose
-        for nb in fix_diagonals(self, o, choice):
-            self.resubdivide(nb)
-
-    def _face_apex_cone(self, o, v, tb, free_T, tris, face):
-        """The cone of a partly cut tet no tip is in from one of its notch nodes F, or the T-cone.
-
-        The tip's path crossed the tet and left it, so its crack front runs
-        between its notched faces' nodes: the cone from one of them over the
-        other faces' triangles (``_kernels_split.best_face_apex``) tiles the tet
-        without T and with fewer tets (a notched face's four triangles are not
-        coned).  It is kept unless it is poor (below ``SPLIT_ANGLE_GOOD``) and the
-        T-cone is better by ``SPLIT_ANGLE_GAIN``: the rule of the complete splits'
-        compact cones.  Returns ``(cone, tb)``: the F-cone's tets (k, 4) or None
-        for the T-cone, and T's barycentric weights (placed by
-        :meth:`_best_T` where it was looked at).
-        """
-        f = self.tet_faces[o]
-        face_nodes = np.where(self.face_ncut[f] == 1, self.face_node[f, 0], -1)
-        lf, angle = -1, -1.0
-        if (face_nodes >= 0).any():
-            lf, angle = KP.best_face_apex(self._x, tris, face, face_nodes, COMPACT_VOL_MIN * float(self._vol0(o)))
-        if lf < 0 or angle < SPLIT_ANGLE_GOOD:
-            tb, cone = self._best_T(v, tb, tris, free_T)
-            if lf < 0 or cone > angle + SPLIT_ANGLE_GAIN:
-                return None, tb
-        return _cone(tris[face != lf], face_nodes[lf]), tb
+        """Re-subdivide original tet ``o`` from scratch from its cut state (:func:`.resubdivision.resubdivide`)."""
+        resubdivide(self, o)
 
     def _vol0(self, o):
         """Signed volume of original tet o at the current positions."""
         return _vol(self._x, self.orig_tets[o])
-
-    def _best_T(self, v, tb, tris, free):
-        """Barycentric weights of T (4,) and the smallest dihedral angle (degrees) of its cone.
-
-        With ``free`` (no tip inside), T is moved from the cut nodes' centroid
-        ``tb`` towards the tet's centroid by each of ``T_BLENDS`` and the
-        best-shaped cone is kept.  The candidates are tried in the spare row
-        ``n_points`` of the node arrays (no node is made), all in one kernel
-        call (``_kernels_step.best_cone_apex``).
-        """
-        if self._x.shape[0] <= self.n_points:
-            self.n_points += 1  # make _grow_nodes double the arrays
-            self._grow_nodes()
-            self.n_points -= 1
-        b, angle = K.best_cone_apex(self._x, np.asarray(v, np.int64), np.asarray(tb, np.float64),
-                                    _T_BLENDS if free else _T_AT_CENTROID, tris, TET_BARY_MIN, self.n_points)
-        return b, float(angle)
 
     def _add_tets(self, new, o):
         """Append the tets ``new`` (list of 4-tuples) as sub-tets of original ``o``; returns their ids."""

@@ -1,0 +1,127 @@
+"""Re-subdivision of one cut tetrahedron from its cut state (paper section 3, Figs. 2-3).
+
+:func:`resubdivide` replaces the sub-tetrahedra of an original tetrahedron
+of a :class:`~cutkit.cutting.cutmesh.CutMesh` by those its cut edges, face
+nodes and tip give now.  A complete split is coned per side to one of its
+vertices when that is well shaped (:mod:`cutkit.cutting.splits`); a partly
+cut tetrahedron the tip has left, to one of its notch nodes F; otherwise
+every face triangle is coned to the interior node T (docs/cutting.md,
+"Interior: cone to the cut node T").
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from cutkit.cutting import _kernels_split as KP
+from cutkit.cutting import _kernels_step as K
+from cutkit.cutting import cutmesh as CM  # its tolerances (a circular import: read at call time)
+from cutkit.cutting import subdivision as S
+from cutkit.cutting.splits import COMPACT_VOL_MIN, SPLIT_ANGLE_GAIN, SPLIT_ANGLE_GOOD, compact_split, fix_diagonals
+
+#: Where T may go when no tip is inside (fractions of the way from the cut
+#: nodes' centroid to the tet's centroid): the best-shaped cone is taken.  0
+#: keeps the cut surface flattest; further in, fewer slivers near the cut.
+T_BLENDS = (0.0, 0.35, 0.7)
+_T_BLENDS = np.array(T_BLENDS)
+_T_AT_CENTROID = np.zeros(1)
+
+
+def _cone(tris, apex):
+    """(k, 4) int64 tets of outward triangles ``tris`` (k, 3) coned to ``apex`` (a node, or (k,)
+    one per triangle): positively oriented, since the apex lies inside of each triangle."""
+    new = np.empty((tris.shape[0], 4), np.int64)
+    new[:, 0], new[:, 1], new[:, 2], new[:, 3] = tris[:, 0], tris[:, 2], tris[:, 1], apex
+    return new
+
+
+def resubdivide(cm, o):
+    """Re-subdivide original tet ``o`` from scratch from its cut state."""
+    mask = S.REDUCE_TABLE[cm.tet_mask(o)]
+    case, group = S.CLASSIFY_TABLE[mask]
+    if case == "uncut":
+        return
+    v = cm.orig_tets[o].tolist()
+    # tip / centre node T
+    tb = cm.tip_bary.get(o)
+    free_T = tb is None  # no tip inside: T may go where its cone is best shaped
+    ct = cm.cut_tables()
+    if free_T:  # the mean of the tet's cut nodes
+        tb = K.cut_nodes_centroid(ct, o, mask)
+    tb = CM._clamp_bary(tb, CM.TET_BARY_MIN)
+    complete = case in ("corner", "quad")
+    group = np.array(group, np.int64)  # side of each corner
+    new, choice = None, []
+    if complete and cm.compact_splits:
+        tris, corner, face, new, angle, choice = compact_split(cm, ct, o, mask, group)
+        if new is not None and angle < SPLIT_ANGLE_GOOD:
+            # a poor compact cone: the T-cone may be better (more tets, but no sliver)
+            tb_c, cone = _best_T(cm, v, tb, tris, free_T)
+            if cone > angle + SPLIT_ANGLE_GAIN:
+                new, tb = None, tb_c
+    else:
+        tris, corner, face = KP.face_triangles(ct, o, mask, cm.centre_nodes)
+        if o != cm.tip_tet:  # no tip inside: the crack front may run between notch nodes
+            new, tb = _face_apex_cone(cm, o, v, tb, free_T, tris, face)
+        elif free_T:
+            tb, _ = _best_T(cm, v, tb, tris, free_T)
+    if new is None:
+        for c in range(2 if complete else 1):
+            if cm.tet_T[o, c] < 0:
+                cm.tet_T[o, c] = cm._new_node(v, tb)
+            else:
+                cm._move_node(cm.tet_T[o, c], v, tb)
+        # the cone of the face triangles to T (each side's copy of T for a complete split)
+        new = _cone(tris, cm.tet_T[o][group[corner]] if complete else cm.tet_T[o, 0])
+    # replace the old sub-tets
+    old = cm.subtets.get(o, [o])
+    cm._alive[old] = False
+    cm._delta["removed_tets"].extend(old)
+    ids = cm._add_tets(new, o)
+    cm.subtets[o] = ids
+    cm._delta["added_tets"].extend(ids)
+    # a partly cut tet across a split face follows the diagonal this split chose
+    for nb in fix_diagonals(cm, o, choice):
+        resubdivide(cm, nb)
+
+def _face_apex_cone(cm, o, v, tb, free_T, tris, face):
+    """The cone of a partly cut tet no tip is in from one of its notch nodes F, or the T-cone.
+
+    The tip's path crossed the tet and left it, so its crack front runs
+    between its notched faces' nodes: the cone from one of them over the
+    other faces' triangles (``_kernels_split.best_face_apex``) tiles the tet
+    without T and with fewer tets (a notched face's four triangles are not
+    coned).  It is kept unless it is poor (below ``SPLIT_ANGLE_GOOD``) and the
+    T-cone is better by ``SPLIT_ANGLE_GAIN``: the rule of the complete splits'
+    compact cones.  Returns ``(cone, tb)``: the F-cone's tets (k, 4) or None
+    for the T-cone, and T's barycentric weights (placed by
+    :func:`_best_T` where it was looked at).
+    """
+    f = cm.tet_faces[o]
+    face_nodes = np.where(cm.face_ncut[f] == 1, cm.face_node[f, 0], -1)
+    lf, angle = -1, -1.0
+    if (face_nodes >= 0).any():
+        lf, angle = KP.best_face_apex(cm._x, tris, face, face_nodes, COMPACT_VOL_MIN * float(cm._vol0(o)))
+    if lf < 0 or angle < SPLIT_ANGLE_GOOD:
+        tb, cone = _best_T(cm, v, tb, tris, free_T)
+        if lf < 0 or cone > angle + SPLIT_ANGLE_GAIN:
+            return None, tb
+    return _cone(tris[face != lf], face_nodes[lf]), tb
+
+
+def _best_T(cm, v, tb, tris, free):
+    """Barycentric weights of T (4,) and the smallest dihedral angle (degrees) of its cone.
+
+    With ``free`` (no tip inside), T is moved from the cut nodes' centroid
+    ``tb`` towards the tet's centroid by each of ``T_BLENDS`` and the
+    best-shaped cone is kept.  The candidates are tried in the spare row
+    ``n_points`` of the node arrays (no node is made), all in one kernel
+    call (``_kernels_step.best_cone_apex``).
+    """
+    if cm._x.shape[0] <= cm.n_points:
+        cm.n_points += 1  # make _grow_nodes double the arrays
+        cm._grow_nodes()
+        cm.n_points -= 1
+    b, angle = K.best_cone_apex(cm._x, np.asarray(v, np.int64), np.asarray(tb, np.float64),
+                                _T_BLENDS if free else _T_AT_CENTROID, tris, CM.TET_BARY_MIN, cm.n_points)
+    return b, float(angle)
