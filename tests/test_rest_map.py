@@ -11,7 +11,8 @@ import pytest
 from _twins_simulate import nodes_near_blade_twin, rest_displacement_twin
 from cutkit.cutting import CutMesh, cut_step
 from cutkit.mesh.generate import box_mesh
-from cutkit.simulate.rest_map import REST_MAP_RADIUS_EDGES, BladeNeighbourhood, rest_displacement, rest_map_radius
+from cutkit.simulate.rest_map import (REST_MAP_RADIUS_EDGES, BladeNeighbourhood, blade_weights, rest_displacement,
+                                      rest_map_radius)
 
 BLADE = 5.0  # blade length, mm
 
@@ -32,7 +33,7 @@ def _block(seed=0):
 def _displacement(cm, x, X, tip, axis):
     radius = rest_map_radius(X[:cm.n_orig_points], cm.orig_tets)
     nodes = BladeNeighbourhood(cm, radius).nodes(cm, x, cm.active_tets, tip, axis)
-    return rest_displacement(x, X, nodes, tip, axis, BLADE, radius)
+    return rest_displacement(x, X, nodes, blade_weights(x, nodes, tip, axis, BLADE, radius))
 
 
 def test_radius_is_the_median_edge_times_the_factor():
@@ -73,10 +74,11 @@ def test_rest_displacement_matches_its_twin(seed):
     nodes = np.arange(cm.n_orig_points)
     for _ in range(5):
         tip = np.array([rng.uniform(3, 7), rng.uniform(2.5, 3.5), rng.uniform(1, 3)])
-        np.testing.assert_allclose(rest_displacement(x, X, nodes, tip, a, BLADE, radius),
+        w = blade_weights(x, nodes, tip, a, BLADE, radius)
+        np.testing.assert_allclose(rest_displacement(x, X, nodes, w),
                                    rest_displacement_twin(x, X, nodes, tip, a, BLADE, radius), atol=1e-12)
     far = np.array([30.0, 3.0, 3.0])  # no node within the radius
-    assert rest_displacement(x, X, nodes, far, a, BLADE, radius) is None
+    assert rest_displacement(x, X, nodes, blade_weights(x, nodes, far, a, BLADE, radius)) is None
 
 
 def test_a_translated_tissue_translates_the_blade_exactly():
@@ -96,7 +98,8 @@ def test_rest_pose_moves_continuously_with_the_blade():
     nodes = np.arange(cm.n_orig_points)  # all of them: the weights alone make it continuous
     step = 1e-3
     xs = np.arange(2.0, 4.0, step)
-    u = np.array([rest_displacement(x, X, nodes, np.array([xx, 3.3, 2.6]), a, BLADE, radius) for xx in xs])
+    u = np.array([rest_displacement(x, X, nodes, blade_weights(x, nodes, np.array([xx, 3.3, 2.6]), a, BLADE, radius))
+                  for xx in xs])
     jump = np.linalg.norm(np.diff(u, axis=0), axis=1).max()
     scale = np.abs(x - X).max()
     # the weights' slope is at most 1.72 / r, so |du/db| stays of order max|u| / r (0.08 of the bound

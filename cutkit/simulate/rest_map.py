@@ -88,16 +88,15 @@ class BladeNeighbourhood:
         return self.out[:n]
 
 
-def rest_displacement(x, X, nodes, tip, axis, length, radius):
-    """The displacement (3,) float64 that carries the blade back into the rest configuration, or None
-    when no node is within ``radius`` of it: the mean over ``nodes``, each weighing
-    ``(1 - (d / radius)^2)^3`` by its distance d to the blade segment (none from ``radius`` on).
+def blade_weights(x, nodes, tip, axis, length, radius):
+    """(k,) float64 weight of each of ``nodes`` by its distance d to the blade segment (deformed
+    positions ``x`` (n, 3)): ``(1 - (d / radius)^2)^3``, none from ``radius`` on.
 
     Parameters
     ----------
-    x, X : (n, 3) float64  node positions (deformed) and rest positions
-    nodes : (k,) int64  the nodes near the blade (:meth:`BladeNeighbourhood.nodes`)
-    tip : (3,) float64  the blade's tip, deformed configuration, mm
+    x : (n, 3) float64
+    nodes : (k,) int64
+    tip : (3,) float64  the blade's tip, mm
     axis : (3,) float64  unit vector along the blade, handle to tip
     length : float  the blade's length, mm
     radius : float  mm
@@ -106,8 +105,20 @@ def rest_displacement(x, X, nodes, tip, axis, length, radius):
     back = tip - length * axis
     s = np.clip((xn - back) @ axis / length, 0.0, 1.0)
     d2 = np.sum((xn - back - s[:, None] * (length * axis)) ** 2, axis=1)
-    w = np.clip(1.0 - d2 / radius ** 2, 0.0, None) ** 3
-    total = w.sum()
+    return np.clip(1.0 - d2 / radius ** 2, 0.0, None) ** 3
+
+
+def rest_displacement(x, X, nodes, weights):
+    """The displacement (3,) float64 that carries the blade back into the rest configuration: the mean
+    over ``nodes`` (k,) weighted by ``weights`` (k,) (:func:`blade_weights`); None when they are all 0.
+
+    Parameters
+    ----------
+    x, X : (n, 3) float64  node positions (deformed) and rest positions
+    nodes : (k,) int64
+    weights : (k,) float64
+    """
+    total = weights.sum()
     if not total > 0.0:
         return None
-    return w @ (xn - X[nodes]) / total
+    return weights @ (x[nodes] - X[nodes]) / total

@@ -79,21 +79,37 @@ class TissueBase:
         active_tets : (k,) int64  the last cut step's active (original) tets
         entry_nodes : (q,) int64  the nodes of the face the blade entered through
         """
-        from cutkit.simulate.rest_map import BladeNeighbourhood, rest_displacement
+        from cutkit.simulate.rest_map import rest_displacement
 
-        point, axis = np.asarray(point, np.float64), np.asarray(axis, np.float64)
+        point = np.asarray(point, np.float64)
         if len(active_tets):
-            hood = self._blade_hood
-            if hood is None or hood.n_rebases != self.cm.n_rebases:  # the first, or the mesh was rebased
-                hood = self._blade_hood = BladeNeighbourhood(self.cm, self.rest_map_radius)
-            nodes = hood.nodes(self.cm, self.positions, active_tets, point, axis)
-            u = rest_displacement(self.positions, self.rest_positions, nodes, point, axis, self.cm.blade_length,
-                                  self.rest_map_radius)
+            nodes, w = self.blade_neighbourhood(point, axis, active_tets)
+            u = rest_displacement(self.positions, self.rest_positions, nodes, w)
             if u is not None:
                 return point - u
         if len(entry_nodes) == 0:
             return point.copy()
         return point - (self.positions[entry_nodes] - self.rest_positions[entry_nodes]).mean(axis=0)
+
+    def blade_neighbourhood(self, point, axis, active_tets: np.ndarray):
+        """The original nodes (k,) int64 within :attr:`rest_map_radius` of the blade (deformed positions) and
+        their weights (k,) float64 (:func:`cutkit.simulate.rest_map.blade_weights`), found by a flood fill
+        from ``active_tets`` (original tets).
+
+        Parameters
+        ----------
+        point : (3,) float64  the blade's tip, deformed configuration, mm
+        axis : (3,) float64  unit vector along the blade, handle to tip
+        active_tets : (k,) int64
+        """
+        from cutkit.simulate.rest_map import BladeNeighbourhood, blade_weights
+
+        point, axis = np.asarray(point, np.float64), np.asarray(axis, np.float64)
+        hood = self._blade_hood
+        if hood is None or hood.n_rebases != self.cm.n_rebases:  # the first, or the mesh was rebased
+            hood = self._blade_hood = BladeNeighbourhood(self.cm, self.rest_map_radius)
+        nodes = hood.nodes(self.cm, self.positions, active_tets, point, axis)
+        return nodes, blade_weights(self.positions, nodes, point, axis, self.cm.blade_length, self.rest_map_radius)
 
     def alive_tets(self) -> tuple[np.ndarray, np.ndarray]:
         """(k, 4) int64 current tets and (k,) int64 their CutMesh ids."""
