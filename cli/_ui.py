@@ -44,6 +44,13 @@ def stage_reporter(bar: Progress, task):
     return on_stage
 
 
+def print_uncut_note(uncut: int) -> None:
+    """Tell how many edges the blade met that its stroke could not cut (``CutMesh.edges_left_uncut``), if any."""
+    if uncut:
+        console.print(f"[yellow]note:[/] {uncut} edge{'s' * (uncut != 1)} the blade met could not be cut in "
+                      "its stroke (the swept surface folded over a face) and stay joined; see docs/cutting.md")
+
+
 def table(title: str, columns: list[str], rows: list[list]) -> Table:
     """A rich table of ``rows`` under ``columns``."""
     from rich.markup import escape

@@ -17,7 +17,7 @@ def command(model, trajectory, out_dir, blade_length, centre_nodes):
     import numpy as np
 
     from cutkit.io.atomic import check_writable
-    from cutkit.cli._ui import console, progress
+    from cutkit.cli._ui import console, print_uncut_note, progress
     from cutkit.cutting import CutMesh, cut_step, cut_surface_faces, to_model
     from cutkit.cutting.rebase import rebase_if_left
     from cutkit.cutting.trajectory import read_trajectory
@@ -73,7 +73,4 @@ def command(model, trajectory, out_dir, blade_length, centre_nodes):
     console.print(f"{len(traj.t)} poses, {strokes} stroke{'s' * (strokes != 1)}, {n_cut} tets cut into "
                   f"{len(new)}, worst new dihedral {worst:.1f} deg "
                   f"-> {out_dir}/cut.pvd, {out_dir}/model.h5")
-    uncut = cm.edges_left_uncut()
-    if uncut:
-        console.print(f"[yellow]note:[/] {uncut} edge{'s' * (uncut != 1)} the blade met could not be cut in "
-                      "its stroke (the swept surface folded over a face) and stay joined; see docs/cutting.md")
+    print_uncut_note(cm.edges_left_uncut())

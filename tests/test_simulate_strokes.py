@@ -216,3 +216,25 @@ def test_a_side_entry_x_falls_into_its_four_quarters(tmp_path):
         # the cut lies where the blade was carried into the rest configuration: within about 0.4 mm
         # of the planes here (3.8 % of a quarter at most, measured)
         assert vol[mine].sum() == pytest.approx(expected, rel=0.06), (k, centre)
+
+
+def test_simulate_reports_the_edges_left_uncut(tmp_path):
+    """With the springs the tissue moves with the blade by millimetres, the blade's rest pose wobbles and
+    its swept surface folds: `cutkit simulate` says how many edges it left uncut, as summary.json counts."""
+    import re
+
+    from click.testing import CliRunner
+
+    from cutkit.cli.simulate import command
+    from cutkit.cutting.trajectory import write_trajectory
+    from cutkit.io.model_h5 import write_model
+
+    write_model(tmp_path / "slab.h5", slab())
+    write_trajectory(tmp_path / "x.csv", crossing_strokes())
+    r = CliRunner().invoke(command, [str(tmp_path / "slab.h5"), "--trajectory", str(tmp_path / "x.csv"),
+                                     "-o", str(tmp_path / "out"), "--material-model", "springs", "--fps", "5"])
+    assert r.exit_code == 0, r.output
+    uncut = json.loads((tmp_path / "out" / "summary.json").read_text())["edges_left_uncut"]
+    assert uncut > 0
+    found = re.search(r"([0-9]+) edges? the blade met could not be cut", r.output.replace("\n", " "))
+    assert found and int(found.group(1)) == uncut, r.output
