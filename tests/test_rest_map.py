@@ -102,8 +102,8 @@ def test_rest_pose_moves_continuously_with_the_blade():
                   for xx in xs])
     jump = np.linalg.norm(np.diff(u, axis=0), axis=1).max()
     scale = np.abs(x - X).max()
-    # the weights' slope is at most 1.72 / r, so |du/db| stays of order max|u| / r (0.08 of the bound
-    # here); a hard cut-off weight (1 inside the radius) jumps by about max|u| / (nodes inside), 11 times
+    # the weights' slope is at most 1.72 / r, so |du/db| stays of order max|u| / r (0.05 of the bound
+    # here); a hard cut-off weight (1 inside the radius) jumps by about max|u| / (nodes inside), 8 times
     # the bound in one step (measured with the twin), and a mean over a changing set as much (below)
     assert jump <= 2.0 * scale / radius * step
     inside = [np.flatnonzero(np.linalg.norm(x[:cm.n_orig_points] - [xx, 3.3, 2.6], axis=1) < radius) for xx in xs]

@@ -27,7 +27,12 @@ from __future__ import annotations
 import numpy as np
 
 #: Radius of the neighbourhood whose displacement carries the blade, in median edge lengths of the model.
-REST_MAP_RADIUS_EDGES = 2.0
+#: Measured on the knee's incision (benchmarks/rest_map.py, sideways wobble of the cut path): 1 edge
+#: 0.102 mm (no better than the plain mean before), 1.5 edges 0.041, 2 edges 0.032, 3 edges 0.009 mm;
+#: a radius of 2 also needed the hand 15 mm past the far side of the side-entry slab instead of 10
+#: (the tissue dragged along at the blade's end weighs more), 3 does not; about 0.6 ms per geometry
+#: update on the knee (0.2 at 2).
+REST_MAP_RADIUS_EDGES = 3.0
 
 
 def rest_map_radius(points, tets) -> float:
