@@ -45,17 +45,17 @@ def step_tet_sets_twin(added, removed, around):
 
 
 
-def nodes_near_blade_twin(x, blade, radius, nodes):
-    """The nodes of ``nodes`` within ``radius`` of the blade segment (``blade`` (3, 3): back end, unit
-    axis, [length, 0, 0]), by checking each."""
-    back, axis, length = blade[0], blade[1], blade[2, 0]
-    out = []
+def nodes_near_blade_twin(x, back, tip, radius, nodes):
+    """{node: squared distance} of the nodes of ``nodes`` within ``radius`` of the blade segment from
+    ``back`` to ``tip`` (each (3,)), by checking each."""
+    d = tip - back
+    out = {}
     for i in nodes:
-        s = min(max(float(np.dot(x[i] - back, axis)) / length, 0.0), 1.0)
-        if np.linalg.norm(x[i] - (back + s * length * axis)) < radius:
-            out.append(int(i))
-    return sorted(out)
-
+        s = min(max(float(np.dot(x[i] - back, d)) / float(d @ d), 0.0), 1.0)
+        d2 = float(np.sum((x[i] - (back + s * d)) ** 2))
+        if d2 < radius ** 2:
+            out[int(i)] = d2
+    return out
 
 
 def rest_displacement_twin(x, X, nodes, tip, axis, length, radius):

@@ -30,10 +30,11 @@ def _block(seed=0):
     return cm, cm.points.copy(), a
 
 
-def _displacement(cm, x, X, tip, axis):
+def _displacement(cm, x, X, tip, axis, seeds=None):
+    """The library's blade displacement: the flood fill from ``seeds`` (default: the active tets), the weights."""
     radius = rest_map_radius(X[:cm.n_orig_points], cm.orig_tets)
-    nodes = BladeNeighbourhood(cm, radius).nodes(cm, x, cm.active_tets, tip, axis)
-    return rest_displacement(x, X, nodes, blade_weights(x, nodes, tip, axis, BLADE, radius))
+    nodes, d2 = BladeNeighbourhood(cm, radius).nodes(cm, x, cm.active_tets if seeds is None else seeds, tip, axis)
+    return rest_displacement(x, X, nodes, blade_weights(d2, radius))
 
 
 def test_radius_is_the_median_edge_times_the_factor():
@@ -59,10 +60,10 @@ def test_flood_fill_finds_every_node_near_the_blade(seed):
         axis = a + rng.normal(0, 0.2, 3)
         axis /= np.linalg.norm(axis)
         cut_step(cm, tip, axis)  # its active tets are the seeds, as in a session
-        got = hood.nodes(cm, x, cm.active_tets, tip, axis)
-        want = nodes_near_blade_twin(x, np.array([tip - BLADE * axis, axis, [BLADE, 0, 0]]), radius,
-                                     range(cm.n_orig_points))
-        assert len(want) > 10 and sorted(got.tolist()) == want
+        nodes, d2 = hood.nodes(cm, x, cm.active_tets, tip, axis)
+        want = nodes_near_blade_twin(x, tip - BLADE * axis, tip, radius, range(cm.n_orig_points))
+        assert len(want) > 10 and sorted(nodes.tolist()) == sorted(want)
+        np.testing.assert_allclose(d2, [want[i] for i in nodes.tolist()], rtol=1e-12, atol=1e-12)
 
 
 @pytest.mark.parametrize("seed", range(4))
@@ -71,14 +72,13 @@ def test_rest_displacement_matches_its_twin(seed):
     rng = np.random.default_rng(200 + seed)
     x = X + rng.normal(0.0, 0.2, X.shape)
     radius = rest_map_radius(X[:cm.n_orig_points], cm.orig_tets)
-    nodes = np.arange(cm.n_orig_points)
+    nodes, every_tet = np.arange(cm.n_orig_points), np.arange(cm.orig_tets.shape[0])
     for _ in range(5):
         tip = np.array([rng.uniform(3, 7), rng.uniform(2.5, 3.5), rng.uniform(1, 3)])
-        w = blade_weights(x, nodes, tip, a, BLADE, radius)
-        np.testing.assert_allclose(rest_displacement(x, X, nodes, w),
+        np.testing.assert_allclose(_displacement(cm, x, X, tip, a, every_tet),
                                    rest_displacement_twin(x, X, nodes, tip, a, BLADE, radius), atol=1e-12)
     far = np.array([30.0, 3.0, 3.0])  # no node within the radius
-    assert rest_displacement(x, X, nodes, blade_weights(x, nodes, far, a, BLADE, radius)) is None
+    assert _displacement(cm, x, X, far, a, every_tet) is None
 
 
 def test_a_translated_tissue_translates_the_blade_exactly():
@@ -95,11 +95,16 @@ def test_rest_pose_moves_continuously_with_the_blade():
     rng = np.random.default_rng(7)
     x = X + rng.normal(0.0, 0.3, X.shape)  # rough: every node its own displacement
     radius = rest_map_radius(X[:cm.n_orig_points], cm.orig_tets)
-    nodes = np.arange(cm.n_orig_points)  # all of them: the weights alone make it continuous
+    hood = BladeNeighbourhood(cm, radius)
+    every_tet = np.arange(cm.orig_tets.shape[0])  # seeds everywhere: the weights alone make it continuous
     step = 1e-3
     xs = np.arange(2.0, 4.0, step)
-    u = np.array([rest_displacement(x, X, nodes, blade_weights(x, nodes, np.array([xx, 3.3, 2.6]), a, BLADE, radius))
-                  for xx in xs])
+    u = []
+    for xx in xs:
+        tip = np.array([xx, 3.3, 2.6])
+        near, d2 = hood.nodes(cm, x, every_tet, tip, a)
+        u.append(rest_displacement(x, X, near, blade_weights(d2, radius)))
+    u = np.array(u)
     jump = np.linalg.norm(np.diff(u, axis=0), axis=1).max()
     scale = np.abs(x - X).max()
     # the weights' slope is at most 1.72 / r, so |du/db| stays of order max|u| / r (0.05 of the bound

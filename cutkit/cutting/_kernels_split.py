@@ -401,7 +401,7 @@ def best_face_apex(x, tris, tri_face, face_nodes, vol_min):
     triangles inside it become a fan from F: the cone of every triangle not
     on F's face to F tiles a partly cut tet without its interior node T,
     with the triangles of F's own face left out (fewer tets than the T-cone;
-    :meth:`cutkit.cutting.cutmesh.CutMesh.resubdivide`).
+    :func:`cutkit.cutting.resubdivision.resubdivide`).
 
     Parameters
     ----------

@@ -84,6 +84,7 @@ def resubdivide(cm, o):
     for nb in fix_diagonals(cm, o, choice):
         resubdivide(cm, nb)
 
+
 def _face_apex_cone(cm, o, v, tb, free_T, tris, face):
     """The cone of a partly cut tet no tip is in from one of its notch nodes F, or the T-cone.
 

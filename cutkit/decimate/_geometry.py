@@ -124,13 +124,14 @@ def point_triangle_dist2(p, a, b, c):
                 qz = a[2] + abz * v + acz * w
             else:
                 # Degenerate triangle: nearest of its three edges.
-                return min(_seg_dist2(p, a, b), _seg_dist2(p, b, c), _seg_dist2(p, a, c))
+                return min(segment_dist2(p, a, b), segment_dist2(p, b, c), segment_dist2(p, a, c))
     dx, dy, dz = p[0] - qx, p[1] - qy, p[2] - qz
     return dx * dx + dy * dy + dz * dz
 
 
-@njit(cache=True)
-def _seg_dist2(p, a, b):
+@njit(cache=True, nogil=True)
+def segment_dist2(p, a, b):
+    """Squared distance from point ``p`` (3,) to the segment from ``a`` (3,) to ``b`` (3,) (a point if a == b)."""
     abx, aby, abz = b[0] - a[0], b[1] - a[1], b[2] - a[2]
     den = abx * abx + aby * aby + abz * abz
     t = 0.0

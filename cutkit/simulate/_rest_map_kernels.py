@@ -5,18 +5,11 @@ from __future__ import annotations
 
 from numba import njit
 
-
-@njit(cache=True, nogil=True, inline="always")
-def _seg_dist2(x, i, back, axis, length):
-    """Squared distance of node i (x[i]) to the segment from ``back`` along ``axis`` for ``length``."""
-    dx, dy, dz = x[i, 0] - back[0], x[i, 1] - back[1], x[i, 2] - back[2]
-    s = min(max((dx * axis[0] + dy * axis[1] + dz * axis[2]) / length, 0.0), 1.0) * length
-    dx, dy, dz = dx - s * axis[0], dy - s * axis[1], dz - s * axis[2]
-    return dx * dx + dy * dy + dz * dz
+from cutkit.decimate._geometry import segment_dist2
 
 
 @njit(cache=True, nogil=True)
-def nodes_near_blade(x, tets, neighbors, seeds, blade, radius, tet_stamp, node_stamp, mark, stack, out):
+def nodes_near_blade(x, tets, neighbors, seeds, blade, radius, tet_stamp, node_stamp, mark, stack, out, out_d2):
     """The corners of tets within ``radius`` of the blade segment, found by a flood fill from ``seeds``.
 
     Tets are visited over face neighbours while one of their corners lies
@@ -30,19 +23,20 @@ def nodes_near_blade(x, tets, neighbors, seeds, blade, radius, tet_stamp, node_s
     tets : (m, 4) int64
     neighbors : (m, 4) int64  face neighbours, -1 on the boundary
     seeds : (k,) int64  tets to start from (always visited)
-    blade : (3, 3) float64  rows: the back end, the unit axis towards the tip, [length, 0, 0]
+    blade : (2, 3) float64  its back end and its tip
     radius : float
     tet_stamp : (m,) int64, node_stamp : (n,) int64
         Visit marks, never reset: visited when equal to ``mark``.
     mark : int  a value no entry of the stamps has
     stack : (m,) int64  work space
     out : (n,) int64  written: the nodes within ``radius``, ``[:count]``
+    out_d2 : (n,) float64  written: their squared distances to the blade, ``[:count]``
 
     Returns
     -------
     count : int
     """
-    back, axis, length = blade[0], blade[1], blade[2, 0]
+    back, tip = blade[0], blade[1]
     r2 = radius * radius
     n = 0
     for j in range(seeds.shape[0]):
@@ -60,8 +54,10 @@ def nodes_near_blade(x, tets, neighbors, seeds, blade, radius, tet_stamp, node_s
             i = tets[t, c]
             if node_stamp[i] != mark:
                 node_stamp[i] = mark
-                if _seg_dist2(x, i, back, axis, length) < r2:
+                d2 = segment_dist2(x[i], back, tip)
+                if d2 < r2:
                     out[count] = i
+                    out_d2[count] = d2
                     count += 1
         for f in range(4):
             nb = neighbors[t, f]
@@ -69,7 +65,7 @@ def nodes_near_blade(x, tets, neighbors, seeds, blade, radius, tet_stamp, node_s
                 continue
             tet_stamp[nb] = mark
             for c in range(4):
-                if _seg_dist2(x, tets[nb, c], back, axis, length) < r2:
+                if segment_dist2(x[tets[nb, c]], back, tip) < r2:
                     stack[n] = nb
                     n += 1
                     break

@@ -70,10 +70,12 @@ class BladeNeighbourhood:
         self.node_stamp = np.zeros(cm.n_orig_points, np.int64)
         self.stack = np.empty(cm.orig_tets.shape[0], np.int64)
         self.out = np.empty(cm.n_orig_points, np.int64)
+        self.out_d2 = np.empty(cm.n_orig_points, np.float64)
         self.mark = 0
 
-    def nodes(self, cm, positions, seeds, tip, axis) -> np.ndarray:
-        """(k,) int64 the original nodes within the radius of the blade (deformed positions).
+    def nodes(self, cm, positions, seeds, tip, axis):
+        """The original nodes (k,) int64 within the radius of the blade (deformed positions) and their
+        squared distances (k,) float64 to it (views into buffers the next call overwrites).
 
         Parameters
         ----------
@@ -86,30 +88,16 @@ class BladeNeighbourhood:
         from cutkit.simulate._rest_map_kernels import nodes_near_blade
 
         self.mark += 1
-        length = cm.blade_length
-        blade = np.array([tip - length * axis, axis, [length, 0.0, 0.0]], np.float64)
+        blade = np.array([tip - cm.blade_length * axis, tip], np.float64)
         n = nodes_near_blade(positions, cm.orig_tets, cm.neighbors, np.ascontiguousarray(seeds, np.int64), blade,
-                             self.radius, self.tet_stamp, self.node_stamp, self.mark, self.stack, self.out)
-        return self.out[:n]
+                             self.radius, self.tet_stamp, self.node_stamp, self.mark, self.stack, self.out,
+                             self.out_d2)
+        return self.out[:n], self.out_d2[:n]
 
 
-def blade_weights(x, nodes, tip, axis, length, radius):
-    """(k,) float64 weight of each of ``nodes`` by its distance d to the blade segment (deformed
-    positions ``x`` (n, 3)): ``(1 - (d / radius)^2)^3``, none from ``radius`` on.
-
-    Parameters
-    ----------
-    x : (n, 3) float64
-    nodes : (k,) int64
-    tip : (3,) float64  the blade's tip, mm
-    axis : (3,) float64  unit vector along the blade, handle to tip
-    length : float  the blade's length, mm
-    radius : float  mm
-    """
-    xn = x[nodes]
-    back = tip - length * axis
-    s = np.clip((xn - back) @ axis / length, 0.0, 1.0)
-    d2 = np.sum((xn - back - s[:, None] * (length * axis)) ** 2, axis=1)
+def blade_weights(d2, radius):
+    """(k,) float64 weight ``(1 - d^2 / radius^2)^3`` of each node at squared distance ``d2`` (k,) float64
+    from the blade (none from ``radius`` on)."""
     return np.clip(1.0 - d2 / radius ** 2, 0.0, None) ** 3
 
 

@@ -108,8 +108,8 @@ class TissueBase:
         hood = self._blade_hood
         if hood is None or hood.n_rebases != self.cm.n_rebases:  # the first, or the mesh was rebased
             hood = self._blade_hood = BladeNeighbourhood(self.cm, self.rest_map_radius)
-        nodes = hood.nodes(self.cm, self.positions, active_tets, point, axis)
-        return nodes, blade_weights(self.positions, nodes, point, axis, self.cm.blade_length, self.rest_map_radius)
+        nodes, d2 = hood.nodes(self.cm, self.positions, active_tets, point, axis)
+        return nodes, blade_weights(d2, self.rest_map_radius)
 
     def alive_tets(self) -> tuple[np.ndarray, np.ndarray]:
         """(k, 4) int64 current tets and (k,) int64 their CutMesh ids."""
