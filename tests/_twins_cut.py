@@ -354,7 +354,7 @@ def _best_twin(x, cands, vol_min, n_rot):
 
 # ---- the Fig. 2 face patterns, as first written: cutkit.cutting._kernels_split.face_triangles
 
-def _face_pattern_twin(gv, cut, edge_copy, face_node, centre_nodes, diag=-1):
+def _face_pattern_twin(gv, cut, edge_copy, face_node, centre_nodes, diag=-1, rep=None):
     """Triangles of one face by the Fig. 2 patterns.
 
     Parameters
@@ -364,8 +364,11 @@ def _face_pattern_twin(gv, cut, edge_copy, face_node, centre_nodes, diag=-1):
     edge_copy : callable (k, vertex) -> node id of the copy of edge k's node
         on the side of ``vertex``
     face_node : callable (side) -> node id; side 0 = notch F or lone-side C,
-        1 = pair-side C
+        1 = pair-side C; with three cut edges, the copy of C of the vertex
+        ranked ``side`` by global id
     centre_nodes : bool
+    diag : int  the split face's fixed diagonal vertex, or -1 (default: the quad's base vertex of smaller ``rep``)
+    rep : sequence, optional  each vertex's representative id (default: its id)
 
     Returns
     -------
@@ -382,6 +385,13 @@ def _face_pattern_twin(gv, cut, edge_copy, face_node, centre_nodes, diag=-1):
         F = face_node(0)
         return [((p, edge_copy(k, p), F), p), ((edge_copy(k, q), q, F), q),
                 ((q, r, F), q), ((r, p, F), r)]
+    if n == 3:  # forked: each corner, its two edge nodes and its copy of C
+        tris = []
+        for k in range(3):
+            p, q, r = gv[k], gv[(k + 1) % 3], gv[(k + 2) % 3]
+            C = face_node(sorted(gv).index(p))
+            tris += [((p, edge_copy(k, p), C), p), ((p, C, edge_copy((k + 2) % 3, p)), p)]
+        return tris
     # two cut edges: lone vertex p is shared by both cut edges
     k_uncut = cut.index(False)
     q, r = gv[k_uncut], gv[(k_uncut + 1) % 3]
@@ -394,7 +404,8 @@ def _face_pattern_twin(gv, cut, edge_copy, face_node, centre_nodes, diag=-1):
                 ((Cp, edge_copy(k1, q), q), q), ((Cp, q, r), q), ((Cp, r, edge_copy(k2, r)), r)]
     tris = [((p, edge_copy(k1, p), edge_copy(k2, p)), p)]
     E1, E2 = edge_copy(k1, q), edge_copy(k2, r)
-    if (diag if diag >= 0 else min(q, r)) == q:  # the quad's diagonal through the fixed vertex
+    rep = (lambda i: i) if rep is None else rep.__getitem__
+    if (diag if diag >= 0 else min((q, r), key=rep)) == q:  # the quad's diagonal through the fixed vertex
         tris += [((E1, q, E2), q), ((q, r, E2), q)]
     else:
         tris += [((E1, q, r), q), ((E1, r, E2), r)]
@@ -424,7 +435,7 @@ def face_triangles_twin(cm, o, mask):
             return int(cm.face_node[f, side])
 
         tris.extend((tri, ow, lf) for tri, ow in _face_pattern_twin(gv, cut, edge_copy, f_node, cm.centre_nodes,
-                                                                    int(cm.face_diag[f])))
+                                                                    int(cm.face_diag[f]), cm.node_rep.tolist()))
     return tris
 
 

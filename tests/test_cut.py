@@ -33,6 +33,8 @@ def check_mesh(cm, v0):
 
 @pytest.mark.parametrize("centre", [True, False])
 def test_all_64_edge_combinations(centre):
+    """Every mask of cut edges, faces with three cut edges (forked) included, gives a valid lone tet
+    cut into one piece per component of its uncut edges."""
     seen = set()
     for mask in range(64):
         cm = CutMesh(ONE_TET_P, ONE_TET_T, centre_nodes=centre)
@@ -40,29 +42,41 @@ def test_all_64_edge_combinations(centre):
             if mask >> k & 1:
                 cm.try_cut_edge(int(cm.tet_edges[0, k]), 0.3 + 0.05 * k)
         got = cm.tet_mask(0)
-        # refused cuts give the nearest valid pattern; valid masks are taken whole, except
-        # two opposite edges alone (two crack sheets at one node): the second waits
-        assert S.face_ok(got)
+        # every mask is taken whole, except two opposite edges alone (two crack sheets at one
+        # node): the second waits
         if mask in S.OPPOSITE_MASKS:
             assert bin(got).count("1") == 1 and got & mask == got
             assert len(cm.pending_edges) == 1
-        elif S.face_ok(mask):
+        else:
             assert got == mask
         cm.resubdivide(0)
         check_mesh(cm, 1 / 6)
         case, _ = S.classify(got)
         seen.add(case)
         n_comp = components(cm.tets)
-        assert n_comp == (2 if case in ("corner", "quad") else 1), (mask, case)
-    assert seen == {"uncut", "partial", "corner", "quad"}
+        assert n_comp == int(S.vertex_groups(got).max()) + 1, (mask, case)
+        if case in ("corner", "quad"):
+            assert n_comp == 2
+    assert seen == {"uncut", "partial", "corner", "quad", "general"}
 
 
-def test_reduce_mask_all_64():
+def test_only_opposite_edges_alone_join_two_sheets_at_one_node():
+    """The T-cone of every mask, general ones included, has a disc round each copy of T, except the
+    three masks of two opposite cut edges alone (the reason they are deferred)."""
+    sheets = {m for m in range(64) if max(S._cone_links(m)) > 1}
+    assert sheets == set(S.OPPOSITE_MASKS)
     for mask in range(64):
         r = S.reduce_mask(mask)
-        assert S.face_ok(r) and (r & ~mask) == 0
-        if S.face_ok(mask):
-            assert r == mask
+        assert r not in S.OPPOSITE_MASKS and (r & ~mask) == 0
+        assert (r == mask) == (mask not in S.OPPOSITE_MASKS)
+
+
+def test_vertex_groups_are_the_pieces():
+    assert S.vertex_groups(0).tolist() == [0, 0, 0, 0]
+    assert S.vertex_groups(0b000111).tolist() == [0, 1, 1, 1]  # corner 0 cut off
+    assert S.vertex_groups(0b111111).tolist() == [0, 1, 2, 3]
+    assert S.vertex_groups(0b011111).tolist() == [0, 1, 2, 2]  # only 23 uncut
+    assert S.classify(0b001011)[0] == "general"  # face 012 forked: three cracks, one piece
 
 
 def test_five_cases_counts():

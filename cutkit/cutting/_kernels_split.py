@@ -22,8 +22,8 @@ from cutkit.mesh.topology import TET_FACES
 
 #: At most this many cut nodes per tet: two copies of each of six edge nodes and of four face nodes.
 _MAX_KEYS = 20
-#: At most this many face triangles per tet: four faces of at most five triangles (Fig. 2c with centre nodes).
-MAX_FACE_TRIANGLES = 20
+#: At most this many face triangles per tet: four faces of at most six triangles (three cut edges).
+MAX_FACE_TRIANGLES = 24
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -49,8 +49,9 @@ def face_triangles(ct, o, mask, centre_nodes):
     Fig. 2c), the lone vertex's triangle and the quad split by its diagonal
     through the vertex ``face_diag`` names (fixed by the first complete split
     that used the face, :func:`cutkit.cutting.splits.fix_diagonals`; until
-    then the smaller global vertex id), or with ``centre_nodes`` five
-    triangles around the centre node's two copies.
+    then the smaller global vertex id, compared on ``node_rep``), or with ``centre_nodes`` five
+    triangles around the centre node's two copies; three, two triangles per
+    corner round its copy of the centre node C.
 
     Parameters
     ----------
@@ -86,6 +87,16 @@ def face_triangles(ct, o, mask, centre_nodes):
         f = ct.tet_faces[o, lf]
         if n_cut == 0:
             k = _put(tris, corner, face, k, g0, g1, g2, lc[0], lf)
+        elif n_cut == 3:
+            # each corner's quad round its own copy of the centre node C (copy i: the face's vertex
+            # of i-th smallest global id, so both tets sharing the face pick the same copies)
+            for j in range(3):
+                p, q, r = gv[j], gv[(j + 1) % 3], gv[(j + 2) % 3]
+                C = ct.face_node[f, (p > q) + (p > r)]
+                e_pq = ct.tet_edges[o, FACE_EDGES[lf, j]]
+                e_rp = ct.tet_edges[o, FACE_EDGES[lf, (j + 2) % 3]]
+                k = _put(tris, corner, face, k, p, _edge_copy(ct, e_pq, p), C, lc[j], lf)
+                k = _put(tris, corner, face, k, p, C, _edge_copy(ct, e_rp, p), lc[j], lf)
         elif n_cut == 1:
             j = first_cut
             p, q, r = gv[j], gv[(j + 1) % 3], gv[(j + 2) % 3]
@@ -113,8 +124,9 @@ def face_triangles(ct, o, mask, centre_nodes):
                 k = _put(tris, corner, face, k, p, _edge_copy(ct, e1, p), _edge_copy(ct, e2, p), cp, lf)
                 E1, E2 = _edge_copy(ct, e1, q), _edge_copy(ct, e2, r)
                 d = ct.face_diag[f]  # the vertex the quad's diagonal passes through
-                if d < 0:  # not fixed yet: the vertex of smaller global id
-                    d = min(q, r)
+                if d < 0:  # not fixed yet: the vertex of smaller global id (of its representative, so
+                    # a coincident copy of the face along an earlier cut takes the same diagonal)
+                    d = q if ct.node_rep[q] < ct.node_rep[r] else r
                 if d == q:
                     k = _put(tris, corner, face, k, E1, q, E2, cq, lf)
                     k = _put(tris, corner, face, k, q, r, E2, cq, lf)

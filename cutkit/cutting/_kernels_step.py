@@ -389,10 +389,12 @@ def best_cone_apex(x, corners, tb, blends, tris, bary_min, spare):
 
 #: The cut state a kernel reads of one original tet's edges and faces: orig_tets (m, 4),
 #: tet_edges (m, 6), tet_faces (m, 4), edges (E, 2) int64; edge_t (E,) float64 (NaN: uncut);
-#: edge_node (E, 2) (the cut node's copy at either end), face_node (F, 2), face_ncut (F,) int64;
-#: def_nodes (N, 4) int64, def_w (N, 4) float64 (each node's defining original nodes and weights).
+#: edge_node (E, 2) (the cut node's copy at either end), face_node (F, 3), face_ncut (F,) int64;
+#: def_nodes (N, 4) int64, def_w (N, 4) float64 (each node's defining original nodes and weights);
+#: face_diag (F,) int64 (a split face's fixed quad diagonal vertex, or -1); node_rep (n0,) int64
+#: (each original node's representative among its coincident copies along earlier cuts).
 CutTables = namedtuple("CutTables", ["orig_tets", "tet_edges", "tet_faces", "edges", "edge_t", "edge_node",
-                                     "face_node", "face_ncut", "def_nodes", "def_w", "face_diag"])
+                                     "face_node", "face_ncut", "def_nodes", "def_w", "face_diag", "node_rep"])
 
 
 

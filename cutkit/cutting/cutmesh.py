@@ -11,12 +11,14 @@ changed.
 State machine of an original edge (Bielser et al. 2003 style, simplified):
 UNCUT -> CUT at its first intersection parameter (clamped into
 [EDGE_SNAP, 1 - EDGE_SNAP]); a cut edge never changes again, so blade
-reversal and tremor cannot create new slivers.  An edge cut that would
-give some face three cut edges (impossible for a planar cut) is refused.
-A face is UNCUT, NOTCHED (one cut edge: face node F on the crack front,
-moved with the blade while it crosses the face) or SPLIT (two cut edges:
-F's node id is reused as the lone-side centre node C and frozen).  A tet's
-tip node T follows the tip while the tip is inside and freezes after.
+reversal and tremor cannot create new slivers.  A face is UNCUT, NOTCHED
+(one cut edge: face node F on the crack front, moved with the blade while
+it crosses the face), SPLIT (two cut edges: with centre nodes, F's node id
+is reused as the lone-side centre node C and frozen) or, beyond the paper,
+FORKED (three cut edges: a second cut crossing the first, or a swept
+surface folded over the face; a centre node C with one copy per corner, the
+cut a Y).  A tet's tip node T follows the tip while the tip is inside and
+freezes after; it has one copy per piece of the tet.
 """
 
 from __future__ import annotations
@@ -122,15 +124,16 @@ class CutMesh:
         # ---- cut state
         self.edge_t = np.full(self.edges.shape[0], np.nan)
         self.edge_node = -np.ones((self.edges.shape[0], 2), np.int64)
-        self.face_node = -np.ones((self.faces.shape[0], 2), np.int64)
+        # F, or the copies of C: per side (lone, pair) of a split face, per vertex (in faces[f]'s order) of a forked one
+        self.face_node = -np.ones((self.faces.shape[0], 3), np.int64)
         self.face_ncut = np.zeros(self.faces.shape[0], np.int64)  # cut edges per face (kept by try_cut_edge)
         self.face_diag = -np.ones(self.faces.shape[0], np.int64)  # split face: its quad's diagonal vertex (splits.py)
         self.pending_edges = {}  # edge -> first parameter, deferred (see try_cut_edge)
         self.retried_edges = []  # deferred edges cut later (drained by cut_step)
-        self.refused_edges = set()  # edges the blade met whose cut the face rule refused (see edges_left_uncut)
+        self.refused_edges = set()  # edges the blade met and could not cut (see edges_left_uncut)
         self.face_bary = {}  # face -> (3,) bary of the latest blade crossing
         self.tip_bary = {}  # original tet -> (4,) tip bary while inside
-        self.tet_T = -np.ones((m0, 2), np.int64)
+        self.tet_T = -np.ones((m0, 4), np.int64)  # T's copies, one per piece
         self.stamp = np.zeros(m0, np.int64)  # visited stamps (no per-step reset)
         self.step_count = 0
         self.active_tets = np.zeros(0, np.int64)
@@ -226,7 +229,7 @@ class CutMesh:
         return self.edge_tet_idx[self.edge_tet_off[e]:self.edge_tet_off[e + 1]]
 
     def face_cut_count(self, f):
-        """Number of cut edges of global face f (0, 1 or 2)."""
+        """Number of cut edges of global face f (0 to 3)."""
         return int(self.face_ncut[f])
 
     def faces_of_edge(self, e):
@@ -256,21 +259,19 @@ class CutMesh:
     def try_cut_edge(self, e, s):
         """Cut global edge ``e`` at parameter ``s`` (from edges[e,0]); returns touched tets.
 
-        Refused (returns an empty list) when already cut or when some face
-        around the edge would get three cut edges.  Deferred (kept in
+        Nothing is done (an empty list returned) when it is cut already: an
+        edge is cut once, at its first crossing.  Deferred (kept in
         ``pending_edges`` and an empty list returned) when the cut would give a
         tet two opposite cut edges only (see :meth:`_splits_a_sheet`); a
         deferred edge is cut as soon as an edge cut linking the two sheets
-        is made in one of its tets.
+        is made in one of its tets.  A face may get a third cut edge (a
+        forked face: a second cut crossing the first, or a folded sweep).
         """
         if np.isfinite(self.edge_t[e]):
             return []
         if int(e) in self.edge_twins:  # a copy along an earlier cut (after a rebase): cut all alike
             return cut_twins(self, int(e), float(s), self.edge_twins[int(e)])
         faces = self.faces_of_edge(e)
-        if any(self.face_ncut[f] >= 2 for f in faces):
-            self.refused_edges.add(int(e))
-            return []
         if self._splits_a_sheet(e):
             self.pending_edges.setdefault(int(e), float(s))
             return []
@@ -282,13 +283,12 @@ class CutMesh:
     def edges_left_uncut(self):
         """Edges the blade met and the cut left uncut, over every stroke so far (int).
 
-        An edge is left uncut when cutting it would give a face a third cut
-        edge (the swept surface folded over the face: tremor, a tight curve,
-        a blade swept back over its own cut; one cut per edge and face in a
-        stroke cannot represent it, docs/cutting.md) or when it is still
-        deferred (two opposite cut edges alone in a tet) where the blade
-        stopped.  Edges met on their boundary (at an end) count too.  Such an
-        edge stays joined: a thin bridge across the wound.
+        An edge is left uncut when it is still deferred (two opposite cut
+        edges alone in a tet) where the blade stopped, or when it has
+        coincident copies along an earlier stroke's cut and one of them was
+        cut already at another point (:func:`.rebase.cut_twins`).  Edges met
+        on their boundary (at an end) count too.  Such an edge stays joined:
+        a thin bridge across the wound.
         """
         mine = self.refused_edges.union(self.pending_edges)
         return self.uncut_before + sum(1 for e in mine if not np.isfinite(self.edge_t[e]))
@@ -312,10 +312,6 @@ class CutMesh:
                     touched.extend(more)
                     continue
                 faces = self.faces_of_edge(e)
-                if any(self.face_ncut[f] >= 2 for f in faces):
-                    del self.pending_edges[e]  # can never be cut now
-                    self.refused_edges.add(e)
-                    continue
                 if self._splits_a_sheet(e):
                     continue
                 more = self._cut_edge(e, self.pending_edges.pop(e), faces)
@@ -365,6 +361,8 @@ class CutMesh:
                 self.face_node[f, 0] = self._new_node(self.faces[f], b, FACE_BARY_MIN)
             else:
                 self._move_node(i, self.faces[f], b, FACE_BARY_MIN)
+        elif n == 3:
+            self._fork_face(f)
         elif n == 2 and self.centre_nodes:
             # centre node C on the cut line: midpoint of the two edge nodes (Fig. 2c)
             fv = self.faces[f].tolist()
@@ -379,6 +377,25 @@ class CutMesh:
                 self._move_node(self.face_node[f, 0], fv, b)
             if self.face_node[f, 1] < 0:
                 self.face_node[f, 1] = self._new_node(fv, b)
+
+    def _fork_face(self, f):
+        """Place the copies of the centre node C of a face with three cut edges (one per vertex).
+
+        C goes to the mean of the three edge nodes (inside the triangle they
+        make, so each corner's quad is star-shaped from the corner), clamped
+        like F.  Node ids made before (F, or the copies of a split face's C)
+        are reused and moved.
+        """
+        fv = self.faces[f].tolist()
+        b = [0.0, 0.0, 0.0]
+        for e in self.face_edges[f].tolist():
+            self._edge_bary_on_face(e, fv, b, 1.0 / 3.0)
+        for c in range(3):
+            i = int(self.face_node[f, c])
+            if i < 0:
+                self.face_node[f, c] = self._new_node(fv, b, FACE_BARY_MIN)
+            else:
+                self._move_node(i, fv, b, FACE_BARY_MIN)
 
     def set_face_crossing(self, f, bary):
         """Record where the blade crosses face ``f`` (and its copies along an earlier cut); moves notch nodes F."""
@@ -397,7 +414,7 @@ class CutMesh:
         """Move the T node(s) of a cut tet to its recorded tip (no topology change)."""
         if self.tet_T[o, 0] < 0 or o not in self.tip_bary:
             return
-        for c in range(2):
+        for c in range(self.tet_T.shape[1]):
             if self.tet_T[o, c] >= 0:
                 self._move_node(self.tet_T[o, c], self.orig_tets[o], self.tip_bary[o], TET_BARY_MIN)
 
@@ -407,13 +424,14 @@ class CutMesh:
         return int(K.tet_mask(self.tet_edges, self.edge_t, o))
 
     def completely_split(self, o):
-        """Whether original tet ``o``'s cut edges split it in two (Fig. 3 corner or quad)."""
+        """Whether original tet ``o``'s cut edges split it in two (Fig. 3 corner or quad; not a general tet)."""
         return S.CLASSIFY_TABLE[S.REDUCE_TABLE[self.tet_mask(o)]][0] in ("corner", "quad")
 
     def cut_tables(self):
         """The cut state as the step kernels read it (``_kernels_step.CutTables``; views, no copy)."""
         return K.CutTables(self.orig_tets, self.tet_edges, self.tet_faces, self.edges, self.edge_t, self.edge_node,
-                           self.face_node, self.face_ncut, self._def_nodes, self._def_w, self.face_diag)
+                           self.face_node, self.face_ncut, self._def_nodes, self._def_w, self.face_diag,
+                           self.node_rep)
 
     def resubdivide(self, o):
         """Re-subdivide original tet ``o`` from scratch from its cut state (:func:`.resubdivision.resubdivide`)."""

@@ -228,13 +228,13 @@ def cut_twins(cm, e, s, twins):
     """Cut edge ``e`` at parameter ``s`` together with its coincident copies ``twins`` (list); returns touched tets.
 
     All are cut, at the same point, or none: refused when one is cut
-    already or would give some face a third cut edge, deferred (kept in
-    ``pending_edges`` under ``e``) when one would split a sheet (see
-    :meth:`CutMesh.try_cut_edge`).
+    already (a copy numbered apart met first at another point), deferred
+    (kept in ``pending_edges`` under ``e``) when one would split a sheet
+    (see :meth:`CutMesh.try_cut_edge`).
     """
     group = [e] + list(twins)
     faces = [cm.faces_of_edge(g) for g in group]
-    if any(np.isfinite(cm.edge_t[g]) for g in group) or any(cm.face_ncut[f] >= 2 for fs in faces for f in fs):
+    if any(np.isfinite(cm.edge_t[g]) for g in group):
         cm.refused_edges.add(e)
         return []
     if any(cm._splits_a_sheet(g) for g in group):

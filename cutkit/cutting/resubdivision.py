@@ -6,7 +6,8 @@ nodes and tip give now.  A complete split is coned per side to one of its
 vertices when that is well shaped (:mod:`cutkit.cutting.splits`); a partly
 cut tetrahedron the tip has left, to one of its notch nodes F; otherwise
 every face triangle is coned to the interior node T (docs/cutting.md,
-"Interior: cone to the cut node T").
+"Interior: cone to the cut node T"), to its piece's copy of T in a
+tetrahedron with a forked face (three cut edges).
 """
 
 from __future__ import annotations
@@ -50,9 +51,14 @@ def resubdivide(cm, o):
         tb = K.cut_nodes_centroid(ct, o, mask)
     tb = CM._clamp_bary(tb, CM.TET_BARY_MIN)
     complete = case in ("corner", "quad")
-    group = np.array(group, np.int64)  # side of each corner
+    general = case == "general"  # a forked face: one T per piece, always the T-cone
+    group = np.array(group, np.int64)  # side (piece) of each corner
     new, choice = None, []
-    if complete and cm.compact_splits:
+    if general:
+        tris, corner, face = KP.face_triangles(ct, o, mask, cm.centre_nodes)
+        if free_T:
+            tb, _ = _best_T(cm, v, tb, tris, free_T)
+    elif complete and cm.compact_splits:
         tris, corner, face, new, angle, choice = compact_split(cm, ct, o, mask, group)
         if new is not None and angle < SPLIT_ANGLE_GOOD:
             # a poor compact cone: the T-cone may be better (more tets, but no sliver)
@@ -66,13 +72,13 @@ def resubdivide(cm, o):
         elif free_T:
             tb, _ = _best_T(cm, v, tb, tris, free_T)
     if new is None:
-        for c in range(2 if complete else 1):
+        for c in range(int(group.max()) + 1 if complete or general else 1):
             if cm.tet_T[o, c] < 0:
                 cm.tet_T[o, c] = cm._new_node(v, tb)
             else:
                 cm._move_node(cm.tet_T[o, c], v, tb)
-        # the cone of the face triangles to T (each side's copy of T for a complete split)
-        new = _cone(tris, cm.tet_T[o][group[corner]] if complete else cm.tet_T[o, 0])
+        # the cone of the face triangles to T (each piece's copy of T for a complete split or a general tet)
+        new = _cone(tris, cm.tet_T[o][group[corner]] if complete or general else cm.tet_T[o, 0])
     # replace the old sub-tets
     old = cm.subtets.get(o, [o])
     cm._alive[old] = False

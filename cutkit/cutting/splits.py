@@ -95,7 +95,7 @@ def _set_diagonals(cm, free, bits):
 
 
 def _free_diagonals(cm, o, mask):
-    """[(face, smaller, larger vertex id of its quad's base)] for the split faces of ``o`` whose diagonal
+    """[(face, smaller, larger vertex of its quad's base (by ``node_rep``))] for the split faces of ``o`` whose diagonal
     is not fixed yet (none with centre nodes, nor on a face with copies along an earlier cut)."""
     if cm.centre_nodes:
         return []
@@ -106,8 +106,8 @@ def _free_diagonals(cm, o, mask):
             continue
         uncut = [k for k in FACE_EDGES[lf].tolist() if not mask >> k & 1]
         if len(uncut) == 1:  # two cut edges: split
-            a, b = (int(q) for q in cm.orig_tets[o, TET_EDGES[uncut[0]]])
-            out.append((f, min(a, b), max(a, b)))
+            a, b = sorted((int(q) for q in cm.orig_tets[o, TET_EDGES[uncut[0]]]), key=lambda q: cm.node_rep[q])
+            out.append((f, a, b))
     return out
 
 

@@ -233,7 +233,9 @@ class Session:
 
 def cut_pairs(cm, before=None) -> np.ndarray:
     """(p, 2) int64 the two copies of every duplicated cut node of the current stroke, after ``before`` (q, 2)."""
-    pairs = [cm.edge_node[np.all(cm.edge_node >= 0, axis=1)], cm.face_node[np.all(cm.face_node >= 0, axis=1)]]
+    # a face node's first two copies (a forked face's third is its third corner's)
+    faces = cm.face_node[:, :2]
+    pairs = [cm.edge_node[np.all(cm.edge_node >= 0, axis=1)], faces[np.all(faces >= 0, axis=1)]]
     if before is not None:
         pairs.insert(0, before)
     return np.concatenate(pairs).astype(np.int64, copy=False)
