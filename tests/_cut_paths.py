@@ -141,12 +141,12 @@ def uncut_reason(cm, e):
 
     An edge and its coincident copies along an earlier stroke's cut
     (``edge_twins``) are cut together or not at all (docs/cutting.md):
-    refused when a face around one of them already has two cut edges (a
-    third cannot be cut in one stroke), deferred when the cut is waiting
-    (two opposite cut edges alone in a tet).
+    refused when one of the copies is cut already (met first, at another
+    point, from the other side), deferred when the cut is waiting (two
+    opposite cut edges alone in a tet).
     """
     group = [int(e)] + list(cm.edge_twins.get(int(e), ()))
-    if any(cm.face_ncut[f] >= 2 for g in group for f in cm.faces_of_edge(g)):
+    if any(np.isfinite(cm.edge_t[g]) for g in group):
         return "refused"
     if any(g in cm.pending_edges for g in group):
         return "deferred"

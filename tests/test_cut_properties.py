@@ -19,6 +19,7 @@ from _cut_paths import (KINDS, crossed_edges, crossing_strokes, delaunay_ball, j
                         uncut_reason)
 from cutkit.collision._swept_kernels import tri_tri  # noqa: F401  (compiled once for the oracle below)
 from cutkit.cutting import CutMesh, cut_step, to_model
+from cutkit.cutting import subdivision as S
 from cutkit.cutting.rebase import blade_in_tissue, rebase_if_left
 from cutkit.mesh.check import check_mesh
 from cutkit.mesh.generate import box_mesh
@@ -121,12 +122,6 @@ def test_every_step_is_a_clean_mesh_many(name, kind, tremor, seed, blade_length)
     test_every_step_is_a_clean_mesh.hypothesis.inner_test(name, kind, tremor, seed, blade_length)
 
 
-#: Path kinds whose swept surface never folds over an edge or a face at tremor 0 (curved paths
-#: fold in tight bends, a blade pulled up and swept back in without leaving folds over its own
-#: cut, a blade pushed in along itself may stop with an edge deferred): every crossed edge is cut.
-UNFOLDED_KINDS = ["straight", "reversal", "crossing", "vertex", "edge", "face", "guillotine"]
-
-
 def stroke_losses(cm, stroke):
     """(lost, refused, deferred): sets of this stroke's original edges crossed strictly inside and
     left uncut; of those, the refused and the deferred (:func:`_cut_paths.uncut_reason`)."""
@@ -137,18 +132,17 @@ def stroke_losses(cm, stroke):
 
 
 @settings(max_examples=100, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-@given(st.sampled_from(["jittered", "delaunay"]), st.sampled_from(UNFOLDED_KINDS),
+@given(st.sampled_from(["jittered", "delaunay"]), st.sampled_from(KINDS), st.sampled_from([0.0, 0.3, 1.0]),
        st.integers(0, 2**31 - 1), st.sampled_from([2.5, 10.0]))
-def test_oracle_every_crossed_edge_is_cut(name, kind, seed, blade_length):
-    """A blade whose swept surface does not fold cuts every original edge it crosses, in every stroke.
+def test_oracle_every_crossed_edge_is_cut(name, kind, tremor, seed, blade_length):
+    """Every original edge the swept blade crosses is cut, in every stroke, on any path.
 
-    Curved paths and tremor can fold the swept surface over an edge or a
-    face (a second crossing of an edge, a third cut edge on a face), which
-    one cut per edge and stroke cannot represent: those edges stay uncut
-    (measured in docs/cutting.md, ``benchmarks/cut_quality.py``; accounted
-    for by the next test).  The one exception here: an edge deferred (two
+    Tremor, tight curves and a blade swept back over its own cut fold the
+    swept surface, so a face may be crossed on all three edges (a forked
+    face) and a tet cut into up to four pieces; an edge crossed twice is
+    cut at its first crossing.  The one exception: an edge deferred (two
     opposite cut edges alone in a tet) waits for the blade to move on, so a
-    blade that stops in the tissue may leave it uncut.
+    blade that stops or leaves in between may leave it uncut.
     """
     p, t, v0, L = mesh(name)
     cm = CutMesh(p, t, blade_length=blade_length)
@@ -158,7 +152,7 @@ def test_oracle_every_crossed_edge_is_cut(name, kind, seed, blade_length):
         lost_now, _, deferred = stroke_losses(cm, stroke)
         lost.extend(lost_now - deferred)
 
-    run_path(cm, make_path(kind, np.random.default_rng(seed), L), v0, check=False, end_strokes=True,
+    run_path(cm, make_path(kind, np.random.default_rng(seed), L, tremor), v0, check=False, end_strokes=True,
              on_stroke_end=account)
     assert not lost, sorted(lost)[:10]
 
@@ -167,9 +161,9 @@ def test_oracle_every_crossed_edge_is_cut(name, kind, seed, blade_length):
 @given(st.sampled_from(["jittered", "delaunay"]), st.sampled_from(KINDS), st.sampled_from([0.0, 0.3, 1.0]),
        st.integers(0, 2**31 - 1), st.sampled_from([2.5, 10.0]))
 def test_every_lost_edge_is_a_documented_refusal(name, kind, tremor, seed, blade_length):
-    """Any path: a crossed edge left uncut is one a face around which (or around a coincident copy
-    along an earlier stroke's cut) had two cut edges already (a third cannot be cut in one stroke)
-    or one deferred (two opposite cut edges alone in a tet)."""
+    """Any path: a crossed edge left uncut is one whose coincident copy along an earlier stroke's cut
+    was cut already, at another point, or one deferred (two opposite cut edges alone in a tet); and
+    ``edges_left_uncut`` counts each."""
     p, t, v0, L = mesh(name)
     cm = CutMesh(p, t, blade_length=blade_length)
     other, unreported, n_lost = [], [], [0]
@@ -196,6 +190,28 @@ def test_through_cut_gives_two_pieces():
     run_path(cm, [(np.array([x, 1.37, -0.5]), np.array([0.1, 0.0, -1.0]) / np.hypot(0.1, 1))
                   for x in np.linspace(-0.5, L[0] + 0.5, 12)], v0)
     assert components(cm.tets) == 2
+
+
+@pytest.mark.parametrize("name", ["block", "jittered", "delaunay"])
+def test_a_through_x_in_one_stroke_gives_four_pieces(name):
+    """The blade never leaves the tissue's cut state between the two cuts of an X (no rebase): the
+    second cut re-cuts the tets the first split, through their forked faces."""
+    from _twins_cut import components
+
+    p, t, v0, L = mesh(name)
+    lo, hi = p.min(axis=0), p.max(axis=0)
+    c, z, a = (lo + hi) / 2 + 0.07, lo[2] - 0.5, np.array([0.0, 0.0, -1.0])
+    poses = [(np.array([x, c[1], z]), a) for x in np.linspace(lo[0] - 0.5, hi[0] + 0.5, 12)]
+    poses += [(np.array([hi[0] + 0.5, hi[1] + 0.5, z]), a)]  # round the corner, outside
+    poses += [(np.array([c[0], y, z]), a) for y in np.linspace(hi[1] + 0.5, lo[1] - 0.5, 8)]
+    cm = CutMesh(p, t, blade_length=10.0)
+    run_path(cm, poses, v0)
+    assert cm.n_rebases == 0 and cm.edges_left_uncut() == 0
+    assert components(cm.tets) == 4
+    general = [o for o in cm.subtets if S.CLASSIFY_TABLE[cm.tet_mask(o)][0] == "general"]
+    assert general and max(int(S.vertex_groups(cm.tet_mask(o)).max()) + 1 for o in general) >= 3
+    vol = piece_volumes(cm)
+    assert vol.min() > 0.2 * v0, vol / v0
 
 
 def test_through_x_gives_four_pieces():
