@@ -8,12 +8,15 @@ written (``to_model``):
   distribution over paths is reported);
 * lost edges: original edges the swept surface crossed strictly inside
   (parameter in [1e-6, 1 - 1e-6]) that are not cut, as a fraction of the
-  crossed ones, and by reason (a face around the edge already had two cut
-  edges; deferred, see docs/cutting.md; other).  A stroke ends where the
+  crossed ones, and by reason (a coincident copy along an earlier stroke's
+  cut was cut elsewhere; deferred, see docs/cutting.md; other).  A stroke ends where the
   blade is lifted or has left the tissue, as in ``cutkit cut``, so a stroke's
   losses are counted on its own original edges (a second stroke crossing
   the first cuts the first's sub-tetrahedra);
-* new tetrahedra per cut tetrahedron.
+* new tetrahedra per cut tetrahedron, and the share of cut tetrahedra
+  with a forked face (three cut edges: the ``general`` case);
+* crumbs: pieces of less than ``CRUMB`` of the mesh's volume at the end
+  of a path (a folded sweep or a crossing can cut a sliver of tissue loose).
 
     python benchmarks/cut_quality.py [--json] [--paths 20]
 """
@@ -29,11 +32,27 @@ sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."
 
 KINDS = ("straight", "curved", "reversal", "reentry", "crossing", "vertex", "face", "guillotine", "press")
 TREMORS = (0.0, 0.1, 0.3, 1.0)
+#: A piece below this fraction of the mesh's volume is a crumb.
+CRUMB = 1e-3
+
+
+def _piece_volumes(points, tets):
+    """(k,) float64 volume of each face-connected piece of ``tets`` (m, 4) int64 over ``points`` (n, 3)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+    from cutkit.mesh.quality import signed_volumes
+    from cutkit.mesh.topology import tet_neighbors
+
+    nb = tet_neighbors(tets)
+    r, c = np.nonzero(nb >= 0)
+    k, lab = connected_components(coo_matrix((np.ones(r.size), (r, nb[r, c])), shape=(len(tets),) * 2),
+                                  directed=False)
+    return np.bincount(lab, weights=signed_volumes(points, tets), minlength=k)
 
 
 def _stroke_losses(cm, crossed):
-    """Crossed edges of the stroke left uncut, by reason: (refused: a third cut edge on a face, deferred,
-    other); see ``tests/_cut_paths.uncut_reason``."""
+    """Crossed edges of the stroke left uncut, by reason: (refused: a coincident copy cut elsewhere,
+    deferred, other); see ``tests/_cut_paths.uncut_reason``."""
     from _cut_paths import uncut_reason
 
     why = [uncut_reason(cm, e) for e in crossed - set(np.flatnonzero(np.isfinite(cm.edge_t)).tolist())]
@@ -45,21 +64,24 @@ def measure(p, t, poses, blade_length=10.0):
     (the blade lifted) and wherever the blade has left the tissue after cutting.
 
     Returns (worst cut-made angle, its ratio to the model tet's, losses by reason (3,), crossed
-    edges, cut tets, new tets); losses and crossings are counted per stroke on its own original edges.
+    edges, cut tets, new tets, general tets, crumbs, crumbs' volume fraction); losses and crossings
+    are counted per stroke on its own original edges.
     """
     from _cut_paths import crossed_edges
     from cutkit.cutting import CutMesh, cut_step, to_model
     from cutkit.cutting.rebase import blade_in_tissue, rebase_if_left
-    from cutkit.mesh.quality import min_dihedral_angles
+    from cutkit.cutting.subdivision import CLASSIFY_TABLE
+    from cutkit.mesh.quality import min_dihedral_angles, signed_volumes
 
     cm = CutMesh(p, t, blade_length=blade_length)
-    crossed, lost, n_crossed, cut, new = set(), np.zeros(3, np.int64), 0, 0, 0
+    crossed, lost, n_crossed, cut, new, general = set(), np.zeros(3, np.int64), 0, 0, 0, 0
 
     def end_stroke():
-        nonlocal crossed, n_crossed, cut, new
+        nonlocal crossed, n_crossed, cut, new, general
         lost[:] += _stroke_losses(cm, crossed)
         n_crossed += len(crossed)
         cut, new = cut + len(cm.subtets), new + sum(len(v) for v in cm.subtets.values())
+        general += sum(CLASSIFY_TABLE[cm.tet_mask(o)][0] == "general" for o in cm.subtets)
         crossed = set()
 
     for pose in poses:
@@ -83,7 +105,10 @@ def measure(p, t, poses, blade_length=10.0):
         ang = min_dihedral_angles(m.points, m.tets[is_new])
         orig = min_dihedral_angles(p, t[cm.model_tet[cm.tet_origin[is_new]]])
         worst, rel = float(ang.min()), float((ang / orig).min())
-    return worst, rel, lost, n_crossed, cut, new
+    vol = _piece_volumes(m.points, m.tets)
+    v0 = float(signed_volumes(p, t).sum())
+    crumbs = vol < CRUMB * v0
+    return worst, rel, lost, n_crossed, cut, new, general, int(crumbs.sum()), float(vol[crumbs].sum() / v0)
 
 
 def run(n_paths):
@@ -100,12 +125,15 @@ def run(n_paths):
                                          "worst_angle_deg": float(min_dihedral_angles(p, t).min())}
         for tremor in TREMORS:
             worst, rels, lost, crossed, cut, new, by_kind = [], [], np.zeros(3, np.int64), 0, 0, 0, {}
-            angle_by_kind = {}
+            angle_by_kind, general, crumbs, crumb_vol, crumb_paths = {}, 0, 0, 0.0, 0
             for kind in KINDS:
                 kl = kc = 0
                 kw = []
                 for seed in range(n_paths):
-                    w, r, lo, cr, c, nw = measure(p, t, make_path(kind, np.random.default_rng(seed), L, tremor))
+                    w, r, lo, cr, c, nw, g, nc, vc = measure(p, t, make_path(kind, np.random.default_rng(seed), L,
+                                                                            tremor))
+                    general, crumbs, crumb_paths = general + g, crumbs + nc, crumb_paths + (nc > 0)
+                    crumb_vol = max(crumb_vol, vc)
                     if w is not None:
                         worst.append(w)
                         rels.append(r)
@@ -122,9 +150,11 @@ def run(n_paths):
                 "worst_angle_over_original_tet_min": float(np.min(rels)),
                 "worst_angle_over_original_tet_median": float(np.median(rels)),
                 "lost_edge_fraction": int(lost.sum()) / max(crossed, 1), "lost_edge_fraction_by_kind": by_kind,
-                "lost_edges_by_reason": {"third_cut_edge_on_a_face": int(lost[0]), "deferred": int(lost[1]),
+                "lost_edges_by_reason": {"copy_cut_elsewhere": int(lost[0]), "deferred": int(lost[1]),
                                          "other": int(lost[2])},
-                "new_tets_per_cut_tet": new / max(cut, 1)}
+                "new_tets_per_cut_tet": new / max(cut, 1), "general_tet_fraction": general / max(cut, 1),
+                "paths_with_crumbs": crumb_paths, "crumbs": crumbs,
+                "crumb_volume_fraction_max_per_path": crumb_vol}
     # a long steady incision
     p, t = box_mesh((20, 4, 4))
     cm = CutMesh(p, t, blade_length=10.0)
