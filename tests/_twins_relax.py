@@ -149,3 +149,20 @@ def volume_forces_twin(x, tets, rest_volume, bulk):
             f[node] -= bulk[t] * (V - rest_volume[t]) / rest_volume[t] * g
             k[node] += bulk[t] * g @ g / rest_volume[t]
     return f, k
+
+
+def graph_components_twin(springs, n):
+    """Connected components of the spring graph (scipy): (n_components, (n,) labels), numbered in
+    order of their smallest node."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    s = np.asarray(springs, np.int64).reshape(-1, 2)
+    g = coo_matrix((np.ones(len(s)), (s[:, 0], s[:, 1])), shape=(n, n))
+    k, lab = connected_components(g, directed=False)
+    # renumber by smallest node
+    first = {}
+    out = np.empty(n, np.int64)
+    for i, c in enumerate(lab.tolist()):
+        out[i] = first.setdefault(c, len(first))
+    return k, out

@@ -334,9 +334,6 @@ def test_add_nodes_rejects_taking_all_the_mass():
         add_nodes(sm, st, sm.rest_positions[[3, 3]], sm.rest_positions[[3, 3]], [[3], [3]], [[0.5], [0.5]])
 
 
-@pytest.mark.xfail(strict=True, reason="the paper's semi-implicit step divides each node's force by its own implicit "
-                   "mass, so a free piece's momentum is not kept (docs/relaxation.md, 'The paper's springs'); "
-                   "remove this mark when it is")
 def test_semi_implicit_steps_keep_a_free_pieces_momentum():
     """A free block started out of balance, no load: its centre of mass must stay where it is. Symplectic
     Euler keeps it to rounding (4e-15 mm); the semi-implicit steps move it 1.8e-4 mm in 400 steps."""

@@ -28,8 +28,9 @@ from concurrent.futures import Future, ThreadPoolExecutor
 import numpy as np
 
 from cutkit.errors import InputError
-from cutkit.relax._kernels import halo_nodes
-from cutkit.relax.integrate import advance_nodes, colour_classes, control_arrays, method_mode
+from cutkit.relax._kernels import MODE_EXPLICIT, halo_nodes
+from cutkit.relax.integrate import advance_nodes, colour_classes, control_arrays, method_mode, synchronised
+from cutkit.relax.momentum import free_momentum_start, keep_free_momentum
 from cutkit.relax.model import Control, SpringModel, SpringState
 
 #: Number of quantised step sizes dt_0 2^i by default.
@@ -243,6 +244,10 @@ class NodeLists:
             self.state.node_list[loaded] = 0
             self._since_move[loaded] = 0
             self._dirty(np.concatenate([old, [0]]))
+        # a free piece's momentum is kept over a synchronised interval (cutkit.relax.momentum)
+        start = None
+        if self.mode != MODE_EXPLICIT and synchronised(self.model, self.state, TIME_EPS * self.dt0):
+            start = free_momentum_start(self.model, self.state)
         passes = 0
         while max_passes is None or passes < max_passes:
             i = self.next_list()
@@ -252,6 +257,7 @@ class NodeLists:
             passes += 1
         if synchronise and (max_passes is None or passes < max_passes):
             self.synchronise(until, f, g)
+            keep_free_momentum(self.model, self.state, start, f, g)
         return passes
 
     def synchronise(self, until: float, f_ext: np.ndarray, gravity: np.ndarray) -> None:

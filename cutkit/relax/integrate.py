@@ -10,6 +10,9 @@
   springs only) as implicit stiffness;
 * ``"symplectic-euler"``: the explicit reference.
 
+The semi-implicit steps then give every free piece (no fixed node) the
+momentum its loads give it (:mod:`cutkit.relax.momentum`).
+
 Either Jacobi-style (every node from the old positions, eq. 7 for all
 neighbours) or Gauss-Seidel (section 5.1, last paragraph: neighbours
 already processed in this sweep are used as updated), the latter run in
@@ -24,6 +27,7 @@ from cutkit.errors import InputError
 from cutkit.relax import _kernels as K
 from cutkit.relax._volume_kernels import add_volume_forces
 from cutkit.relax.model import Control, SpringModel, SpringState
+from cutkit.relax.momentum import free_momentum_start, keep_free_momentum
 
 METHODS = {
     "semi-implicit": K.MODE_AXIAL,
@@ -160,9 +164,18 @@ def step(
     target = state.time + dt
     nodes = model.free_nodes
     classes = colour_classes(model, nodes) if gauss_seidel else None
+    start = free_momentum_start(model, state) if synchronised(model, state) else None
     advance_nodes(model, state, nodes, target, f, g, mode, classes)
     state.time_stamps[model.fixed] = target  # held nodes are "at" every time
     state.time = target
+    if mode != K.MODE_EXPLICIT:  # symplectic Euler keeps momentum by itself
+        keep_free_momentum(model, state, start, f, g)
+
+
+def synchronised(model: SpringModel, state: SpringState, eps: float = 0.0) -> bool:
+    """Whether every free node's time stamp is within ``eps`` s of ``state.time``."""
+    ts = state.time_stamps[~model.fixed]
+    return bool(ts.size == 0 or np.all(np.abs(ts - state.time) <= eps))
 
 
 def spring_forces(model: SpringModel, positions: np.ndarray) -> np.ndarray:

@@ -72,6 +72,8 @@ class SpringModel:
     volume : VolumeTerm or None
         Per-tet volume springs (:mod:`cutkit.relax.volume`); None: springs only,
         as in the paper.
+    topology_version : int
+        Counts the rebuilds of the spring graph (caches of it key on it).
     """
 
     rest_positions: np.ndarray
@@ -92,6 +94,7 @@ class SpringModel:
     spring_b: np.ndarray = field(default=None)
     node_stiffness: np.ndarray = field(default=None)
     volume: "VolumeTerm | None" = None
+    topology_version: int = 0
 
     def __post_init__(self):
         if self.adj_offsets is None:
@@ -114,6 +117,7 @@ class SpringModel:
         """Recompute the CSR spring graph (and the colouring) from ``springs``."""
         n = self.n_nodes
         s = self.springs
+        self.topology_version += 1  # caches of the graph (momentum.spring_pieces) key on it
         # counting sort, O(n + s): a cut rebuilds this every geometry update
         self.adj_offsets, self.adj_nodes, self.adj_springs = spring_csr(
             np.ascontiguousarray(s[:, 0], np.int64), np.ascontiguousarray(s[:, 1], np.int64), n)

@@ -265,8 +265,9 @@ class CutTask:
         if code == CUTTING and cm.active_tets.size:
             # the tissue along the blade feels the reaction of the cut force (eqs. 16-18);
             # before the blade enters the surface is not indented (docs/simulate.md)
-            nodes = np.unique(cm.orig_tets[cm.active_tets])
-            f_ext[nodes] -= out[O_CUT:O_CUT + 3] / len(nodes)
+            nodes = self.tis.bearing_nodes(np.unique(cm.orig_tets[cm.active_tets]))
+            if nodes.size:
+                f_ext[nodes] -= out[O_CUT:O_CUT + 3] / len(nodes)
         return f_ext
 
     def leave(self) -> None:

@@ -304,6 +304,9 @@ class Tissue(TissueBase):
         if changed.size:
             st.node_list[changed] = np.where(fixed[changed], -1, 0)
             st.velocities[changed[fixed[changed]]] = 0.0
+            # a node freed again (an unused T node a later cut uses) was held since its stamp:
+            # its first step starts now, not there (a step that long threw it)
+            st.time_stamps[changed[~fixed[changed]]] = st.time
             sm.prescribed_displacement[changed] = np.where(
                 fixed[changed, None], st.positions[changed] - sm.rest_positions[changed], 0.0)
 
@@ -417,6 +420,24 @@ class Tissue(TissueBase):
         st.time_stamps[:] = 0.0
         self.lists.list_time[:] = 0.0
         return {"iterations": int(iterations), "relative_residual": r / r0 if r0 > 0 else 0.0}
+
+    def bearing_nodes(self, nodes: np.ndarray) -> np.ndarray:
+        """The nodes of ``nodes`` (k,) int64 in a piece of tissue that is held (has a fixed node).
+
+        A piece the cut has set loose cannot resist the blade: the reaction of
+        the cut force (eqs. 16-18), spread over a few milligrams, would throw
+        it away at metres per second.  It gets no share; the rest of the
+        blade's tissue takes it (:mod:`cutkit.relax.momentum` keeps the loose
+        piece's own momentum).
+        """
+        from cutkit.relax.momentum import spring_pieces
+
+        sm = self.springs
+        n_pieces, labels = spring_pieces(sm)
+        if n_pieces == 1:
+            return nodes
+        held = np.bincount(labels, weights=sm.fixed, minlength=n_pieces) > 0
+        return nodes[held[labels[nodes]]]
 
     def advance(self, f_ext: np.ndarray, until: float, stop=None) -> int:
         """Process the node lists up to ``until`` s and bring every node there; returns list passes.

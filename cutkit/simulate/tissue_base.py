@@ -111,6 +111,10 @@ class TissueBase:
         nodes, d2 = hood.nodes(self.cm, self.positions, active_tets, point, axis)
         return nodes, blade_weights(d2, self.rest_map_radius)
 
+    def bearing_nodes(self, nodes: np.ndarray) -> np.ndarray:
+        """The nodes of ``nodes`` (k,) int64 that bear the blade's reaction (all, unless a model says otherwise)."""
+        return nodes
+
     def alive_tets(self) -> tuple[np.ndarray, np.ndarray]:
         """(k, 4) int64 current tets and (k,) int64 their CutMesh ids."""
         cm = self.cm
