@@ -48,7 +48,8 @@ def print_uncut_note(uncut: int) -> None:
     """Tell how many edges the blade met that its stroke could not cut (``CutMesh.edges_left_uncut``), if any."""
     if uncut:
         console.print(f"[yellow]note:[/] {uncut} edge{'s' * (uncut != 1)} the blade met could not be cut in "
-                      "its stroke (the swept surface folded over a face) and stay joined; see docs/cutting.md")
+                      "its stroke (deferred where it ended, or a copy along an earlier cut cut elsewhere) and "
+                      "stay joined; see docs/cutting.md")
 
 
 def table(title: str, columns: list[str], rows: list[list]) -> Table:

@@ -16,7 +16,7 @@ def command(model: str, min_dihedral: float) -> None:
 
     m = read_model(model)
     rep = check_mesh(m.points, m.tets, m.labels, min_dihedral=min_dihedral)
-    rows = [[r.name, "[green]ok[/]" if r.passed else "[red]FAIL[/]", r.detail] for r in rep.rows]
+    rows = [[r.name, "ok" if r.passed else "FAIL", r.detail] for r in rep.rows]  # table cells are plain text
     console.print(table(f"check {model}", ["check", "result", "detail"], rows))
     if not rep.passed:
         console.print(f"[red]failed:[/] {', '.join(rep.failed)}")

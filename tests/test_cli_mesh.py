@@ -34,6 +34,7 @@ def test_import_check_conforming_passes(tmp_path):
     r = run("check", tmp_path / "m.h5")
     assert r.exit_code == 0, r.output
     assert "checks passed" in r.output
+    assert "│ ok" in r.output and "[green]" not in r.output  # a result cell, not its markup
     r = run("info", tmp_path / "m.h5")
     assert r.exit_code == 0, r.output
     assert "12 nodes, 12 tets, total volume 2 mm^3" in r.output
@@ -49,6 +50,7 @@ def test_hanging_node_fails_and_is_named(tmp_path):
     centre = int(np.flatnonzero(np.all(p == [1.0, 0.5, 0.5], axis=1))[0])
     assert "hanging nodes" in r.output and str(centre) in r.output
     assert "failed:" in r.output and "no hanging node (conforming)" in r.output
+    assert "│ FAIL" in r.output and "[red]FAIL" not in r.output
 
 
 @pytest.mark.parametrize("ext", [".vtu", ".vtk", ".msh", ".xdmf"])
