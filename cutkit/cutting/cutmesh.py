@@ -271,12 +271,11 @@ class CutMesh:
             return []
         if int(e) in self.edge_twins:  # a copy along an earlier cut (after a rebase): cut all alike
             return cut_twins(self, int(e), float(s), self.edge_twins[int(e)])
-        faces = self.faces_of_edge(e)
         if self._splits_a_sheet(e):
             self.pending_edges.setdefault(int(e), float(s))
             return []
         self.pending_edges.pop(int(e), None)
-        touched = self._cut_edge(e, s, faces)
+        touched = self._cut_edge(e, s)
         self._retry_pending(touched)
         return touched
 
@@ -311,10 +310,9 @@ class CutMesh:
                     seen.update(more)
                     touched.extend(more)
                     continue
-                faces = self.faces_of_edge(e)
                 if self._splits_a_sheet(e):
                     continue
-                more = self._cut_edge(e, self.pending_edges.pop(e), faces)
+                more = self._cut_edge(e, self.pending_edges.pop(e))
                 self.retried_edges.append(e)
                 for u in more:
                     if u not in seen:
@@ -322,8 +320,9 @@ class CutMesh:
                         touched.append(u)
                         todo.append(u)
 
-    def _cut_edge(self, e, s, faces):
+    def _cut_edge(self, e, s):
         """Make the cut of edge e at parameter s (checks done); returns the tets of its ring."""
+        faces = self.faces_of_edge(e)
         s = min(max(float(s), EDGE_SNAP), 1.0 - EDGE_SNAP)
         self.edge_t[e] = s
         for f in faces:

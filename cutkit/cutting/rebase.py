@@ -233,7 +233,6 @@ def cut_twins(cm, e, s, twins):
     (see :meth:`CutMesh.try_cut_edge`).
     """
     group = [e] + list(twins)
-    faces = [cm.faces_of_edge(g) for g in group]
     if any(np.isfinite(cm.edge_t[g]) for g in group):
         cm.refused_edges.add(e)
         return []
@@ -242,10 +241,10 @@ def cut_twins(cm, e, s, twins):
         return []
     first = cm.node_rep[cm.edges[e, 0]]
     touched = []
-    for g, fs in zip(group, faces):
+    for g in group:
         cm.pending_edges.pop(g, None)
         # a copy numbered the other way round is cut at 1 - s (the clamp is symmetric)
-        touched += cm._cut_edge(g, s if cm.node_rep[cm.edges[g, 0]] == first else 1.0 - s, fs)
+        touched += cm._cut_edge(g, s if cm.node_rep[cm.edges[g, 0]] == first else 1.0 - s)
     cm._retry_pending(touched)
     return touched
 

@@ -164,12 +164,13 @@ def step(
     target = state.time + dt
     nodes = model.free_nodes
     classes = colour_classes(model, nodes) if gauss_seidel else None
-    start = free_momentum_start(model, state) if synchronised(model, state) else None
+    # symplectic Euler keeps momentum by itself; the semi-implicit steps are given it
+    keep = mode != K.MODE_EXPLICIT and synchronised(model, state)
+    start = free_momentum_start(model, state) if keep else None
     advance_nodes(model, state, nodes, target, f, g, mode, classes)
     state.time_stamps[model.fixed] = target  # held nodes are "at" every time
     state.time = target
-    if mode != K.MODE_EXPLICIT:  # symplectic Euler keeps momentum by itself
-        keep_free_momentum(model, state, start, f, g)
+    keep_free_momentum(model, state, start, f, g)
 
 
 def synchronised(model: SpringModel, state: SpringState, eps: float = 0.0) -> bool:

@@ -47,6 +47,18 @@ def spring_pieces(model: SpringModel) -> tuple[int, np.ndarray]:
     return int(n_pieces), labels
 
 
+def held_pieces(model: SpringModel) -> tuple[np.ndarray, np.ndarray]:
+    """Which pieces of the spring graph hold a fixed node.
+
+    Returns
+    -------
+    labels : (n,) int64  the piece of each node (:func:`spring_pieces`)
+    held : (p,) bool
+    """
+    n_pieces, labels = spring_pieces(model)
+    return labels, np.bincount(labels, weights=model.fixed, minlength=n_pieces) > 0
+
+
 @dataclass
 class MomentumStart:
     """The free pieces' momenta at the start of a synchronised interval.
@@ -67,8 +79,7 @@ class MomentumStart:
 
 def free_momentum_start(model: SpringModel, state: SpringState) -> MomentumStart | None:
     """Record the free pieces' momenta now (every node at ``state.time``); None when there is no free piece."""
-    n_pieces, labels = spring_pieces(model)
-    held = np.bincount(labels, weights=model.fixed, minlength=n_pieces) > 0
+    labels, held = held_pieces(model)
     if held.all():
         return None
     nodes = np.flatnonzero(~held[labels])

@@ -430,14 +430,10 @@ class Tissue(TissueBase):
         blade's tissue takes it (:mod:`cutkit.relax.momentum` keeps the loose
         piece's own momentum).
         """
-        from cutkit.relax.momentum import spring_pieces
+        from cutkit.relax.momentum import held_pieces
 
-        sm = self.springs
-        n_pieces, labels = spring_pieces(sm)
-        if n_pieces == 1:
-            return nodes
-        held = np.bincount(labels, weights=sm.fixed, minlength=n_pieces) > 0
-        return nodes[held[labels[nodes]]]
+        labels, held = held_pieces(self.springs)
+        return nodes if held.all() else nodes[held[labels[nodes]]]
 
     def advance(self, f_ext: np.ndarray, until: float, stop=None) -> int:
         """Process the node lists up to ``until`` s and bring every node there; returns list passes.
