@@ -73,4 +73,7 @@ def command(model, trajectory, out_dir, blade_length, centre_nodes):
     console.print(f"{len(traj.t)} poses, {strokes} stroke{'s' * (strokes != 1)}, {n_cut} tets cut into "
                   f"{len(new)}, worst new dihedral {worst:.1f} deg "
                   f"-> {out_dir}/cut.pvd, {out_dir}/model.h5")
+    if cm.started_inside:
+        console.print("[yellow]note:[/] the blade lay inside the tissue at the first pose: the cut starts where "
+                      "it lay, with no entry through the surface")
     print_uncut_note(cm.edges_left_uncut())

@@ -74,3 +74,81 @@ def test_kinematic_guillotine_and_cleaver_cut():
     for z in np.linspace(5.0, 2.0, 7):
         cut_step(cm, [2.37, -2.0, z], [0, -1.0, 0])
     assert np.isfinite(cm.edge_t).any() and components(cm.tets) == 1
+
+
+def test_locate_matches_a_scan_of_every_tet(block):
+    """The first-pose point location (kernel ``locate``) against its twin: every tet's barycentric
+    coordinates in NumPy, the first tet holding the point."""
+    from cutkit.cutting._kernels_step import WALK_EPS, locate
+
+    p, t, _ = block
+    rng = np.random.default_rng(7)
+    corners = p[t]  # (m, 4, 3)
+    T = np.transpose(corners[:, 1:] - corners[:, :1], (0, 2, 1))  # columns: the edges from corner 0
+    for q in np.concatenate([rng.uniform(-0.5, 4.5, (40, 3)), p[t[:5]].mean(axis=1)]):
+        lam = np.linalg.solve(T, (q - corners[:, 0])[..., None])[..., 0]
+        bary = np.concatenate([1.0 - lam.sum(axis=1, keepdims=True), lam], axis=1)
+        inside = np.flatnonzero(bary.min(axis=1) >= -WALK_EPS)
+        assert locate(p, t, q) == (inside[0] if inside.size else -1)
+
+
+def test_a_blade_put_inside_the_tissue_cuts_from_where_it_lies():
+    """A blade whose whole edge lies inside the tissue at its first pose (put there, never drawn in
+    through the surface) cuts as it moves; the cut mesh stays valid and the start is recorded."""
+    from cutkit.cutting import to_model
+    from cutkit.mesh.check import check_mesh
+    from cutkit.model.tetmodel import TetModel
+
+    p, t = box_mesh((10, 6, 6), spacing=(2.0, 2.0, 2.0))
+    cm = CutMesh(p, t, blade_length=4.0)
+    n_cut = 0
+    for s in np.linspace(0.0, 1.0, 40):  # the edge from y = 4.5 to 8.5 of 0..12, then out through x = 20
+        n_cut += cut_step(cm, [4.0 + 18.0 * s, 8.5, 6.3], [0.0, 1.0, 0.0]).cut_edges.size
+    assert cm.started_inside
+    assert n_cut > 40
+    assert components(cm.tets) == 1  # a slit from where the blade lay out through the side
+    cut = to_model(cm, TetModel.from_arrays(p, t))  # as `cutkit cut` writes it: no unused node
+    assert check_mesh(cut.points, cut.tets).passed
+    # a blade that starts outside is not put inside
+    cm = CutMesh(p, t, blade_length=4.0)
+    cut_step(cm, [4.0, -2.0, 6.3], [0.0, 1.0, 0.0])
+    assert not cm.started_inside and cm.tip_tet == -1
+
+
+def _inside_incision(tmp_path):
+    """A slab model and a trajectory whose first pose has the whole blade inside it."""
+    from cutkit.cutting.trajectory import Trajectory, write_trajectory
+    from cutkit.io.model_h5 import write_model
+    from cutkit.model.tetmodel import TetModel
+
+    p, t = box_mesh((10, 6, 6), spacing=(2.0, 2.0, 2.0))
+    write_model(tmp_path / "slab.h5", TetModel.from_arrays(p, t))
+    k = 40
+    tip = np.stack([np.linspace(4.0, 22.0, k), np.full(k, 8.5), np.full(k, 6.3)], axis=1)
+    traj = Trajectory(t=np.linspace(0.0, 0.39, k), tip=tip, a=np.tile([0.0, 1.0, 0.0], (k, 1)),
+                      n=np.tile([1.0, 0.0, 0.0], (k, 1)))
+    write_trajectory(tmp_path / "in.csv", traj)
+    return tmp_path / "slab.h5", tmp_path / "in.csv"
+
+
+def test_cut_cli_notes_a_blade_put_inside(tmp_path, capsys):
+    from cutkit.cli.main import main
+
+    model, traj = _inside_incision(tmp_path)
+    assert main(["cut", str(model), "--trajectory", str(traj), "-o", str(tmp_path / "out"), "--blade-length", "4"]) == 0
+    out = " ".join(capsys.readouterr().out.split())
+    assert "the blade lay inside the tissue at the first pose: the cut starts where it lay" in out
+    assert "nothing cut" not in out
+
+
+def test_simulate_refuses_a_blade_put_inside(tmp_path, capsys):
+    """The scalpel model needs an entry through the surface: one line, exit 2, no output folder."""
+    from cutkit.cli.main import main
+
+    model, traj = _inside_incision(tmp_path)
+    out = tmp_path / "sim"
+    assert main(["simulate", str(model), "--trajectory", str(traj), "-o", str(out), "--blade-length", "4"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == ("cutkit: error: the blade lies inside the tissue at the trajectory's first pose (tip at 4, 8.5, 6.3 mm): "
+                   "start the trajectory outside the tissue, so that the blade enters through its surface")
+    assert not out.exists()

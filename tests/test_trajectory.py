@@ -186,3 +186,25 @@ def test_shipped_incision_reads_cleanly():
     # across the leg (x), blade pointing into the front of the leg (+y)
     np.testing.assert_allclose(traj.n[0], [1, 0, 0])
     np.testing.assert_allclose(traj.a[0], [0, 1, 0])
+
+
+@pytest.mark.parametrize("flip", ["a", "n", "both"])
+def test_pose_at_keeps_unit_vectors_when_a_row_turns_half_a_turn(flip):
+    """A blade axis or edge that reverses between two rows (a stroke drawn back) has no blend:
+    every pose in between is the nearer row's, finite, unit and perpendicular (was NaN)."""
+    from cutkit.cutting.trajectory import MIN_BLEND_LENGTH, Trajectory
+
+    a0, n0 = np.array([0.0, 1.0, 0.0]), np.array([1.0, 0.0, 0.0])
+    a1 = -a0 if flip in ("a", "both") else a0
+    n1 = -n0 if flip in ("n", "both") else n0
+    traj = Trajectory(t=np.array([0.0, 0.01]), tip=np.array([[0.0, 0, 0], [1.0, 0, 0]]),
+                      a=np.array([a0, a1]), n=np.array([n0, n1]))
+    for w in np.linspace(0.0, 1.0, 101):
+        tip, a, n = traj.pose_at(0.01 * w)
+        assert np.all(np.isfinite(a)) and np.all(np.isfinite(n))
+        assert abs(np.linalg.norm(a) - 1.0) < 1e-12 and abs(np.linalg.norm(n) - 1.0) < 1e-12
+        assert abs(np.dot(a, n)) < 1e-12
+        np.testing.assert_allclose(tip, [w, 0.0, 0.0], atol=1e-12)
+    # away from the flip the blend is the usual one: exact at the rows
+    np.testing.assert_array_equal(traj.pose_at(0.0)[1], a0)
+    assert MIN_BLEND_LENGTH < 0.01

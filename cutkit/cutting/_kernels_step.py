@@ -122,6 +122,41 @@ def walk(x, tets, neighbors, start, target, max_walk):
 
 
 @njit(cache=True, nogil=True)
+def locate(x, tets, target):
+    """First tet (in index order) containing ``target`` within ``WALK_EPS``, or -1: an O(m) scan.
+
+    Where no walk can start (the blade's first pose, with no tip tet and no
+    boundary face met), this finds the tip.  A tet whose bounding box misses
+    the point is skipped before its barycentric coordinates are computed.
+
+    Parameters
+    ----------
+    x : (n, 3) float64
+    tets : (m, 4) int64
+    target : (3,) float64
+
+    Returns
+    -------
+    int
+    """
+    b = np.empty(4)
+    for t in range(tets.shape[0]):
+        inside = True
+        for c in range(3):
+            lo = min(x[tets[t, 0], c], x[tets[t, 1], c], x[tets[t, 2], c], x[tets[t, 3], c])
+            hi = max(x[tets[t, 0], c], x[tets[t, 1], c], x[tets[t, 2], c], x[tets[t, 3], c])
+            span = hi - lo
+            if target[c] < lo - WALK_EPS * span or target[c] > hi + WALK_EPS * span:
+                inside = False
+                break
+        if not inside:
+            continue
+        if tet_bary(x, tets[t], target, b) and min(b[0], b[1], b[2], b[3]) >= -WALK_EPS:
+            return t
+    return -1
+
+
+@njit(cache=True, nogil=True)
 def _face_bary(x, fv, px, py, pz, out, row):
     """Barycentric coordinates (3,) of a point in the plane of triangle x[fv].
 

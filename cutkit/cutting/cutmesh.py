@@ -140,6 +140,7 @@ class CutMesh:
         self.previous_active_tets = np.zeros(0, np.int64)
         self.tip_tet = -1
         self.prev_pose = None
+        self.started_inside = False  # the blade's first pose lay inside the tissue (cut_step)
         self._delta_reset()
         init_records(self, n0, m0)  # what outlives a rebase (model counts, earlier strokes' cut surface)
 

@@ -132,6 +132,7 @@ def rebase(cm):
     fresh.n_rebases = cm.n_rebases + 1
     fresh.uncut_before = cm.edges_left_uncut()
     fresh.step_count = cm.step_count
+    fresh.started_inside = cm.started_inside
     fresh.node_rep = _node_reps(cm)
     find_twins(fresh)
     # replace the whole state: caches keyed by the old numbering (surface BVH, sweep buffers) go too

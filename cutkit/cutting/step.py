@@ -76,6 +76,21 @@ def find_trajectory_tetra(cm: CutMesh, start: int, target) -> int:
     return int(KS.walk(cm._x, cm.orig_tets, cm.neighbors, int(start), np.asarray(target, np.float64), MAX_WALK))
 
 
+def tet_containing(points, tets, p) -> int:
+    """The first tet of ``tets`` (in index order) that contains the point ``p``, or -1.
+
+    An O(m) scan (kernel ``_kernels_step.locate``): for a start, not for every step.
+
+    Parameters
+    ----------
+    points : (n, 3) float64
+    tets : (m, 4) int64
+    p : (3,) float64
+    """
+    return int(KS.locate(np.ascontiguousarray(points, np.float64), np.ascontiguousarray(tets, np.int64),
+                         np.asarray(p, np.float64).reshape(3)))
+
+
 def surface_bvh(cm: CutMesh, crack: bool = False):
     """The hierarchy of the original tets' boundary faces that surface collision walks, built once.
 
@@ -196,6 +211,11 @@ def cut_step(cm: CutMesh, tip, a) -> StepResult:
             tip_tet = find_trajectory_tetra(cm, o, P1)
             if tip_tet >= 0:
                 break
+        if not ent and cm.prev_pose is None:
+            # the first pose met no boundary face: the whole blade is outside, or inside the
+            # tissue (put there, not drawn in); then the cut starts where it lies
+            tip_tet = tet_containing(cm._x, cm.orig_tets, P1)
+            cm.started_inside = tip_tet >= 0
     elif cm.cut_faces_before:
         # the tip is inside, but the blade may reach across an earlier stroke's cut
         seeds.extend(_surface_seeds(cm, P0, Q0, P1, Q1, crack=True))

@@ -118,12 +118,30 @@ class Trajectory:
             return self.tip[-1].copy(), self.a[-1].copy(), self.n[-1].copy()
         w = (t - self.t[i]) / (self.t[i + 1] - self.t[i])
         tip = (1.0 - w) * self.tip[i] + w * self.tip[i + 1]
+        near = i if w < 0.5 else i + 1
         a = (1.0 - w) * self.a[i] + w * self.a[i + 1]
-        a /= np.linalg.norm(a)
+        length = np.linalg.norm(a)
+        if length < MIN_BLEND_LENGTH:
+            # the axis turns by (nearly) half a turn between the rows: no rotation between them
+            # is the shorter one, so the blade keeps the nearer row's axis and edge
+            return tip, self.a[near].copy(), self.n[near].copy()
+        a /= length
         n = (1.0 - w) * self.n[i] + w * self.n[i + 1]
         n -= np.dot(n, a) * a
-        n /= np.linalg.norm(n)
+        length = np.linalg.norm(n)
+        if length < MIN_BLEND_LENGTH:
+            # the edge direction reverses between the rows (a stroke drawn back): likewise
+            n = self.n[near] - np.dot(self.n[near], a) * a
+            length = np.linalg.norm(n)
+        n /= length
         return tip, a, n
+
+
+#: Below this length, the blend of two rows' unit vectors (the blade axis ``a`` or the edge
+#: direction ``n``) has no direction worth normalising: the rows point (nearly) opposite ways,
+#: a turn of more than about 179.9 degrees in one row interval, and the nearer row's vector is
+#: used instead (:meth:`Trajectory.pose_at`).
+MIN_BLEND_LENGTH = 1e-3
 
 
 def _check_unit(v, name, where, tol):

@@ -178,9 +178,10 @@ def simulate(model, trajectory, out_dir, options: SimulateOptions | None = None,
 
     opt = options or SimulateOptions()
     opt.check()
+    blade_length = opt.blade_length or trajectory.blade_length
+    _refuse_a_blade_put_inside(model, trajectory, blade_length)
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    blade_length = opt.blade_length or trajectory.blade_length
     session = Session(model, opt, blade_length, float(trajectory.blade_breadth))
     realtime = bool(opt.realtime)
     if opt.haptics:
@@ -198,6 +199,20 @@ def simulate(model, trajectory, out_dir, options: SimulateOptions | None = None,
     finally:
         summary = replay.finish(model_path)
     return _complete(session, replay, summary, out_dir, opt)
+
+
+def _refuse_a_blade_put_inside(model, trajectory, blade_length: float) -> None:
+    """A blade whose whole edge lies inside the tissue at the first pose never meets its surface,
+    so the scalpel model (section 6) has no entry: it would never cut.  Refused in one line."""
+    from cutkit.cutting import tet_containing
+
+    tip, a, _ = trajectory.pose_at(float(trajectory.t[0]))
+    handle_end = tip - blade_length * a
+    if tet_containing(model.points, model.tets, tip) >= 0 and \
+            tet_containing(model.points, model.tets, handle_end) >= 0:
+        raise InputError(f"the blade lies inside the tissue at the trajectory's first pose (tip at "
+                         f"{', '.join(f'{v:g}' for v in tip)} mm): start the trajectory outside the tissue, "
+                         f"so that the blade enters through its surface")
 
 
 class _Replay:
