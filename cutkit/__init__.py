@@ -3,6 +3,6 @@
 The method follows Bielser & Gross, *Interactive Simulation of Surgical Cuts* (2000).
 """
 
-__version__ = "0.1.0"
+__version__ = "0.2.0"
 
 __all__ = ["__version__"]
