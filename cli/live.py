@@ -15,6 +15,16 @@ import click
               help="Poses from OpenIGTLink TRANSFORMs on this port (3D Slicer: 18944); the tissue goes back as POLYDATA.")
 @click.option("--igtl-device", default="ScalpelToReference", show_default=True,
               help="Device name of the tool's TRANSFORM (--igtl).")
+@click.option("--igtl-axis", default=None, help="Tool axis along the blade, handle to tip: x y z -x -y -z [default: -z].")
+@click.option("--igtl-edge", default=None, help="Tool axis the sharp edge faces [default: x].")
+@click.option("--igtl-frame", default=None, help="Frame of the tool's and Slicer's coordinates: RAS or LPS [default: RAS].")
+@click.option("--igtl-registration", default=None, metavar="FILE",
+              help="Model (LPS) <- tracker registration after the frame change: a 4x4 matrix, .npy or text.")
+@click.option("--igtl-surface-rate", default=None, type=float, metavar="HZ",
+              help="POLYDATA surfaces sent per second at most [default: 15].")
+@click.option("--igtl-driver", default=None,
+              help="Which client drives the blade when several send the tool: first (holds it until it "
+                   "disconnects) or latest [default: first].")
 @click.option("--no-window", is_flag=True, help="No window (needs no display); without a pose option the mouse needs one.")
 @click.option("--fps", default=30.0, show_default=True, type=click.FloatRange(min=1.0), help="Frames per second to the views.")
 @click.option("--seconds", type=click.FloatRange(min=0.0), default=None, help="End after this many seconds.")
@@ -26,7 +36,7 @@ import click
 @click.option("--material-model", type=click.Choice(["neohookean", "springs"]), default=None,
               help="Tissue model [default: what the model file names].")
 def command(model, out_dir, haptics, trajectory, speed, igtl_port, igtl_device, no_window, fps, seconds, until_idle,
-            geometry_rate_hz, blade_length, material_model):
+            geometry_rate_hz, blade_length, material_model, **igtl_opts):
     """Cut MODEL live; Ctrl-C (or closing the window) ends the session, its recording stays valid."""
     from cutkit.cli._ui import console
     from cutkit.errors import InputError
@@ -39,12 +49,13 @@ def command(model, out_dir, haptics, trajectory, speed, igtl_port, igtl_device, 
         raise InputError("give at most one of --haptics, --trajectory, --igtl")
     if no_window and haptics is None and trajectory is None and igtl_port is None:
         raise InputError("--no-window needs a pose source: --haptics, --trajectory or --igtl (the mouse needs the window)")
+    igtl = _igtl_options(igtl_port, **igtl_opts)
     opt = SimulateOptions(geometry_rate_hz=geometry_rate_hz, blade_length=blade_length,
                           material_model=material_model, frames=False)
     opt.check()
     check_writable(out_dir, folder=True)
     tet_model = read_model(model)
-    source, views, closers = _open(haptics, trajectory, speed, igtl_port, igtl_device, no_window)
+    source, views, closers = _open(haptics, trajectory, speed, igtl_port, igtl_device, no_window, igtl)
     try:
         summary = run_live(tet_model, source, views, out_dir, opt, max_seconds=seconds, fps=fps,
                            until_idle_s=until_idle, model_path=str(model), on_start=_started)
@@ -64,7 +75,44 @@ def _started() -> None:
     click.get_text_stream("stdout").flush()
 
 
-def _open(haptics, trajectory, speed, igtl_port, igtl_device, no_window):
+def _igtl_options(igtl_port, igtl_axis, igtl_edge, igtl_frame, igtl_registration, igtl_surface_rate, igtl_driver):
+    """The --igtl-* options checked (one-line errors), as keyword arguments of the OpenIGTLink classes."""
+    import math
+
+    import numpy as np
+
+    from cutkit.errors import InputError
+
+    given = {"--igtl-axis": igtl_axis, "--igtl-edge": igtl_edge, "--igtl-frame": igtl_frame,
+             "--igtl-registration": igtl_registration, "--igtl-surface-rate": igtl_surface_rate,
+             "--igtl-driver": igtl_driver}
+    if igtl_port is None:
+        extra = [k for k, v in given.items() if v is not None]
+        if extra:
+            raise InputError(f"{', '.join(extra)} only work with --igtl PORT")
+        return {}
+    from cutkit.live.igtl import AXES, FRAMES, load_registration, pose_from_matrix
+    from cutkit.live.igtl_server import DRIVER_RULES
+
+    axis, edge = igtl_axis or "-z", igtl_edge or "x"
+    for name, value in (("--igtl-axis", axis), ("--igtl-edge", edge)):
+        if value.strip().lower() not in AXES:
+            raise InputError(f"{name} must be one of {' '.join(AXES)}, got {value!r}")
+    pose_from_matrix(np.eye(4), axis, edge)  # the two must be different axes
+    frame = (igtl_frame or "RAS").upper()
+    if frame not in FRAMES:
+        raise InputError(f"--igtl-frame must be RAS or LPS, got {igtl_frame!r}")
+    rate = 15.0 if igtl_surface_rate is None else igtl_surface_rate
+    if not (math.isfinite(rate) and rate > 0):
+        raise InputError(f"--igtl-surface-rate must be a positive number of Hz, got {igtl_surface_rate}")
+    driver = (igtl_driver or "first").lower()
+    if driver not in DRIVER_RULES:
+        raise InputError(f"--igtl-driver must be first or latest, got {igtl_driver!r}")
+    registration = None if igtl_registration is None else load_registration(igtl_registration)
+    return dict(axis=axis, edge=edge, frame=frame, registration=registration, rate=rate, driver=driver)
+
+
+def _open(haptics, trajectory, speed, igtl_port, igtl_device, no_window, igtl):
     """The pose source, the views and what else to close."""
     views, closers = [], []
     mouse = None
@@ -80,10 +128,12 @@ def _open(haptics, trajectory, speed, igtl_port, igtl_device, no_window):
     elif igtl_port is not None:
         from cutkit.live.igtl import IGTLEndpoint, IGTLPolyDataView, IGTLPoseSource
 
-        endpoint = IGTLEndpoint(igtl_port)
+        endpoint = IGTLEndpoint(igtl_port, driver=igtl["driver"])
         closers.append(endpoint)
-        source = IGTLPoseSource(endpoint=endpoint, device_name=igtl_device)
-        views.append(IGTLPolyDataView(endpoint=endpoint, max_rate_hz=15.0))
+        frame = dict(frame=igtl["frame"], registration=igtl["registration"])
+        source = IGTLPoseSource(endpoint=endpoint, device_name=igtl_device, axis=igtl["axis"], edge=igtl["edge"],
+                                **frame)
+        views.append(IGTLPolyDataView(endpoint=endpoint, max_rate_hz=igtl["rate"], **frame))
     else:
         from cutkit.live import MouseKeyboardPoseSource
 
