@@ -12,7 +12,7 @@ What each client gets:
   TRANSFORM); a message not yet sent is replaced by a newer one of the same
   device name;
 - a reply to GET_CAPABIL (CAPABILITY), GET_STATUS (STATUS), GET_TRANSFORM
-  and GET_POLYDATA (the newest of that device name, all of them for an empty
+  (type field ``GET_TRANS``) and GET_POLYDATA (the newest of that device name, all of them for an empty
   name, or STATUS "not found");
 - a STATUS error for a message it sent that was dropped: bad CRC, a body
   that does not decode, a query cutkit does not answer.
@@ -67,12 +67,14 @@ MAX_REPLIES = 256
 #: Device name of the STATUS messages that are not a reply to a named message.
 STATUS_DEVICE = "Cutkit"
 #: Message types the endpoint takes or sends (its CAPABILITY reply).
-CAPABILITIES = ("TRANSFORM", "POLYDATA", "STATUS", "CAPABILITY", "GET_TRANSFORM", "GET_POLYDATA",
-                "GET_STATUS", "GET_CAPABIL")
+CAPABILITIES = ("TRANSFORM", "POLYDATA", "STATUS", "CAPABILITY", "GET_TRANS", "GET_POLYDATA", "GET_STATUS",
+                "GET_CAPABIL")
 #: Who drives a device name's TRANSFORMs when several clients send it.
 DRIVER_RULES = ("first", "latest")
 #: Queries answered with STATUS "unknown instruction" when their type is not one of CAPABILITIES.
 _QUERY_PREFIXES = ("GET_", "STT_", "STP_", "RTS_")
+#: What a query asks for, where its type name does not say it whole.
+_QUERIED = {"GET_TRANS": "TRANSFORM", "GET_TRANSFOR": "TRANSFORM"}
 #: How the log calls a dropped message of each reason.
 _ADJECTIVE = {"crc": "corrupt", "malformed": "malformed", "unused": "unused"}
 #: TRANSFORM content: 12 big-endian float32.
@@ -468,7 +470,7 @@ class IGTLEndpoint:
     def _answer(self, client, head, items, message_id) -> None:
         if not items:
             what = repr(head.device_name) if head.device_name else "yet"
-            client.status(wire.STATUS_NOT_FOUND, f"{head.type}: no {head.type[4:]} {what}",
+            client.status(wire.STATUS_NOT_FOUND, f"{head.type}: no {_QUERIED.get(head.type, head.type[4:])} {what}",
                           head.device_name or STATUS_DEVICE, "NotFound", message_id=message_id)
         for item in items:
             client.reply(item.reply(message_id))
@@ -502,7 +504,10 @@ class IGTLEndpoint:
 
 
 #: What each message type does (a type not here is skipped, logged once and counted).
-_HANDLERS = {"TRANSFORM": IGTLEndpoint._on_transform, "GET_TRANSFORM": IGTLEndpoint._on_get_transform,
+#: GET_TRANSFORM travels as "GET_TRANS" (the reference library's name; the type field holds 12 bytes), or
+#: cut to "GET_TRANSFOR" by some clients.
+_HANDLERS = {"TRANSFORM": IGTLEndpoint._on_transform, "GET_TRANS": IGTLEndpoint._on_get_transform,
+             "GET_TRANSFOR": IGTLEndpoint._on_get_transform,
              "GET_POLYDATA": IGTLEndpoint._on_get_polydata, "GET_STATUS": IGTLEndpoint._on_get_status,
              "GET_CAPABIL": IGTLEndpoint._on_get_capabil, "STATUS": IGTLEndpoint._on_status,
              "CAPABILITY": IGTLEndpoint._on_capability}
