@@ -312,9 +312,9 @@ class IGTLEndpoint:
             return None
         log.info("OpenIGTLink client %s connected (%d connected)", peer, len(self._clients))
         client.status(wire.STATUS_OK, "cutkit live: connected")
-        with self._lock:
+        with self._lock:  # then the newest surfaces and blade, before any reply to what it asks
             for item in self._sent.values():
-                client.queue(item)
+                client.reply(item)
         return client
 
     def _serve(self, client: _Client) -> None:
