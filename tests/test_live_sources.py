@@ -200,7 +200,7 @@ def test_igtl_axis_options_and_lps():
 
 def test_igtl_malformed_messages_are_dropped_with_one_line(igtl_source, caplog):
     src, client = igtl_source
-    client.stop()  # make room: pyigtl serves one client at a time
+    client.stop()  # the raw socket below is then the only client
     assert _wait(lambda: not src.endpoint.connected)
     good = pyigtl.TransformMessage(np.eye(4), device_name="ScalpelToReference").pack()
     header = bytearray(good[:58])

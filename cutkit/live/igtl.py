@@ -303,9 +303,12 @@ class IGTLPolyDataView(_Owner):
             return
         frame.check()
         self._last = now
-        for name, faces, colour in zip(self.names[:2], (frame.boundary_faces, frame.cut_faces),
-                                       (None, CUT_RGBA)):
-            self.endpoint.send(self._surface(frame, faces, name, colour))
+        # copies (a few ms for 80k triangles): the surfaces are built and packed on the endpoint's
+        # client threads, off the session's thread, from arrays the session may change
+        points = frame.points.copy()
+        rgb = None if frame.rgb is None else frame.rgb.copy()
+        for name, faces, colour in zip(self.names[:2], (frame.boundary_faces, frame.cut_faces), (None, CUT_RGBA)):
+            self.endpoint.send(_SurfaceMessage(name, points, faces.copy(), rgb, colour, self.to_client))
         if frame.tip is not None:
             m = np.eye(4)
             m[:3, 0], m[:3, 1], m[:3, 2] = frame.n, np.cross(frame.n, frame.a), -np.asarray(frame.a)
@@ -313,31 +316,61 @@ class IGTLPolyDataView(_Owner):
             self.endpoint.send(pyigtl.TransformMessage(self.to_client @ m, device_name=self.names[2]))
         self.frames_sent += 1
 
-    def _surface(self, frame: LiveFrame, faces: np.ndarray, name: str, colour) -> PolyDataMessage:
-        """One surface as POLYDATA in the client's frame, with point normals and colours."""
+
+class _SurfaceMessage(PolyDataMessage):
+    """A surface's POLYDATA, built (compacted, moved to the client's frame, normals, colours) when first packed.
+
+    Parameters
+    ----------
+    name : str
+        Device name.
+    points : (n, 3) float64
+        All the frame's points (model frame).
+    faces : (f, 3) int64
+        The surface's triangles, indices into ``points``.
+    rgb : (n, 3) uint8 or None
+        Texture colour per point.
+    colour : 4 floats or None
+        One RGBA for every point; None: ``rgb``, else the plain tissue colour.
+    to_client : (4, 4)
+        Model -> client map.
+    """
+
+    def __init__(self, name, points, faces, rgb, colour, to_client):
+        super().__init__(device_name=name)
+        self._parts = (points, faces, rgb, colour, np.asarray(to_client, np.float64))
+
+    def _pack_content(self):
+        if self._parts is not None:
+            self._build(*self._parts)
+            self._parts = None
+        return super()._pack_content()
+
+    def _build(self, points, faces, rgb, colour, to_client) -> None:
         from cutkit.live._kernels import vertex_normals
 
-        if faces.size:
-            used, inverse = np.unique(faces.ravel(), return_inverse=True)
-        else:
-            used, inverse = np.zeros(0, np.int64), np.zeros(0, np.int64)
-        tris = np.ascontiguousarray(inverse.reshape(-1, 3), np.int64)
-        pts = np.ascontiguousarray(frame.points[used])
-        normals = np.empty((len(used), 3), np.float32)
+        used = np.zeros(points.shape[0], bool)
+        used[faces.ravel()] = True
+        index = np.flatnonzero(used)
+        renumber = np.cumsum(used) - 1
+        tris = np.ascontiguousarray(renumber[faces], np.int64)
+        pts = np.ascontiguousarray(points[index])
+        normals = np.empty((len(index), 3), np.float32)
         vertex_normals(pts, tris, normals)
-        r, t = self.to_client[:3, :3], self.to_client[:3, 3]
-        normals = normals @ np.linalg.inv(r)  # normals map by the inverse transpose
+        r, t = to_client[:3, :3], to_client[:3, 3]
+        normals = normals @ np.linalg.inv(r).astype(np.float32)  # normals map by the inverse transpose
         length = np.linalg.norm(normals, axis=1, keepdims=True)
         normals = np.divide(normals, length, out=np.zeros_like(normals), where=length > 0)
-        rgba = np.empty((len(used), 4), np.float32)
-        if colour is None and frame.rgb is not None:
-            rgba[:, :3] = frame.rgb[used] / 255.0
+        rgba = np.empty((len(index), 4), np.float32)
+        if colour is None and rgb is not None:
+            rgba[:, :3] = rgb[index] / np.float32(255.0)
             rgba[:, 3] = 1.0
         else:
             rgba[:] = TISSUE_RGBA if colour is None else colour
         cells = np.empty((tris.shape[0], 4), np.uint32)
         cells[:, 0] = 3
         cells[:, 1:] = tris
-        attrs = [PolyDataAttribute(NORMALS_NAME, POINT_NORMAL, normals), PolyDataAttribute(COLORS_NAME, POINT_RGBA, rgba)]
-        return PolyDataMessage(points=(pts @ r.T + t).astype(np.float32), polygons=cells.ravel(), attributes=attrs,
-                               device_name=name)
+        self.points = (pts @ r.T + t).astype(np.float32)
+        self.polygons = cells.ravel()
+        self.attributes = [PolyDataAttribute(NORMALS_NAME, POINT_NORMAL, normals),
+                           PolyDataAttribute(COLORS_NAME, POINT_RGBA, rgba)]
