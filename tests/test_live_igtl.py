@@ -479,6 +479,8 @@ def test_two_clients_both_get_surfaces_and_the_first_drives(endpoint, client_fac
         _sync(b)
         assert endpoint.take(TOOL) is None, "a second client took the blade from the first"
         assert endpoint.dropped[("not driver", "TRANSFORM")] == 2
+        told = [parse_status(m.content) for m in b.seen if m.kind == "STATUS" and m.name == TOOL]
+        assert [x[:3:2] for x in told] == [(5, "NotDriver")]  # access denied, once
         a.close()
         assert wait_for(lambda: len(endpoint.clients) == 1)
         b.send("TRANSFORM", TOOL, _tool(4.0))

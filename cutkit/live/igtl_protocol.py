@@ -36,7 +36,7 @@ from cutkit.errors import InputError
 __all__ = ["Header", "ProtocolError", "PolyDataMessage", "decode_polydata", "polydata_attributes", "crc64",
            "parse_header", "pack_message", "split_body", "status_content", "parse_status",
            "capability_content", "parse_capability", "HEADER_SIZE", "STATUS_OK", "STATUS_NOT_FOUND",
-           "STATUS_BUSY", "STATUS_TIME_OUT", "STATUS_OVERFLOW", "STATUS_CHECKSUM_ERROR",
+           "STATUS_ACCESS_DENIED", "STATUS_BUSY", "STATUS_TIME_OUT", "STATUS_OVERFLOW", "STATUS_CHECKSUM_ERROR",
            "STATUS_UNKNOWN_INSTRUCTION", "STATUS_UNKNOWN_VERSION", "STATUS_CONFIGURATION_ERROR",
            "POINT_SCALAR", "POINT_NORMAL", "POINT_RGBA"]
 
@@ -57,6 +57,7 @@ _ASCII, _UTF8 = 3, 106
 STATUS_OK = 1
 STATUS_UNKNOWN_ERROR = 2
 STATUS_NOT_FOUND = 4
+STATUS_ACCESS_DENIED = 5
 STATUS_BUSY = 6
 STATUS_TIME_OUT = 7
 STATUS_OVERFLOW = 8

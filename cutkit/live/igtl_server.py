@@ -15,7 +15,8 @@ What each client gets:
   (type field ``GET_TRANS``) and GET_POLYDATA (the newest of that device name, all of them for an empty
   name, or STATUS "not found");
 - a STATUS error for a message it sent that was dropped: bad CRC, a body
-  that does not decode, a query cutkit does not answer.
+  that does not decode, a query cutkit does not answer; and once, STATUS
+  "access denied", when it sends a tool that another client drives.
 
 A header of an unknown version, a body over ``max_body`` bytes, or a message
 that stalls for ``body_timeout_s`` gets a STATUS error and its connection is
@@ -450,6 +451,8 @@ class IGTLEndpoint:
                 log.warning("OpenIGTLink client %s sends %s, which %s drives (driver rule: first); its TRANSFORMs "
                             "are ignored until %s disconnects (%d ignored so far)", client.peer, name, holder.peer,
                             holder.peer, n)
+                client.status(wire.STATUS_ACCESS_DENIED, f"{name} is driven by another client (driver rule: first); "
+                              "this client's TRANSFORMs of it are ignored", name, "NotDriver", message_id=message_id)
         elif holder is not client:
             log.info("OpenIGTLink client %s drives %s (driver rule: %s)", client.peer, name, self.driver)
 
