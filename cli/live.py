@@ -112,6 +112,18 @@ def _igtl_options(igtl_port, igtl_axis, igtl_edge, igtl_frame, igtl_registration
     return dict(axis=axis, edge=edge, frame=frame, registration=registration, rate=rate, driver=driver)
 
 
+def _show_igtl_log() -> None:
+    """Clients connecting, who drives the blade, dropped messages: one stderr line each."""
+    import logging
+
+    log = logging.getLogger("cutkit.live")
+    if not log.handlers:
+        handler = logging.StreamHandler()
+        handler.setFormatter(logging.Formatter("cutkit live: %(message)s"))
+        log.addHandler(handler)
+        log.setLevel(logging.INFO)
+
+
 def _open(haptics, trajectory, speed, igtl_port, igtl_device, no_window, igtl):
     """The pose source, the views and what else to close."""
     views, closers = [], []
@@ -128,6 +140,7 @@ def _open(haptics, trajectory, speed, igtl_port, igtl_device, no_window, igtl):
     elif igtl_port is not None:
         from cutkit.live.igtl import IGTLEndpoint, IGTLPolyDataView, IGTLPoseSource
 
+        _show_igtl_log()
         endpoint = IGTLEndpoint(igtl_port, driver=igtl["driver"])
         closers.append(endpoint)
         frame = dict(frame=igtl["frame"], registration=igtl["registration"])
