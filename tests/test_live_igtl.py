@@ -612,8 +612,11 @@ def test_igtl_options_need_igtl_and_reach_the_source_and_view(tmp_path):
     reg = tmp_path / "r.txt"
     reg.write_text("1 0 0 5\n0 1 0 0\n0 0 1 0\n0 0 0 1\n")
     opts = _igtl_options(0, "x", "y", "lps", str(reg), 7.5, "latest")
+    log = logging.getLogger("cutkit.live")
+    handlers, level = list(log.handlers), log.level
     source, views, closers = _open(None, None, 1.0, 0, TOOL, True, opts)
     try:
+        assert len(log.handlers) == len(handlers) + (not handlers)  # the endpoint's lines go to stderr
         assert (source.axis, source.edge) == ("x", "y") and closers[0].driver == "latest"
         np.testing.assert_array_equal(source.to_model[:3, 3], (5.0, 0.0, 0.0))  # LPS: no flip
         assert views[0].min_period == pytest.approx(1 / 7.5)
@@ -621,3 +624,4 @@ def test_igtl_options_need_igtl_and_reach_the_source_and_view(tmp_path):
         source.close()
         for x in views + closers:
             x.close()
+        log.handlers[:], log.level = handlers, level
