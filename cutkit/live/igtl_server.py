@@ -103,6 +103,7 @@ class _Outgoing:
         self._content = content  # bytes, or a callable that packs them (run on a client's thread)
         self._packed = {}
         self._lock = threading.Lock()
+        self._parent = None  # the broadcast this reply repeats: a v1 header has no message id, so the same bytes
 
     @classmethod
     def of(cls, message) -> "_Outgoing":
@@ -117,9 +118,16 @@ class _Outgoing:
 
     def reply(self, message_id: int) -> "_Outgoing":
         """The same message as a reply to the request ``message_id``."""
-        return _Outgoing(self.kind, self.device_name, self.content, self.timestamp, message_id)
+        if message_id == self.message_id:
+            return self
+        out = _Outgoing(self.kind, self.device_name, self.content, self.timestamp, message_id)
+        out._parent = self
+        return out
 
     def data(self, version: int) -> bytes:
+        """The whole message with a header of ``version`` (1 or 2)."""
+        if version == 1 and self._parent is not None:
+            return self._parent.data(1)
         content = self.content()
         with self._lock:
             if version not in self._packed:
@@ -155,15 +163,16 @@ class _Client:
             self.stream[item.device_name] = item
 
     def flush(self) -> None:
-        """Send every queued reply, then every queued broadcast."""
-        while True:
-            with self.lock:
-                if self.replies:
-                    item = self.replies.popleft()
-                elif self.stream:
-                    item = self.stream.popitem(last=False)[1]
-                else:
-                    return
+        """Send the replies queued now, then the broadcasts queued now.
+
+        What is queued meanwhile waits a turn, so that a slow client's thread
+        still reads what the client sends between turns.
+        """
+        with self.lock:
+            items = list(self.replies) + list(self.stream.values())
+            self.replies.clear()
+            self.stream.clear()
+        for item in items:
             data = item.data(self.version)
             self.sock.settimeout(SEND_TIMEOUT_S)
             try:
