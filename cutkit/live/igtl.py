@@ -295,6 +295,8 @@ class IGTLPolyDataView(_Owner):
         self.clock = clock
         self.frames_sent = 0
         self._last = -np.inf
+        # compile (or load) the normals kernel now, not on a client thread while the session runs
+        _SurfaceMessage("warm-up", np.eye(3), np.array([[0, 1, 2]]), None, None, np.eye(4))._pack_content()
         self._attach(port, endpoint, local_only, driver)
 
     def show(self, frame: LiveFrame) -> None:
