@@ -492,7 +492,7 @@ def test_two_clients_both_get_surfaces_and_the_first_drives(endpoint, client_fac
     view.close()
 
 
-def test_the_latest_client_drives_with_driver_latest(client_factory):
+def test_the_latest_client_drives_with_driver_latest():
     from cutkit.live.igtl import IGTLEndpoint
 
     ep = IGTLEndpoint(0, driver="latest")
