@@ -28,8 +28,8 @@ import math
 import numpy as np
 from numba import njit
 
-from cutkit.decimate._geometry import point_triangle_dist2, tet_max_cos, tet_volume6
 from cutkit.decimate._pool import C_STAMP
+from cutkit.mesh.geometry import point_triangle_dist2, tet_max_cos, tet_volume6
 
 #: Slots of the ``params`` (float64) array.
 P_H = 0  # reference edge length, mm

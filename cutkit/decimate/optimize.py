@@ -30,6 +30,7 @@ import time
 import numpy as np
 
 from cutkit.errors import InputError
+from cutkit.mesh.geometry import tet_volumes
 from cutkit.model.tetmodel import BoundaryConditions, TetModel
 
 __all__ = ["optimize", "OPTIMIZERS"]
@@ -207,8 +208,7 @@ def optimize(model: TetModel, method: str = "netgen") -> tuple[TetModel, dict]:
     if t2.shape[0] == 0 or np.any(t2 < 0):
         return done(model, "gmsh returned no tets or tets with unknown nodes")
     # Orientation is a convention: turn gmsh's tets positive before judging them.
-    p = p2[t2]
-    neg = np.einsum("ij,ij->i", np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), p[:, 3] - p[:, 0]) < 0
+    neg = tet_volumes(p2, t2) < 0
     t2[neg, 2], t2[neg, 3] = t2[neg, 3].copy(), t2[neg, 2].copy()
     after = float(min_dihedral_deg(p2, t2).min())
     report["min_dihedral_after_deg"] = after
