@@ -81,7 +81,6 @@ def volumes(points, tets):
 
 def tet_bary_twin(x, tv, p):
     """Barycentric coordinates (4,) of p in the tet x[tv] (np.linalg.solve)."""
-    from cutkit.cutting._geometry import barycentric
     return barycentric(np.asarray(p, float), x[tv])
 
 
@@ -106,7 +105,6 @@ def walk_twin(x, tets, neighbors, start, target, max_walk=10000):
 
 def sweep_twin(x, tets, neighbors, tet_edges, tet_faces, edges, faces, edge_t, stamp, step, seeds, swept, blade, p0):
     """The per-tet Python traversal of a cut step: (active, ev_kind, ev_id, ev_val); modifies stamp."""
-    from cutkit.cutting._geometry import segment_hits_tet, segment_triangle
     from cutkit.mesh.topology import TET_EDGES
     q1, p1 = blade
     active, kinds, ids, vals = [], [], [], []

@@ -182,11 +182,11 @@ def test_segment_against_several_tets_matches_the_twin_in_either_orientation():
             if np.dot(np.cross(pts[1] - pts[0], pts[2] - pts[0]), pts[3] - pts[0]) < 0:
                 pts = pts[[0, 2, 1, 3]]  # the twin needs positive orientation
             want |= segment_hits_tet(p0, p1, pts)
-        assert K.seg_meets_any_tet(p0, p1, x, tets) == want
-        assert K.seg_meets_any_tet(p0, p1, x, tets[:, [1, 0, 2, 3]]) == want
+        assert G.segment_meets_any_tet(p0, p1, x, tets) == want
+        assert G.segment_meets_any_tet(p0, p1, x, tets[:, [1, 0, 2, 3]]) == want
         hits += want
     assert 20 < hits < 280
-    assert not K.seg_meets_any_tet(np.zeros(3), np.ones(3), x, np.zeros((0, 4), np.int64))
+    assert not G.segment_meets_any_tet(np.zeros(3), np.ones(3), x, np.zeros((0, 4), np.int64))
 
 
 def test_best_cone_apex_matches_twin():

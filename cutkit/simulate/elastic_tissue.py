@@ -32,7 +32,7 @@ from cutkit.relax.elastic import (
     node_damping,
 )
 from cutkit.mesh.geometry import signed_volumes_serial
-from cutkit.relax._adjacency_kernels import loaded_nodes, tets_around
+from cutkit.relax.kernels import loaded_nodes, tets_around
 from cutkit.relax.growable import append_rows
 from cutkit.relax.vbd import DEFAULT_ATOL_N, local_step
 from cutkit.relax.materials import material_of_tets, prestress_of_tets

@@ -34,7 +34,7 @@ from cutkit.mesh.topology import unique_edges
 from cutkit.relax import Control, NodeLists, build_spring_model, initial_state
 from cutkit.relax.materials import material_of_tets, prestress_of_tets
 from cutkit.relax.model import STIFFNESS_CALIBRATION
-from cutkit.relax.topology import _recolour
+from cutkit.relax.topology import recolour
 from cutkit.simulate._kernels import lookup_springs
 from cutkit.simulate.rest_map import rest_map_radius
 from cutkit.simulate.tissue_base import TissueBase
@@ -312,7 +312,7 @@ class Tissue(TissueBase):
         if sm.colour.shape[0] < sm.n_nodes:
             sm.colour = np.concatenate([sm.colour, np.full(sm.n_nodes - sm.colour.shape[0], -1, np.int32)])
         if len(new_pairs):
-            _recolour(sm, np.unique(new_pairs))
+            recolour(sm, np.unique(new_pairs))
         self.lists.topology_changed()
     def _rebuild_volume_term(self) -> None:
         """The volume term over the live tets: rest volumes from the per-tet records (the cut is made at rest)."""
