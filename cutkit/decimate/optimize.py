@@ -30,7 +30,7 @@ import time
 import numpy as np
 
 from cutkit.errors import InputError
-from cutkit.mesh.geometry import tet_volumes
+from cutkit.mesh.geometry import TET_FACES, tet_volumes
 from cutkit.model.tetmodel import BoundaryConditions, TetModel
 
 __all__ = ["optimize", "OPTIMIZERS"]
@@ -58,7 +58,7 @@ def surface_faces_with_sheets(tets: np.ndarray, labels: np.ndarray):
     """
     tets = np.asarray(tets, np.int64)
     labels = np.asarray(labels, np.int64)
-    f = np.sort(np.concatenate([tets[:, [1, 2, 3]], tets[:, [0, 2, 3]], tets[:, [0, 1, 3]], tets[:, [0, 1, 2]]]), axis=1)
+    f = np.sort(np.concatenate([tets[:, TET_FACES[i]] for i in range(4)]), axis=1)  # face-major, as lab below
     lab = np.tile(labels, 4)
     order = np.lexsort((lab, f[:, 2], f[:, 1], f[:, 0]))
     f, lab = f[order], lab[order]
