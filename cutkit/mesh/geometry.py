@@ -593,6 +593,12 @@ def segment_triangle_hit(p0, p1, v0, v1, v2, out):
     out[1] = p0[0] + t * dx
     out[2] = p0[1] + t * dy
     out[3] = p0[2] + t * dz
+    return _hit_kind(u, v, w)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _hit_kind(u, v, w):
+    """HIT_VERTEX, HIT_EDGE or HIT_FACE: two, one or none of the barycentric coordinates within EPS_BARY of 0."""
     n_on = 0
     if abs(u) <= EPS_BARY:
         n_on += 1
