@@ -21,6 +21,7 @@ def command(volume_path, output, level, snap, labels):
     from cutkit.cli._ui import console, table
     from cutkit.io.model_h5 import write_model
     from cutkit.isovolume import SNAP_FRACTION, dihedral_summary, isovolume
+    from cutkit.mesh.geometry import tet_volumes
     from cutkit.volumes import read_volume
 
     check_model_output(output)
@@ -36,8 +37,7 @@ def command(volume_path, output, level, snap, labels):
         )
     write_model(output, model)
 
-    p = model.points[model.tets]
-    tet_volume = np.einsum("ij,ij->i", np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), p[:, 3] - p[:, 0]) / 6.0
+    tet_volume = tet_volumes(model.points, model.tets)
     voxel_mm3 = float(np.prod(volume.spacing))
     data = np.asarray(volume.data)
     rows = []

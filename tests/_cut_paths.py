@@ -156,7 +156,7 @@ def uncut_reason(cm, e):
 def crossed_edges(p, edges, swept):
     """Original edges (set of ids into ``edges`` (m, 2)) over positions ``p`` (n, 3) met strictly inside by
     one of the ``swept`` triangles (each three (3,) points): the slow reference."""
-    from cutkit.cutting._geometry import segment_triangle
+    from _twins_cut import segment_triangle
 
     out = set()
     for tri in swept:

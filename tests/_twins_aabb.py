@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from cutkit.collision import _geometry as G
+from cutkit.mesh import geometry as G
 
 
 def pair_level(box_min, box_max, nodes, adjacency):

@@ -11,7 +11,7 @@ from cutkit.collision import (
     SurfaceBVH,
 )
 from cutkit.collision import _kernels as K
-from cutkit.collision.adjacency import boundary_faces_standin, csr_adjacency, edge_adjacency
+from cutkit.collision.adjacency import csr_adjacency, edge_adjacency
 from cutkit.errors import InputError, MeshError
 
 from _twins_aabb import brute_segment_hits, expected_boxes, pair_level, refit_tolerance
@@ -156,16 +156,6 @@ def test_from_tets_uses_boundary(tmp_path):
     tri = pts[bvh.faces]
     normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
     assert np.all(np.einsum("ij,ij->i", normal, tri.mean(axis=1) - 0.5) > 0)
-
-
-def test_standin_matches_topology_when_available():
-    topology = pytest.importorskip("cutkit.mesh.topology")
-    pts, tets = kuhn_box(2)
-    a, ta = boundary_faces_standin(tets)
-    b, tb = topology.boundary_faces(tets)
-    canon = lambda f: sorted(tuple(np.roll(r, -int(np.argmin(r)))) for r in f)  # noqa: E731
-    assert canon(a) == canon(b)
-    np.testing.assert_array_equal(np.sort(ta), np.sort(tb))
 
 
 def test_bad_input_messages():

@@ -205,7 +205,7 @@ def test_find_trajectory_tetra_walk():
     for _ in range(20):
         x = rng.uniform([0, 0, 0], [6, 3, 3])
         o = find_trajectory_tetra(cm, 0, x)
-        from cutkit.cutting._geometry import barycentric
+        from _twins_cut import barycentric
         assert barycentric(x, p[t[o]]).min() >= -1e-9
     assert find_trajectory_tetra(cm, 0, np.array([10.0, 1, 1])) == -1
 

@@ -3,13 +3,23 @@
 import numpy as np
 import pytest
 
-from _twins_cut import clamp_bary_twin, min_volume_twin, set_node_twin, sweep_twin, tet_bary_twin, walk_twin
+from _twins_cut import (
+    clamp_bary_twin,
+    edge_crosses_triangle,
+    min_volume_twin,
+    segment_hits_tet,
+    segment_triangle,
+    set_node_twin,
+    sweep_twin,
+    tet_bary_twin,
+    walk_twin,
+)
 from cutkit.cutting import CutMesh
 from cutkit.cutting import _kernels as K
 from cutkit.cutting import _kernels_split as KP
 from cutkit.cutting import _kernels_step as KS
+from cutkit.mesh import geometry as G
 from cutkit.mesh.generate import box_mesh
-from cutkit.cutting._geometry import edge_crosses_triangle, segment_hits_tet, segment_triangle
 
 
 def test_seg_tri_and_seg_tet_match_twins():
@@ -19,10 +29,10 @@ def test_seg_tri_and_seg_tet_match_twins():
     hits = 0
     for _ in range(400):
         p0, p1, a, b, c = rng.uniform(-0.5, 1.2, (5, 3))
-        r = K.seg_tri(p0, p1, a, b, c)
+        r = G.segment_triangle_crossing(p0, p1, a, b, c)
         assert np.isclose(r, segment_triangle(p0, p1, a, b, c))
         hits += r >= 0
-        assert K.seg_tet(p0, p1, x, tv) == segment_hits_tet(p0, p1, x)
+        assert G.segment_meets_tet(p0, p1, x, tv) == segment_hits_tet(p0, p1, x)
     assert hits > 10
 
 
@@ -43,7 +53,7 @@ def test_tet_sweep_matches_twin():
             for j in range(i + 1, 4):
                 ref = -1.0
                 for s in range(2):
-                    r = edge_crosses_triangle(x[i], x[j], swept[s], K.EDGE_END_EPS, K.EDGE_BARY_EPS)
+                    r = edge_crosses_triangle(x[i], x[j], swept[s], G.EDGE_END_EPS, G.EDGE_BARY_EPS)
                     if r >= 0:
                         ref = r
                         break
@@ -145,8 +155,8 @@ def test_clamp_set_node_min_volume_match_twins():
     p, t = _jittered_box(8)
     t = t.copy()
     t[::3] = t[::3, [1, 0, 2, 3]]  # some inverted
-    assert KS.min_volume(p, t) == pytest.approx(min_volume_twin(p, t), abs=1e-14)
-    assert KS.min_volume(p, t[:0]) == np.inf
+    assert G.min_volume(p, t) == pytest.approx(min_volume_twin(p, t), abs=1e-14)
+    assert G.min_volume(p, t[:0]) == np.inf
 
 
 def test_serial_dihedral_kernel_matches_the_mesh_core():
@@ -172,11 +182,11 @@ def test_segment_against_several_tets_matches_the_twin_in_either_orientation():
             if np.dot(np.cross(pts[1] - pts[0], pts[2] - pts[0]), pts[3] - pts[0]) < 0:
                 pts = pts[[0, 2, 1, 3]]  # the twin needs positive orientation
             want |= segment_hits_tet(p0, p1, pts)
-        assert K.seg_meets_any_tet(p0, p1, x, tets) == want
-        assert K.seg_meets_any_tet(p0, p1, x, tets[:, [1, 0, 2, 3]]) == want
+        assert G.segment_meets_any_tet(p0, p1, x, tets) == want
+        assert G.segment_meets_any_tet(p0, p1, x, tets[:, [1, 0, 2, 3]]) == want
         hits += want
     assert 20 < hits < 280
-    assert not K.seg_meets_any_tet(np.zeros(3), np.ones(3), x, np.zeros((0, 4), np.int64))
+    assert not G.segment_meets_any_tet(np.zeros(3), np.ones(3), x, np.zeros((0, 4), np.int64))
 
 
 def test_best_cone_apex_matches_twin():

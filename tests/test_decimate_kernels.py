@@ -20,7 +20,7 @@ from cutkit.decimate import _candidates as C
 from cutkit.decimate import _kernels as K
 from cutkit.decimate import _legality as L
 from cutkit.decimate import _pool as P
-from cutkit.decimate._geometry import point_triangle_dist2, tet_max_cos, tet_volume6
+from cutkit.mesh.geometry import point_triangle_dist2, tet_max_cos, tet_volume6
 from cutkit.decimate.decimate import _adjacency
 
 

@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from cutkit.collision._geometry import segment_box, segment_triangle
+from cutkit.mesh.geometry import segment_box, segment_triangle_hit
 
 
 @njit(cache=True)
@@ -222,7 +222,7 @@ def query_segment(points, faces, face_alive, box_min, box_max, child, leaf_face,
     hit_kind : (cap,) int64
     hit_param : (cap, 4) float64
         Filled with the first ``min(count, cap)`` hits: face, kind
-        (see :mod:`cutkit.collision._geometry`), and (t, x, y, z).
+        (see :mod:`cutkit.mesh.geometry`), and (t, x, y, z).
 
     Returns
     -------
@@ -254,7 +254,7 @@ def query_segment(points, faces, face_alive, box_min, box_max, child, leaf_face,
         if f >= 0:
             if not face_alive[f]:
                 continue
-            kind = segment_triangle(p0, p1, points[faces[f, 0]], points[faces[f, 1]],
+            kind = segment_triangle_hit(p0, p1, points[faces[f, 0]], points[faces[f, 1]],
                                     points[faces[f, 2]], out)
             if kind >= 0:
                 if count < cap:
@@ -287,7 +287,7 @@ def brute_segment(points, faces, face_alive, p0, p1, hit_face, hit_kind, hit_par
     for f in range(faces.shape[0]):
         if not face_alive[f]:
             continue
-        kind = segment_triangle(p0, p1, points[faces[f, 0]], points[faces[f, 1]],
+        kind = segment_triangle_hit(p0, p1, points[faces[f, 0]], points[faces[f, 1]],
                                 points[faces[f, 2]], out)
         if kind >= 0:
             if count < cap:

@@ -1,7 +1,7 @@
 """Numba kernels of the swept-blade surface query (twins: ``tests/_twins_aabb.py``).
 
 Two triangles meet when an edge of one crosses the other
-(``_geometry.segment_triangle``, closed, with its degenerate cases); the
+(``cutkit.mesh.geometry.segment_triangle_hit``, closed, with its degenerate cases); the
 hierarchy is descended while a node's box overlaps the query triangle's
 box.
 """
@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from cutkit.collision._geometry import EPS_BOX, segment_triangle
+from cutkit.mesh.geometry import EPS_BOX, segment_triangle_hit
 
 
 @njit(cache=True, nogil=True)
@@ -20,13 +20,13 @@ def tri_tri(a, b, c, u, v, w, out):
 
     An edge of either triangle crossing the other is found for every pair
     of triangles that meet (coplanar overlaps included, through the
-    coplanar case of ``segment_triangle``).
+    coplanar case of ``segment_triangle_hit``).
     """
-    if segment_triangle(u, v, a, b, c, out) >= 0 or segment_triangle(v, w, a, b, c, out) >= 0 \
-            or segment_triangle(w, u, a, b, c, out) >= 0:
+    if segment_triangle_hit(u, v, a, b, c, out) >= 0 or segment_triangle_hit(v, w, a, b, c, out) >= 0 \
+            or segment_triangle_hit(w, u, a, b, c, out) >= 0:
         return True
-    return segment_triangle(a, b, u, v, w, out) >= 0 or segment_triangle(b, c, u, v, w, out) >= 0 \
-        or segment_triangle(c, a, u, v, w, out) >= 0
+    return segment_triangle_hit(a, b, u, v, w, out) >= 0 or segment_triangle_hit(b, c, u, v, w, out) >= 0 \
+        or segment_triangle_hit(c, a, u, v, w, out) >= 0
 
 
 @njit(cache=True, nogil=True)

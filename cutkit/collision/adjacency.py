@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from cutkit.collision import _kernels as K
+from cutkit.mesh.topology import boundary_faces as topology_boundary_faces
 
 
 def edge_adjacency(faces: np.ndarray) -> np.ndarray:
@@ -40,10 +41,7 @@ def csr_adjacency(pairs: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray, np
 
 
 def boundary_faces(tets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Boundary faces, outward oriented, and the tet of each.
-
-    Uses :func:`cutkit.mesh.topology.boundary_faces` when available, else
-    :func:`boundary_faces_standin`.
+    """Boundary faces, outward oriented, and the tet of each (:func:`cutkit.mesh.topology.boundary_faces`).
 
     Parameters
     ----------
@@ -55,20 +53,4 @@ def boundary_faces(tets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     faces : (b, 3) int64
     face_tet : (b,) int64
     """
-    try:
-        from cutkit.mesh.topology import boundary_faces as topology_boundary_faces
-    except ImportError:
-        return boundary_faces_standin(tets)
     return topology_boundary_faces(tets)
-
-
-def boundary_faces_standin(tets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Same as :func:`boundary_faces`, for when ``cutkit.mesh.topology`` is missing."""
-    # face i opposite vertex i, right-hand normal out of a positive tet
-    local = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]])
-    m = tets.shape[0]
-    f = tets[:, local].reshape(-1, 3)
-    key = np.sort(f, axis=1)
-    _, inv, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
-    keep = counts[inv.reshape(-1)] == 1
-    return f[keep], np.repeat(np.arange(m, dtype=np.int64), 4)[keep]

@@ -19,7 +19,7 @@ import numpy as np
 
 from cutkit.collision import _kernels as K
 from cutkit.collision.adjacency import boundary_faces, csr_adjacency, edge_adjacency
-from cutkit.collision._geometry import HIT_COPLANAR, HIT_EDGE, HIT_FACE, HIT_VERTEX
+from cutkit.mesh.geometry import HIT_COPLANAR, HIT_EDGE, HIT_FACE, HIT_VERTEX
 from cutkit.errors import InputError, MeshError
 
 __all__ = [

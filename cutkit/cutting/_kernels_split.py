@@ -15,9 +15,8 @@ and ``compact_split_twin``.
 import numpy as np
 from numba import njit
 
-from cutkit.cutting._kernels_step import min_volume
 from cutkit.cutting.subdivision import FACE_EDGES
-from cutkit.mesh._quality_kernels import tet_dihedrals
+from cutkit.mesh.geometry import min_volume, tet_dihedrals
 from cutkit.mesh.topology import TET_FACES
 
 #: At most this many cut nodes per tet: two copies of each of six edge nodes and of four face nodes.

@@ -8,7 +8,7 @@
   the cut state machine (Python, :mod:`cutkit.cutting.cutmesh`) replays
   them exactly as a per-tet Python loop would;
 * :func:`clamp_bary`, :func:`set_node`, :func:`set_node_clamped`,
-  :func:`min_volume`, :func:`tet_mask`, :func:`cut_nodes_centroid`,
+  :func:`tet_mask`, :func:`cut_nodes_centroid`,
   :func:`best_cone_apex`: the small per-node / per-candidate work of the
   subdivision (the face patterns and compact splits are in
   :mod:`cutkit.cutting._kernels_split`).
@@ -21,9 +21,8 @@ from collections import namedtuple
 import numpy as np
 from numba import njit
 
-from cutkit.cutting._kernels import seg_tet, tet_sweep
-from cutkit.mesh._quality_kernels import tet_dihedrals
-from cutkit.mesh.topology import TET_EDGES
+from cutkit.cutting._kernels import tet_sweep
+from cutkit.mesh.geometry import TET_EDGES, segment_meets_tet, tet_dihedrals
 
 #: The walk stops in a tet whose barycentric coordinates of the target are all >= -WALK_EPS.
 WALK_EPS = 1e-12
@@ -176,7 +175,7 @@ def _face_bary(x, fv, px, py, pz, out, row):
     if det > 0.0:
         u = (g22 * r1 - g12 * r2) / det
         v = (g11 * r2 - g12 * r1) / det
-    else:  # flat face: cannot be crossed (seg_tri refuses it); keep a valid value
+    else:  # flat face: cannot be crossed (segment_triangle_crossing refuses it); keep a valid value
         u = v = 1.0 / 3.0
     out[row, 0] = 1.0 - (u + v)
     out[row, 1] = u
@@ -255,7 +254,7 @@ def sweep(x, tets, neighbors, tet_edges, tet_faces, edges, faces, edge_t, stamp,
                         n_ev += 1
                 k += 1
         if not touched:
-            touched = seg_tet(q0, p1, x, tv) or seg_tet(p0, p1, x, tv)
+            touched = segment_meets_tet(q0, p1, x, tv) or segment_meets_tet(p0, p1, x, tv)
         if not touched:
             continue
         active[n_active] = o
@@ -358,20 +357,6 @@ def set_node_clamped(x, X, uvw, def_nodes, def_w, i, nodes, w, lo):
     """:func:`set_node` with the weights :func:`clamp_bary` ``(w, lo)`` first, in one call (a notch
     node F following the blade across its face: a few dozen per cut step)."""
     set_node(x, X, uvw, def_nodes, def_w, i, nodes, clamp_bary(w, lo))
-
-@njit(cache=True, nogil=True)
-def min_volume(x, tets):
-    """Smallest signed volume of the tets (k, 4) int64 over positions x (n, 3); +inf if none."""
-    m = np.inf
-    for r in range(tets.shape[0]):
-        a = x[tets[r, 0]]
-        b1x, b1y, b1z = x[tets[r, 1], 0] - a[0], x[tets[r, 1], 1] - a[1], x[tets[r, 1], 2] - a[2]
-        b2x, b2y, b2z = x[tets[r, 2], 0] - a[0], x[tets[r, 2], 1] - a[1], x[tets[r, 2], 2] - a[2]
-        b3x, b3y, b3z = x[tets[r, 3], 0] - a[0], x[tets[r, 3], 1] - a[1], x[tets[r, 3], 2] - a[2]
-        v = ((b1y * b2z - b1z * b2y) * b3x + (b1z * b2x - b1x * b2z) * b3y + (b1x * b2y - b1y * b2x) * b3z) / 6.0
-        m = min(m, v)
-    return m
-
 
 @njit(cache=True, nogil=True)
 def best_cone_apex(x, corners, tb, blends, tris, bary_min, spare):

@@ -26,7 +26,8 @@ from __future__ import annotations
 import numpy as np
 
 from cutkit.errors import InputError
-from cutkit.mesh.topology import TET_EDGES, unique_edges, unique_faces, tet_neighbors
+from cutkit.mesh.geometry import TET_EDGES, min_volume
+from cutkit.mesh.topology import unique_edges, unique_faces, tet_neighbors
 from cutkit.cutting import subdivision as S
 from cutkit.cutting import _kernels_step as K
 from cutkit.cutting.rebase import cut_twins, init_records, rebase, twin_face_bary
@@ -51,7 +52,7 @@ _NO_UVW = np.zeros((0, 3))
 
 def _vol(x, t):
     """Signed volume of the tet t (4,) over positions x (n, 3)."""
-    return float(K.min_volume(x, np.asarray(t, np.int64).reshape(1, 4)))
+    return float(min_volume(x, np.asarray(t, np.int64).reshape(1, 4)))
 
 
 def _clamp_bary(b, lo):

@@ -148,7 +148,7 @@ def blade_in_tissue(cm):
     blade at its new pose: a tet the blade is in now is among them, so the
     test is local.
     """
-    from cutkit.cutting._kernels import seg_meets_any_tet
+    from cutkit.mesh.geometry import segment_meets_any_tet
 
     if cm.prev_pose is None:
         return False
@@ -156,7 +156,7 @@ def blade_in_tissue(cm):
         return True
     tip, back = cm.prev_pose
     corners = np.ascontiguousarray(cm.orig_tets[cm.active_tets])
-    return bool(seg_meets_any_tet(np.asarray(back, np.float64), np.asarray(tip, np.float64), cm._x, corners))
+    return bool(segment_meets_any_tet(np.asarray(back, np.float64), np.asarray(tip, np.float64), cm._x, corners))
 
 
 def rebase_if_left(cm):

@@ -146,7 +146,7 @@ def volume_precheck(u, v, points, tets, adj_start, adj_len, pool, grad, base, vo
     """Whether every tet of ``u`` without ``v`` keeps ``6 V > vol_eps`` after ``u -> v``.
 
     ``grad``, ``base`` come from :func:`volume_gradients` for ``u``.  Rounding
-    differs from :func:`cutkit.decimate._geometry.tet_volume6`, so this only
+    differs from :func:`cutkit.mesh.geometry.tet_volume6`, so this only
     skips candidates; the exact test decides.
     """
     s0 = adj_start[u]

@@ -7,7 +7,6 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from cutkit.decimate._geometry import tet_max_cos, tet_volume6
 from cutkit.decimate._candidates import cheapest_neighbours, half_edge_key2, volume_gradients, volume_precheck
 from cutkit.decimate._legality import (
     P_H,
@@ -31,6 +30,7 @@ from cutkit.decimate._pool import (
     pool_append,
     pool_remove,
 )
+from cutkit.mesh.geometry import tet_max_cos
 
 #: Status codes of :func:`run_collapses`.
 STATUS_BUDGET = 0  # stopped after max_pops heap entries; call again
@@ -50,15 +50,6 @@ def all_tet_max_cos(points, tets):
     out = np.empty(tets.shape[0])
     for t in prange(tets.shape[0]):
         out[t] = tet_max_cos(points[tets[t, 0]], points[tets[t, 1]], points[tets[t, 2]], points[tets[t, 3]])
-    return out
-
-
-@njit(cache=True, parallel=True)
-def tet_volumes6(points, tets):
-    """6 * signed volume of every tet: (m,) float64."""
-    out = np.empty(tets.shape[0])
-    for t in prange(tets.shape[0]):
-        out[t] = tet_volume6(points[tets[t, 0]], points[tets[t, 1]], points[tets[t, 2]], points[tets[t, 3]])
     return out
 
 

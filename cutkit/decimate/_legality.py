@@ -28,8 +28,8 @@ import math
 import numpy as np
 from numba import njit
 
-from cutkit.decimate._geometry import point_triangle_dist2, tet_max_cos, tet_volume6
 from cutkit.decimate._pool import C_STAMP
+from cutkit.mesh.geometry import point_triangle_dist2, tet_max_cos, tet_volume6
 
 #: Slots of the ``params`` (float64) array.
 P_H = 0  # reference edge length, mm
@@ -150,30 +150,23 @@ def label_volume_change(u, v, points, tets, tet_lab, adj_start, adj_len, pool, d
         dvol[tet_lab[t]] += (after - before) / 6.0
 
 
+# ---------------------------------------------------------------------------
+# The rules, one function each (numbered as in the module docstring).  Each
+# returns whether the collapse passes it; the distance rules also carry the
+# largest squared distance found so far.
+# ---------------------------------------------------------------------------
+
+
 @njit(cache=True)
-def can_collapse(u, v, points, tets, labels, tet_lab, tet_maxcos, adj_start, adj_len, pool, vclass, own_pts, own_next, mark, mark2, vol_drift, vol_budget, counters, params, new_maxcos):
-    """Whether the half-edge collapse ``u -> v`` is legal; returns ``(ok, surface_error_mm)``.
+def shape_rule(u, v, points, tets, tet_maxcos, adj_start, adj_len, pool, params, new_maxcos):
+    """Rule 1: the surviving tets of ``u`` keep ``6 V > vol_eps`` and no worse a dihedral angle.
 
-    ``new_maxcos`` (>= adj_len[u],) float64 receives, when the collapse is
-    legal, the largest dihedral cosine of each tet of ``u``'s list after the
-    collapse (entries of the tets that die are left alone), for
-    :func:`cutkit.decimate._kernels.collapse`.
-
-    ``own_pts`` (n + k, 3) holds the original surface points: the n nodes,
-    then the centroids of the original S-faces; ``own_next`` links the ones
-    each vertex represents (a list that starts at the vertex itself and ends
-    with -1).
-    ``tet_lab`` (m,) is each tet's label as an index 0..L-1; ``vol_drift``
-    (L,) the volume each label has gained so far, ``vol_budget`` (L,) the
-    drift allowed.
+    Also refuses a collapse that kills no tet (``u v`` is not an edge).
+    Writes the new largest dihedral cosine of each surviving tet of ``u``'s
+    list to ``new_maxcos``.
     """
     su0 = adj_start[u]
     nsu = adj_len[u]
-    sv0 = adj_start[v]
-    nsv = adj_len[v]
-    pv = points[v]
-
-    # 1. shape of the surviving tets of u.
     old_worst = -1.0
     for i in range(nsu):
         old_worst = max(old_worst, tet_maxcos[pool[su0 + i]])
@@ -188,9 +181,9 @@ def can_collapse(u, v, points, tets, labels, tet_lab, tet_maxcos, adj_start, adj
             continue
         a, b, c, d = _swap(tets[t, 0], u, v), _swap(tets[t, 1], u, v), _swap(tets[t, 2], u, v), _swap(tets[t, 3], u, v)
         if tet_volume6(points[a], points[b], points[c], points[d]) <= params[P_VOL_EPS]:
-            return False, 0.0
+            return False
     if n_dying == 0:
-        return False, 0.0
+        return False
     for i in range(nsu):
         t = pool[su0 + i]
         if _has(tets, t, v):
@@ -198,10 +191,22 @@ def can_collapse(u, v, points, tets, labels, tet_lab, tet_maxcos, adj_start, adj
         a, b, c, d = _swap(tets[t, 0], u, v), _swap(tets[t, 1], u, v), _swap(tets[t, 2], u, v), _swap(tets[t, 3], u, v)
         mc = tet_max_cos(points[a], points[b], points[c], points[d])
         if mc > thr:
-            return False, 0.0
+            return False
         new_maxcos[i] = mc
+    return True
 
-    # 2a. vertex link: N(u) & N(v) == vertices of the tets around edge uv.
+
+@njit(cache=True)
+def vertex_link_rule(u, v, tets, adj_start, adj_len, pool, mark, mark2, counters):
+    """Rule 2a: the common neighbours of ``u`` and ``v`` are the vertices of the tets around the edge.
+
+    Returns ``(ok, ring_stamp)``: the vertices of the tets around the edge
+    carry ``mark2 == ring_stamp`` afterwards (for :func:`edge_triangle_link_rule`).
+    """
+    su0 = adj_start[u]
+    nsu = adj_len[u]
+    sv0 = adj_start[v]
+    nsv = adj_len[v]
     st1 = _new_stamp(counters)
     for i in range(nsu):
         t = pool[su0 + i]
@@ -218,11 +223,19 @@ def can_collapse(u, v, points, tets, labels, tet_lab, tet_maxcos, adj_start, adj
         for k in range(4):
             w = tets[t, k]
             if w != u and w != v and mark[w] == st1 and mark2[w] != st2:
-                return False, 0.0
+                return False, st2
+    return True, st2
 
-    # 2b. no vertex of a dying tet may lose its last tet: every vertex w of a
-    # dying tet needs a tet without u or without v (usually its first one).
-    for i in range(nsu):
+
+@njit(cache=True)
+def no_orphan_rule(u, v, tets, adj_start, adj_len, pool):
+    """Rule 2b: no vertex of a dying tet loses its last tet.
+
+    Every vertex w of a dying tet needs a tet without u or without v
+    (usually its first one).
+    """
+    su0 = adj_start[u]
+    for i in range(adj_len[u]):
         t = pool[su0 + i]
         if not _has(tets, t, v):
             continue
@@ -238,11 +251,24 @@ def can_collapse(u, v, points, tets, labels, tet_lab, tet_maxcos, adj_start, adj
                     keeps = True
                     break
             if not keeps:
-                return False, 0.0
+                return False
+    return True
 
-    # 2c. edge and triangle links.  A link edge w x (or triangle) shared by u
-    # and v has all its vertices in N(u) & N(v), which 2a showed to be the
-    # ring of the edge (mark2 == st2): only those few candidates are looked at.
+
+@njit(cache=True)
+def edge_triangle_link_rule(u, v, tets, adj_start, adj_len, pool, mark2, ring_stamp):
+    """Rule 2c: the edge and triangle links.
+
+    A link edge w x (or triangle) shared by u and v has all its vertices in
+    N(u) & N(v), which :func:`vertex_link_rule` showed to be the ring of the
+    edge (``mark2 == ring_stamp``): only those few candidates are looked at.
+    Every triangle ``u w x`` with a twin ``v w x`` must span a tet
+    ``u v w x``, and no face may have ``u`` on one side and ``v`` on the other.
+    """
+    su0 = adj_start[u]
+    nsu = adj_len[u]
+    sv0 = adj_start[v]
+    nsv = adj_len[v]
     for i in range(nsu):
         t = pool[su0 + i]
         if _has(tets, t, v):
@@ -259,14 +285,14 @@ def can_collapse(u, v, points, tets, labels, tet_lab, tet_maxcos, adj_start, adj
                     o1 = w
                 else:
                     o2 = w
-        r0 = mark2[o0] == st2
-        r1 = mark2[o1] == st2
-        r2 = mark2[o2] == st2
+        r0 = mark2[o0] == ring_stamp
+        r1 = mark2[o1] == ring_stamp
+        r2 = mark2[o2] == ring_stamp
         if r0 and r1 and r2:
             for i2 in range(nsv):
                 s = pool[sv0 + i2]
                 if _has(tets, s, o0) and _has(tets, s, o1) and _has(tets, s, o2):
-                    return False, 0.0  # face o has u on one side and v on the other
+                    return False  # face o has u on one side and v on the other
         for pair in range(3):
             if pair == 0:
                 w, x, ok_pair = o0, o1, r0 and r1
@@ -290,18 +316,13 @@ def can_collapse(u, v, points, tets, labels, tet_lab, tet_maxcos, adj_start, adj
                         spans = True
                         break
                 if not spans:
-                    return False, 0.0
+                    return False
+    return True
 
-    if vclass[u] == 0:
-        return True, 0.0
 
-    # 3. surface rules.
-    fa = np.empty(3 * nsu, np.int64)
-    fb = np.empty(3 * nsu, np.int64)
-    fs0 = np.empty(3 * nsu, np.int64)
-    fs1 = np.empty(3 * nsu, np.int64)
-    nu = surface_faces(u, tets, labels, adj_start, adj_len, pool, fa, fb, fs0, fs1)
-    # 3a. v lies on every sheet of u, along an S-edge of that sheet.
+@njit(cache=True)
+def sheet_rule(v, nu, fa, fb, fs0, fs1):
+    """Rule 3a: ``v`` lies on every sheet of ``u``, along an S-edge of that sheet (u's S-faces given)."""
     for i in range(nu):
         found = False
         for j in range(nu):
@@ -309,14 +330,18 @@ def can_collapse(u, v, points, tets, labels, tet_lab, tet_maxcos, adj_start, adj
                 found = True
                 break
         if not found:
-            return False, 0.0
-    ga = np.empty(3 * nsv, np.int64)
-    gb = np.empty(3 * nsv, np.int64)
-    gs0 = np.empty(3 * nsv, np.int64)
-    gs1 = np.empty(3 * nsv, np.int64)
-    nv = surface_faces(v, tets, labels, adj_start, adj_len, pool, ga, gb, gs0, gs1)
-    # 3b. link condition with a virtual vertex coned to S: a common S-neighbour
-    # w of u and v needs the S-face u v w; no S-face pair u w x / v w x.
+            return False
+    return True
+
+
+@njit(cache=True)
+def surface_link_rule(v, nu, fa, fb, nv, ga, gb, mark, counters):
+    """Rule 3b: the link condition with a virtual vertex coned to S.
+
+    A common S-neighbour w of u and v needs the S-face u v w; no S-face pair
+    u w x / v w x.  ``fa, fb`` (``nu``) and ``ga, gb`` (``nv``) are the
+    S-faces of u and of v.
+    """
     st3 = _new_stamp(counters)
     for j in range(nv):
         mark[ga[j]] = st3
@@ -331,13 +356,19 @@ def can_collapse(u, v, points, tets, labels, tet_lab, tet_maxcos, adj_start, adj
                     spans = True
                     break
             if not spans:
-                return False, 0.0
+                return False
         if fa[i] != v and fb[i] != v:
             for j in range(nv):
                 if (ga[j] == fa[i] and gb[j] == fb[i]) or (ga[j] == fb[i] and gb[j] == fa[i]):
-                    return False, 0.0
-    # 3c. no S-face turns by more than the normal limit (a local fold test).
+                    return False
+    return True
+
+
+@njit(cache=True)
+def normal_rule(u, v, points, nu, fa, fb, params):
+    """Rule 3c: no S-face of ``u`` turns by more than the normal limit (a local fold test)."""
     pu = points[u]
+    pv = points[v]
     for i in range(nu):
         if fa[i] == v or fb[i] == v:
             continue
@@ -352,20 +383,31 @@ def can_collapse(u, v, points, tets, labels, tet_lab, tet_maxcos, adj_start, adj
         l0 = math.sqrt(n0x * n0x + n0y * n0y + n0z * n0z)
         l1 = math.sqrt(n1x * n1x + n1y * n1y + n1z * n1z)
         if l1 == 0.0 or n0x * n1x + n0y * n1y + n0z * n1z < params[P_NORMAL_COS] * l0 * l1:
-            return False, 0.0
-    # 3d. volume balance: a surface collapse may not push any label's volume
-    # drift beyond its budget unless it brings the drift back towards zero.
+            return False
+    return True
+
+
+@njit(cache=True)
+def volume_balance_rule(u, v, points, tets, tet_lab, adj_start, adj_len, pool, vol_drift, vol_budget):
+    """Rule 3d: no label's volume drift goes beyond its budget, unless the collapse brings it back towards zero."""
     dvol = np.empty(vol_drift.shape[0])
     label_volume_change(u, v, points, tets, tet_lab, adj_start, adj_len, pool, dvol)
     for lab in range(dvol.shape[0]):
         after = vol_drift[lab] + dvol[lab]
         if abs(after) > vol_budget[lab] and abs(after) > abs(vol_drift[lab]):
-            return False, 0.0
-    # 3e. distance, both ways: original points represented by u -> new S-faces,
-    # and samples of the new S-faces -> the S-faces now around u.
-    tol = params[P_TOL] * params[P_SURF_SAFETY]
-    tol2 = tol * tol
-    worst = 0.0
+            return False
+    return True
+
+
+@njit(cache=True)
+def own_points_distance_rule(u, v, points, own_pts, own_next, nu, fa, fb, nv, ga, gb, tol2, worst):
+    """Rule 3e, the points ``u`` and ``v`` represent: within the tolerance of the S-faces after the collapse.
+
+    The points of u go to the new S-faces; those of v to the new S-faces and
+    v's S-faces that stay.  Returns ``(ok, worst)``, ``worst`` the largest
+    squared distance so far (in: from the rules before).
+    """
+    pv = points[v]
     r = u
     while r >= 0:
         pr = own_pts[r]
@@ -376,9 +418,8 @@ def can_collapse(u, v, points, tets, labels, tet_lab, tet_maxcos, adj_start, adj
             best = min(best, point_triangle_dist2(pr, pv, points[fa[i]], points[fb[i]]))
         worst = max(worst, best)
         if worst > tol2:
-            return False, math.sqrt(worst)
+            return False, worst
         r = own_next[r]
-    # Points v represents: to the new S-faces and v's S-faces that stay.
     r = own_next[v]
     while r >= 0:
         pr = own_pts[r]
@@ -393,10 +434,21 @@ def can_collapse(u, v, points, tets, labels, tet_lab, tet_maxcos, adj_start, adj
             best = min(best, point_triangle_dist2(pr, pv, points[ga[j]], points[gb[j]]))
         worst = max(worst, best)
         if worst > tol2:
-            return False, math.sqrt(worst)
+            return False, worst
         r = own_next[r]
-    # Points represented by the other S-neighbours w of u: to the S-faces
-    # around w after the collapse (u replaced by v, faces holding both gone).
+    return True, worst
+
+
+@njit(cache=True)
+def neighbour_points_distance_rule(u, v, points, tets, labels, adj_start, adj_len, pool, own_pts, own_next,
+                                   nu, fa, fb, mark, counters, tol2, worst):
+    """Rule 3e, the points the other S-neighbours w of ``u`` represent.
+
+    Each goes to the S-faces around w after the collapse (u replaced by v,
+    faces holding both gone).  Returns ``(ok, worst)`` as
+    :func:`own_points_distance_rule`.
+    """
+    pv = points[v]
     st4 = _new_stamp(counters)
     for i in range(nu):
         for w in (fa[i], fb[i]):
@@ -425,8 +477,19 @@ def can_collapse(u, v, points, tets, labels, tet_lab, tet_maxcos, adj_start, adj
                     best = min(best, point_triangle_dist2(pr, points[w], pa, pb))
                 worst = max(worst, best)
                 if worst > tol2:
-                    return False, math.sqrt(worst)
+                    return False, worst
                 r = own_next[r]
+    return True, worst
+
+
+@njit(cache=True)
+def sample_distance_rule(u, v, points, nu, fa, fb, tol2, worst):
+    """Rule 3e, samples of the new S-faces (centroid, two edge midpoints): to the S-faces of ``u`` now.
+
+    Returns ``(ok, worst)`` as :func:`own_points_distance_rule`.
+    """
+    pu = points[u]
+    pv = points[v]
     sample = np.empty(3)
     for i in range(nu):
         if fa[i] == v or fb[i] == v:
@@ -448,5 +511,71 @@ def can_collapse(u, v, points, tets, labels, tet_lab, tet_maxcos, adj_start, adj
                 best = min(best, point_triangle_dist2(sample, pu, points[fa[j]], points[fb[j]]))
             worst = max(worst, best)
         if worst > tol2:
-            return False, math.sqrt(worst)
-    return True, math.sqrt(worst)
+            return False, worst
+    return True, worst
+
+
+@njit(cache=True)
+def can_collapse(u, v, points, tets, labels, tet_lab, tet_maxcos, adj_start, adj_len, pool, vclass, own_pts, own_next, mark, mark2, vol_drift, vol_budget, counters, params, new_maxcos):
+    """Whether the half-edge collapse ``u -> v`` is legal; returns ``(ok, surface_error_mm)``.
+
+    The rules of the module docstring, in order (the ``*_rule`` functions
+    above); the surface rules only when ``u`` lies on S (``vclass[u] != 0``).
+
+    ``new_maxcos`` (>= adj_len[u],) float64 receives, when the collapse is
+    legal, the largest dihedral cosine of each tet of ``u``'s list after the
+    collapse (entries of the tets that die are left alone), for
+    :func:`cutkit.decimate._kernels.collapse`.
+
+    ``own_pts`` (n + k, 3) holds the original surface points: the n nodes,
+    then the centroids of the original S-faces; ``own_next`` links the ones
+    each vertex represents (a list that starts at the vertex itself and ends
+    with -1).
+    ``tet_lab`` (m,) is each tet's label as an index 0..L-1; ``vol_drift``
+    (L,) the volume each label has gained so far, ``vol_budget`` (L,) the
+    drift allowed.
+    """
+    # 1. shape; 2. link conditions of the tet complex
+    if not shape_rule(u, v, points, tets, tet_maxcos, adj_start, adj_len, pool, params, new_maxcos):
+        return False, 0.0
+    ok, ring = vertex_link_rule(u, v, tets, adj_start, adj_len, pool, mark, mark2, counters)
+    if not ok:
+        return False, 0.0
+    if not no_orphan_rule(u, v, tets, adj_start, adj_len, pool):
+        return False, 0.0
+    if not edge_triangle_link_rule(u, v, tets, adj_start, adj_len, pool, mark2, ring):
+        return False, 0.0
+    if vclass[u] == 0:
+        return True, 0.0
+
+    # 3. surface rules, over the S-faces of u and of v
+    nsu = adj_len[u]
+    nsv = adj_len[v]
+    fa = np.empty(3 * nsu, np.int64)
+    fb = np.empty(3 * nsu, np.int64)
+    fs0 = np.empty(3 * nsu, np.int64)
+    fs1 = np.empty(3 * nsu, np.int64)
+    nu = surface_faces(u, tets, labels, adj_start, adj_len, pool, fa, fb, fs0, fs1)
+    if not sheet_rule(v, nu, fa, fb, fs0, fs1):
+        return False, 0.0
+    ga = np.empty(3 * nsv, np.int64)
+    gb = np.empty(3 * nsv, np.int64)
+    gs0 = np.empty(3 * nsv, np.int64)
+    gs1 = np.empty(3 * nsv, np.int64)
+    nv = surface_faces(v, tets, labels, adj_start, adj_len, pool, ga, gb, gs0, gs1)
+    if not surface_link_rule(v, nu, fa, fb, nv, ga, gb, mark, counters):
+        return False, 0.0
+    if not normal_rule(u, v, points, nu, fa, fb, params):
+        return False, 0.0
+    if not volume_balance_rule(u, v, points, tets, tet_lab, adj_start, adj_len, pool, vol_drift, vol_budget):
+        return False, 0.0
+    # 3e. distance, both ways: original points -> new S-faces, samples of the new S-faces -> S now
+    tol = params[P_TOL] * params[P_SURF_SAFETY]
+    tol2 = tol * tol
+    ok, worst = own_points_distance_rule(u, v, points, own_pts, own_next, nu, fa, fb, nv, ga, gb, tol2, 0.0)
+    if ok:
+        ok, worst = neighbour_points_distance_rule(u, v, points, tets, labels, adj_start, adj_len, pool, own_pts,
+                                                   own_next, nu, fa, fb, mark, counters, tol2, worst)
+    if ok:
+        ok, worst = sample_distance_rule(u, v, points, nu, fa, fb, tol2, worst)
+    return ok, math.sqrt(worst)

@@ -77,7 +77,7 @@ def _check_model(model: TetModel):
         raise MeshError("points contain NaN or infinite coordinates")
     if tets.min() < 0 or tets.max() >= points.shape[0]:
         raise MeshError(f"tets reference nodes outside 0..{points.shape[0] - 1}")
-    from cutkit.decimate._kernels import tet_volumes6
+    from cutkit.mesh.geometry import tet_volumes6
 
     vol6 = tet_volumes6(points, tets)
     bad = np.flatnonzero(vol6 <= 0.0)

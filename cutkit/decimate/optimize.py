@@ -30,6 +30,7 @@ import time
 import numpy as np
 
 from cutkit.errors import InputError
+from cutkit.mesh.geometry import TET_FACES, tet_volumes
 from cutkit.model.tetmodel import BoundaryConditions, TetModel
 
 __all__ = ["optimize", "OPTIMIZERS"]
@@ -57,7 +58,7 @@ def surface_faces_with_sheets(tets: np.ndarray, labels: np.ndarray):
     """
     tets = np.asarray(tets, np.int64)
     labels = np.asarray(labels, np.int64)
-    f = np.sort(np.concatenate([tets[:, [1, 2, 3]], tets[:, [0, 2, 3]], tets[:, [0, 1, 3]], tets[:, [0, 1, 2]]]), axis=1)
+    f = np.sort(np.concatenate([tets[:, TET_FACES[i]] for i in range(4)]), axis=1)  # face-major, as lab below
     lab = np.tile(labels, 4)
     order = np.lexsort((lab, f[:, 2], f[:, 1], f[:, 0]))
     f, lab = f[order], lab[order]
@@ -207,8 +208,7 @@ def optimize(model: TetModel, method: str = "netgen") -> tuple[TetModel, dict]:
     if t2.shape[0] == 0 or np.any(t2 < 0):
         return done(model, "gmsh returned no tets or tets with unknown nodes")
     # Orientation is a convention: turn gmsh's tets positive before judging them.
-    p = p2[t2]
-    neg = np.einsum("ij,ij->i", np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), p[:, 3] - p[:, 0]) < 0
+    neg = tet_volumes(p2, t2) < 0
     t2[neg, 2], t2[neg, 3] = t2[neg, 3].copy(), t2[neg, 2].copy()
     after = float(min_dihedral_deg(p2, t2).min())
     report["min_dihedral_after_deg"] = after

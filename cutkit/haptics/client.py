@@ -207,7 +207,7 @@ class HapticsClient:
         while True:
             ftype, seq, ts, payload = self.read_frame(timeout)
             if ftype in (P.FORCE, P.STATE):
-                return _decode_force(ftype, seq, ts, payload, time.perf_counter_ns())
+                return decode_force(ftype, seq, ts, payload, time.perf_counter_ns())
             if ftype == P.BYE:
                 raise ProtocolError("the haptics server said BYE")
 
@@ -234,7 +234,22 @@ class HapticsClient:
         self.close()
 
 
-def _decode_force(ftype, seq, ts, payload, arrival) -> ForceFrame:
+def decode_force(ftype, seq, ts, payload, arrival) -> ForceFrame:
+    """A force frame from the fields of a received message.
+
+    Parameters
+    ----------
+    ftype, seq, ts : int
+        Frame type, sequence number and server time stamp of the message.
+    payload : bytes
+        The message body, :data:`cutkit.haptics.protocol.FORCE_PAYLOAD`.
+    arrival : int
+        Arrival time, ``time.perf_counter_ns()``.
+
+    Returns
+    -------
+    ForceFrame
+    """
     v = P.FORCE_PAYLOAD.unpack(payload)
     return ForceFrame(ftype, seq, ts, v[0:3], v[3:6], v[6:9], v[9:12], v[12], v[13], v[14], v[15], v[16], arrival)
 

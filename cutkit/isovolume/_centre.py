@@ -19,9 +19,9 @@ import math
 import numpy as np
 from numba import njit
 
-from cutkit.decimate._geometry import tet_max_cos
 from cutkit.isovolume._clip import EDGE_A, EDGE_B, KUHN_PATHS, REF_CENTRE
 from cutkit.isovolume._crossings import crossing_node
+from cutkit.mesh.geometry import tet_max_cos
 
 #: A centre whose cone has a smaller dihedral angle (degrees) is moved.  Above
 #: the decimator's default floor (10 degrees), so that floor is met with margin.

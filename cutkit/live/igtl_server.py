@@ -97,13 +97,14 @@ class _Close(Exception):
 class _Outgoing:
     """One message to send: its content packed once, the whole message once per header version."""
 
-    def __init__(self, kind: str, device_name: str, content, timestamp: float | None = None, message_id: int = 0):
+    def __init__(self, kind: str, device_name: str, content, timestamp: float | None = None, message_id: int = 0,
+                 parent: "_Outgoing | None" = None):
         self.kind, self.device_name, self.message_id = kind, device_name, message_id
         self.timestamp = time.time() if timestamp is None else timestamp
         self._content = content  # bytes, or a callable that packs them (run on a client's thread)
         self._packed = {}
         self._lock = threading.Lock()
-        self._parent = None  # the broadcast this reply repeats: a v1 header has no message id, so the same bytes
+        self._parent = parent  # the broadcast this reply repeats: a v1 header has no message id, so the same bytes
 
     @classmethod
     def of(cls, message) -> "_Outgoing":
@@ -120,9 +121,7 @@ class _Outgoing:
         """The same message as a reply to the request ``message_id``."""
         if message_id == self.message_id:
             return self
-        out = _Outgoing(self.kind, self.device_name, self.content, self.timestamp, message_id)
-        out._parent = self
-        return out
+        return _Outgoing(self.kind, self.device_name, self.content, self.timestamp, message_id, parent=self)
 
     def data(self, version: int) -> bytes:
         """The whole message with a header of ``version`` (1 or 2)."""

@@ -383,7 +383,7 @@ class HapticsPoseSource:
         if self.finished:
             return None
         from cutkit.haptics import protocol as P
-        from cutkit.haptics.client import _decode_force, decode_device_pose
+        from cutkit.haptics.client import decode_device_pose, decode_force
 
         newest = None
         arrival = time.perf_counter_ns()
@@ -392,7 +392,7 @@ class HapticsPoseSource:
                 newest = decode_device_pose(ts, payload, arrival)
                 self.poses_received += 1
             elif ftype == P.STATE:
-                self.state = _decode_force(ftype, seq, ts, payload, arrival)
+                self.state = decode_force(ftype, seq, ts, payload, arrival)
             elif ftype == P.BYE:
                 self.finished = True
         if newest is None:

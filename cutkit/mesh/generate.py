@@ -6,6 +6,8 @@ from itertools import permutations
 
 import numpy as np
 
+from cutkit.mesh.geometry import tet_volumes
+
 # Kuhn (Freudenthal) split of the unit cube into six tetrahedra that share the
 # main diagonal (0,0,0)-(1,1,1): one tet per axis permutation, walking from the
 # first to the last corner one axis at a time.  Every cube uses the same
@@ -58,9 +60,7 @@ def box_mesh(shape=(4, 4, 4), spacing=(1.0, 1.0, 1.0), origin=(0.0, 0.0, 0.0)):
         for v, (a, b, c) in enumerate(corners):
             tets[t::6, v] = node(ci + a, cj + b, ck + c)
     # Odd permutations give negatively oriented tets: swap two nodes to fix.
-    p = points[tets]
-    det = np.einsum("ij,ij->i", np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), p[:, 3] - p[:, 0])
-    neg = det < 0
+    neg = tet_volumes(points, tets) < 0
     tets[neg, 2], tets[neg, 3] = tets[neg, 3].copy(), tets[neg, 2].copy()
     return points, tets
 

@@ -18,6 +18,7 @@ import numpy as np
 
 from cutkit.errors import MeshError
 from cutkit.mesh import _topology_kernels as _k
+from cutkit.mesh.geometry import TET_EDGES, TET_FACES
 
 __all__ = [
     "TET_FACES",
@@ -29,13 +30,6 @@ __all__ = [
     "node_to_tets",
 ]
 
-#: (4, 3) int64: local vertices of face i (opposite vertex i), outward right-hand order.
-TET_FACES = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]], dtype=np.int64)
-TET_FACES.setflags(write=False)
-
-#: (6, 2) int64: local vertices of the six edges.
-TET_EDGES = np.array([[0, 1], [0, 2], [0, 3], [1, 2], [1, 3], [2, 3]], dtype=np.int64)
-TET_EDGES.setflags(write=False)
 
 def _check_tets(tets, n_points=None) -> np.ndarray:
     """Normalise ``tets`` to a C-contiguous (m, 4) int64 array; raise MeshError on bad input."""

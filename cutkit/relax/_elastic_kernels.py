@@ -30,7 +30,7 @@ from collections import namedtuple
 import numpy as np
 from numba import njit, prange
 
-from cutkit.mesh.topology import TET_EDGES
+from cutkit.mesh.geometry import TET_EDGES, TET_FACES_INWARD
 
 #: tets (m, 4) int64, Dminv (m, 3, 3) float64, volume (m,) float64 (0: inactive), mu, lam (m,) float64 MPa
 Elements = namedtuple("Elements", ["tets", "Dminv", "volume", "mu", "lam"])
@@ -41,7 +41,7 @@ Elements = namedtuple("Elements", ["tets", "Dminv", "volume", "mu", "lam"])
 NODE_TERMS = 9
 #: For corner c, the corners (j, k, l) with (j, c, k, l) an even permutation of (0, 1, 2, 3):
 #: det Ds = (x_c - x_j) . ((x_k - x_j) x (x_l - x_j)), so d det Ds / d x_c is the cross product.
-OPPOSITE = np.array([[1, 3, 2], [0, 2, 3], [0, 3, 1], [0, 1, 2]], np.int64)
+OPPOSITE = TET_FACES_INWARD
 #: Column of the edge (c, j) for corner c and each other corner j (-1 on the diagonal).
 EDGE_COLUMN = np.array([[-1, 0, 1, 2], [0, -1, 3, 4], [1, 3, -1, 5], [2, 4, 5, -1]], np.int64)
 #: What a node's adjacency row holds of each tet around it (``Adjacency.terms``): the edge

@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from cutkit.errors import InputError, MeshError
+from cutkit.mesh.geometry import tet_volumes
 from cutkit.relax._kernels import greedy_colouring, spring_csr
 from cutkit.relax.materials import material_of_tets, prestress_of_tets
 
@@ -199,23 +200,9 @@ def tet_edges(tets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     edges : (e, 2) int64, ``edges[:, 0] < edges[:, 1]``, lexicographically sorted
     tet_edge : (m, 6) int64
     """
-    try:  # the shared mesh topology module when it is there
-        from cutkit.mesh.topology import unique_edges
+    from cutkit.mesh.topology import unique_edges
 
-        return unique_edges(tets)
-    except ImportError:
-        pass
-    local = np.array([[0, 1], [0, 2], [0, 3], [1, 2], [1, 3], [2, 3]])
-    pairs = np.sort(tets[:, local].reshape(-1, 2), axis=1)
-    n = int(tets.max()) + 1 if tets.size else 1
-    keys, inverse = np.unique(pairs[:, 0] * n + pairs[:, 1], return_inverse=True)  # 1D keys: fast
-    edges = np.stack([keys // n, keys % n], axis=1)
-    return edges.astype(np.int64), inverse.reshape(-1, 6).astype(np.int64)
-
-
-def _tet_volumes(points: np.ndarray, tets: np.ndarray) -> np.ndarray:
-    p = points[tets]
-    return np.einsum("ij,ij->i", np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), p[:, 3] - p[:, 0]) / 6.0
+    return unique_edges(tets)
 
 
 def build_spring_model(
@@ -264,7 +251,7 @@ def build_spring_model(
         raise InputError(f"stiffness calibration must be > 0, got {calibration}")
     if not (np.isfinite(volume_stiffness) and volume_stiffness >= 0):
         raise InputError(f"volume_stiffness must be a finite number >= 0, got {volume_stiffness}")
-    vol = _tet_volumes(points, tets)
+    vol = tet_volumes(points, tets)
     if np.any(vol <= 0):
         bad = int(np.flatnonzero(vol <= 0)[0])
         raise MeshError(f"tet {bad} has non-positive volume {vol[bad]:.3g} mm^3 (inverted or degenerate)")

@@ -102,7 +102,7 @@ def add_nodes(
     model.rebuild_adjacency(recolour=False)
     model.colour = np.concatenate([model.colour, np.full(p, -1, np.int32)])
     new_ids = np.arange(n, n + p, dtype=np.int64)
-    _recolour(model, new_ids)
+    recolour(model, new_ids)
     return new_ids
 
 
@@ -147,7 +147,7 @@ def add_springs(
     model.stiffness = np.concatenate([model.stiffness, stiffness])
     model.rest_length = np.concatenate([model.rest_length, rest_length])
     model.rebuild_adjacency(recolour=False)
-    _recolour(model, np.unique(springs))
+    recolour(model, np.unique(springs))
     return np.arange(s0, s0 + a, dtype=np.int64)
 
 
@@ -176,8 +176,15 @@ def remove_springs(model: SpringModel, spring_ids: np.ndarray) -> np.ndarray:
     return np.flatnonzero(keep)
 
 
-def _recolour(model: SpringModel, nodes: np.ndarray) -> None:
-    """Give each node the smallest colour none of its neighbours has."""
+def recolour(model: SpringModel, nodes: np.ndarray) -> None:
+    """Give each node the smallest colour none of its neighbours has (``model.colour``, in place).
+
+    Parameters
+    ----------
+    model : SpringModel
+    nodes : (k,) int64
+        The nodes to colour again (those whose springs changed).
+    """
     off, adj, col = model.adj_offsets, model.adj_nodes, model.colour
     for k in np.asarray(nodes, np.int64):
         nb = col[adj[off[k]:off[k + 1]]]

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from cutkit.relax._shape_kernels import corner_edge_inverses
+from cutkit.relax.kernels import corner_edge_inverses
 
 
 @njit(cache=True, nogil=True)

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from numba import njit
 
-from cutkit.decimate._geometry import segment_dist2
+from cutkit.mesh.geometry import segment_dist2
 
 
 @njit(cache=True, nogil=True)

@@ -31,8 +31,8 @@ from cutkit.relax.elastic import (
     initial_element_state,
     node_damping,
 )
-from cutkit.mesh._quality_kernels import signed_volumes_serial
-from cutkit.relax._adjacency_kernels import loaded_nodes, tets_around
+from cutkit.mesh.geometry import signed_volumes_serial
+from cutkit.relax.kernels import loaded_nodes, tets_around
 from cutkit.relax.growable import append_rows
 from cutkit.relax.vbd import DEFAULT_ATOL_N, local_step
 from cutkit.relax.materials import material_of_tets, prestress_of_tets

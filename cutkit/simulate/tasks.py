@@ -206,13 +206,13 @@ class CutTask:
         The active tets are those the swept quad met, whose last edge is the
         blade at its new pose: a tet the blade is in now is among them.
         """
-        from cutkit.cutting._kernels import seg_meets_any_tet
+        from cutkit.mesh.geometry import segment_meets_any_tet
 
         cm = self.tis.cm
         corners = np.ascontiguousarray(cm.orig_tets[cm.active_tets])
         length = cm.blade_length
-        return (seg_meets_any_tet(blade_tip - length * axis, blade_tip, cm._x, corners),
-                seg_meets_any_tet(proxy - length * axis, proxy, self.tis.positions, corners))
+        return (segment_meets_any_tet(blade_tip - length * axis, blade_tip, cm._x, corners),
+                segment_meets_any_tet(proxy - length * axis, proxy, self.tis.positions, corners))
 
     def _apply(self, result) -> None:
         """Hand a cut step's topology change over to the tissue."""

@@ -29,19 +29,15 @@ from __future__ import annotations
 import numpy as np
 
 from cutkit.cutting import CutMesh
-from cutkit.mesh.topology import TET_EDGES, unique_edges
+from cutkit.mesh.geometry import TET_EDGES, tet_volumes
+from cutkit.mesh.topology import unique_edges
 from cutkit.relax import Control, NodeLists, build_spring_model, initial_state
 from cutkit.relax.materials import material_of_tets, prestress_of_tets
 from cutkit.relax.model import STIFFNESS_CALIBRATION
-from cutkit.relax.topology import _recolour
+from cutkit.relax.topology import recolour
 from cutkit.simulate._kernels import lookup_springs
 from cutkit.simulate.rest_map import rest_map_radius
 from cutkit.simulate.tissue_base import TissueBase
-
-
-def _rest_volumes(X: np.ndarray, tets: np.ndarray) -> np.ndarray:
-    p = X[tets]
-    return np.einsum("ij,ij->i", np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), p[:, 3] - p[:, 0]) / 6.0
 
 
 #: Tets whose normalised volume 6 sqrt(2) V / l_rms^3 (1 for a regular tet)
@@ -141,7 +137,7 @@ class Tissue(TissueBase):
         cm = self.cm
         q = cm._tets[tet_ids]
         X = cm._X
-        V = _rest_volumes(X, q)
+        V = tet_volumes(X, q)
         orig = cm._tet_orig[tet_ids]
         d = X[q[:, TET_EDGES[:, 1]]] - X[q[:, TET_EDGES[:, 0]]]  # (t, 6, 3)
         length = np.linalg.norm(d, axis=2)
@@ -316,7 +312,7 @@ class Tissue(TissueBase):
         if sm.colour.shape[0] < sm.n_nodes:
             sm.colour = np.concatenate([sm.colour, np.full(sm.n_nodes - sm.colour.shape[0], -1, np.int32)])
         if len(new_pairs):
-            _recolour(sm, np.unique(new_pairs))
+            recolour(sm, np.unique(new_pairs))
         self.lists.topology_changed()
     def _rebuild_volume_term(self) -> None:
         """The volume term over the live tets: rest volumes from the per-tet records (the cut is made at rest)."""
