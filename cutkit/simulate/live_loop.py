@@ -95,10 +95,10 @@ class LiveLoop:
 
         self.opt = opt or SimulateOptions(frames=False)
         self.opt.check()
-        out_dir.mkdir(parents=True, exist_ok=True)
         self.out_dir, self.source, self.views, self.model_path = out_dir, source, list(views), model_path
         blade_length = self.opt.blade_length or DEFAULT_BLADE_LENGTH
         self.session = s = Session(model, self.opt, blade_length, DEFAULT_BLADE_BREADTH)
+        out_dir.mkdir(parents=True, exist_ok=True)  # once the model is known to run
         self.service = isinstance(source, HapticsPoseSource)
         self.poses = PoseRecorder(blade_length, DEFAULT_BLADE_BREADTH)
         self.meter = TickMeter(source, poses=self.poses) if self.service else None
