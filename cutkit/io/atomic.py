@@ -109,6 +109,7 @@ FOLDER_OUTPUTS: dict[str, tuple[str, ...]] = {
     "cut": ("frames", "cut.pvd", "model.h5"),
     "relax": ("frames", "relax.pvd"),
     "live": ("trajectory.csv", "forces.csv", "summary.json", "model.h5"),
+    "sweep": ("results.parquet", "results.csv", "runs"),
 }
 #: The demo's folder: a simulate folder and the knee model the demo builds (kept and reused).
 DEMO_MODEL = ("knee.h5", "knee.h5.key")
@@ -140,8 +141,9 @@ def check_output_folder(path: str | os.PathLike, command: str, overwrite: bool =
         return []
     if not overwrite:
         shown = ", ".join(entries[:3]) + (f" (+{len(entries) - 3} more)" if len(entries) > 3 else "")
-        raise InputError(f"{path}: the output folder is not empty ({shown}); give --overwrite to replace "
-                         f"the outputs of an earlier `cutkit {command}` there, or another folder")
+        resume = "--resume to continue the earlier sweep there, " if command == "sweep" else ""
+        raise InputError(f"{path}: the output folder is not empty ({shown}); give {resume}--overwrite to "
+                         f"replace the outputs of an earlier `cutkit {command}` there, or another folder")
     ours = [p / name for name in FOLDER_OUTPUTS[command] if (p / name).exists() or (p / name).is_symlink()]
     for inp in inputs:
         if inp is None:

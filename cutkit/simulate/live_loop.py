@@ -142,12 +142,14 @@ class LiveLoop:
         self.relax = RelaxThread(s, clock, chunk)
         self.relax.start()
         self.interrupted = False
+        stopped_by = None
         try:
             if on_start is not None:
                 on_start()
             self._loop(max_seconds, idle_end_s, stop or threading.Event(), on_frame, until_idle_s)
-        except KeyboardInterrupt:
+        except KeyboardInterrupt as exc:  # Ctrl-C, or SIGTERM as the command line raises it
             self.interrupted = True
+            stopped_by = exc
         finally:
             self.relax.halt()
             self.loop_wall = self.now()
@@ -155,7 +157,7 @@ class LiveLoop:
         if self.relax.error is not None:
             raise self.relax.error
         if self.interrupted:
-            raise KeyboardInterrupt
+            raise stopped_by
         return summary
 
     def now(self) -> float:

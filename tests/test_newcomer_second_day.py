@@ -1,0 +1,293 @@
+"""A newcomer's second day (issue 33): the bad-input matrix, each case one exact line, its exit status
+and what is (not) left on disk."""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from cutkit.assign.defaults import DEFAULT_MATERIALS
+from cutkit.cli.main import cli
+from cutkit.cutting.trajectory import straight_incision, write_trajectory
+from cutkit.io.model_h5 import read_model, write_model
+from cutkit.mesh.generate import box_mesh
+from cutkit.model.tetmodel import BoundaryConditions, Materials, TetModel
+
+ROOT = Path(__file__).resolve().parents[1]
+BLOCK = str(ROOT / "sample_volumes" / "block_labels.nrrd")
+
+
+def run(args):
+    r = CliRunner().invoke(cli, [str(a) for a in args])
+    assert r.exception is None or isinstance(r.exception, SystemExit), repr(r.exception)
+    return r.exit_code, r.output
+
+
+def error_line(args, code=2):
+    got, output = run(args)
+    lines = [ln for ln in output.splitlines() if ln.startswith("cutkit: error:")]
+    assert got == code, output
+    assert len(lines) == 1, output
+    return lines[0]
+
+
+def slab(materials=True, shape=(6, 3, 3)):
+    """A small box of tets (label 1), held at x = 0, with muscle as its material."""
+    p, t = box_mesh(shape)
+    rows = [dict(label=1, name="muscle", **DEFAULT_MATERIALS["muscle"])] if materials else []
+    return TetModel.from_arrays(p, t, labels=np.ones(len(t), np.int32),
+                                materials=Materials.from_rows(rows) if rows else Materials.empty(),
+                                boundary=BoundaryConditions(fixed_nodes=np.flatnonzero(p[:, 0] == 0)))
+
+
+@pytest.fixture
+def d(tmp_path):
+    write_model(tmp_path / "m.h5", slab())
+    write_model(tmp_path / "bare.h5", slab(materials=False))
+    traj = straight_incision([0.5, 1.37, 3.0], [5.5, 1.37, 3.0], [0, 0, -1.0], depth=1.5, approach=1.0,
+                             press_time=0.05, cut_time=0.2, rate=50.0, blade_length=5.0)
+    write_trajectory(tmp_path / "c.csv", traj)
+    return tmp_path
+
+
+def listing(folder):
+    return sorted(str(p.relative_to(folder)) for p in Path(folder).rglob("*"))
+
+
+# ---- 1. a non-empty output folder is refused unless --overwrite
+
+FOLDER_COMMANDS = {
+    "simulate": lambda d, o: ["simulate", d / "m.h5", "--trajectory", d / "c.csv", "-o", o, "--hold", "0",
+                              "--fps", "5"],
+    "cut": lambda d, o: ["cut", d / "m.h5", "--trajectory", d / "c.csv", "-o", o],
+    "relax": lambda d, o: ["relax", d / "m.h5", "--seconds", "0.01", "--fps", "100", "-o", o],
+}
+
+
+@pytest.mark.parametrize("name", sorted(FOLDER_COMMANDS))
+def test_non_empty_output_folder_is_refused(d, name):
+    out = d / "out"
+    out.mkdir()
+    (out / "0032.vtu").write_text("an earlier run's frame\n")
+    line = error_line(FOLDER_COMMANDS[name](d, out))
+    assert line == (f"cutkit: error: {out}: the output folder is not empty (0032.vtu); give --overwrite to "
+                    f"replace the outputs of an earlier `cutkit {name}` there, or another folder")
+    assert listing(out) == ["0032.vtu"]
+
+
+@pytest.mark.parametrize("name", sorted(FOLDER_COMMANDS))
+def test_overwrite_replaces_only_the_commands_own_outputs(d, name):
+    out = d / "out"
+    code, output = run(FOLDER_COMMANDS[name](d, out))
+    assert code == 0, output
+    frames = sorted((out / "frames").glob("*.vtu"))
+    stale = out / "frames" / "9999.vtu"
+    stale.write_bytes(frames[-1].read_bytes())  # as if an earlier run had been longer
+    (out / "notes.txt").write_text("mine\n")
+    code, output = run(FOLDER_COMMANDS[name](d, out) + ["--overwrite"])
+    assert code == 0, output
+    assert not stale.exists()  # nothing of the earlier run mixes with this one
+    assert (out / "notes.txt").read_text() == "mine\n"  # what cutkit did not write stays
+    assert sorted((out / "frames").glob("*.vtu")) == frames
+
+
+def test_overwrite_never_removes_an_input(d):
+    out = d / "out"
+    out.mkdir()
+    model = out / "model.h5"
+    model.write_bytes((d / "m.h5").read_bytes())
+    line = error_line(["simulate", model, "--trajectory", d / "c.csv", "-o", out, "--overwrite"])
+    assert line == (f"cutkit: error: {model}: an input of this run is one of the outputs --overwrite would "
+                    f"replace in {out}; move it or write to another folder")
+    assert listing(out) == ["model.h5"]
+
+
+def test_sweep_offers_resume_and_overwrite(d):
+    out = d / "sw"
+    out.mkdir()
+    (out / "results.csv").write_text("key\n")
+    (d / "s.toml").write_text("name = 'x'\n")
+    line = error_line(["sweep", d / "s.toml", "-o", out])
+    assert line == (f"cutkit: error: {out}: the output folder is not empty (results.csv); give --resume to "
+                    "continue the earlier sweep there, --overwrite to replace the outputs of an earlier "
+                    "`cutkit sweep` there, or another folder")
+    line = error_line(["sweep", d / "s.toml", "-o", out, "--resume", "--overwrite"])
+    assert line == "cutkit: error: --resume continues the earlier sweep, --overwrite replaces it; give one"
+    assert listing(out) == ["results.csv"]
+
+
+def test_demo_folder_is_reused_and_a_foreign_one_refused(tmp_path):
+    from cutkit.simulate.demo import demo_outputs
+
+    out = tmp_path / "demo"
+    out.mkdir()
+    for name in ("knee.h5", "knee.h5.key", "cut.pvd", "forces.csv"):
+        (out / name).write_text("x\n")
+    (out / "pictures").mkdir()
+    (out / "pictures" / "0054_cut.png").write_text("x\n")
+    # the demo's own folder: its earlier run goes, its built model stays for reuse
+    assert sorted(p.name for p in demo_outputs(out)) == ["cut.pvd", "forces.csv", "pictures"]
+    (out / "mine.txt").write_text("x\n")
+    line = error_line(["demo", "-o", out])
+    assert line == (f"cutkit: error: {out}: the output folder is not empty (cut.pvd, forces.csv, knee.h5 (+3 "
+                    "more)); give --overwrite to replace the outputs of an earlier `cutkit demo` there, or "
+                    "another folder")
+    assert sorted(p.name for p in demo_outputs(out, overwrite=True)) == ["cut.pvd", "forces.csv", "pictures"]
+    assert (out / "mine.txt").exists() and (out / "knee.h5").exists()
+
+
+# ---- 7. refusals leave no folder; an imported mesh is told to get materials
+
+
+def test_model_without_materials_names_assign(d):
+    out = d / "out"
+    line = error_line(["simulate", d / "bare.h5", "--trajectory", d / "c.csv", "-o", out])
+    assert line == (f"cutkit: error: {d / 'bare.h5'}: the model has no materials yet; give them with "
+                    f"`cutkit assign {d / 'bare.h5'} --recipe R.toml -o MODEL.h5` (docs/recipes.md)")
+    assert not out.exists()
+
+
+def test_model_with_a_label_without_material():
+    from cutkit.errors import InputError
+    from cutkit.simulate.run import preflight
+
+    m = slab()
+    m.labels[:3] = 4  # a model file refuses this on reading; a model built in a script may have it
+    with pytest.raises(InputError) as err:
+        preflight(m, "two.h5")
+    assert str(err.value) == ("two.h5: the model has no material for tet label 4; give them with "
+                              "`cutkit assign two.h5 --recipe R.toml -o MODEL.h5` (docs/recipes.md)")
+
+
+def test_import_says_what_to_run_next(d):
+    import meshio
+
+    p, t = box_mesh((2, 2, 2))
+    meshio.write(d / "sphere.vtu", meshio.Mesh(p, [("tetra", t)]))
+    code, output = run(["import", d / "sphere.vtu", "-o", d / "s.h5"])
+    assert code == 0, output
+    text = " ".join(output.split())
+    assert (f"the model has no materials yet: give them with `cutkit assign {d / 's.h5'} --recipe R.toml "
+            "-o MODEL.h5` (docs/recipes.md), then `cutkit simulate`") in text
+
+
+def test_failed_run_leaves_no_empty_folder(d, monkeypatch):
+    import cutkit.simulate
+    from cutkit.errors import InputError
+
+    def refuse(model, traj, out_dir, *a, **k):
+        (Path(out_dir) / "frames").mkdir(parents=True)  # the folders made, then a refusal
+        raise InputError("refused inside the run")
+
+    monkeypatch.setattr(cutkit.simulate, "simulate", refuse)
+    (d / "new").mkdir()
+    out = d / "new" / "out"
+    line = error_line(FOLDER_COMMANDS["simulate"](d, out))
+    assert line == "cutkit: error: refused inside the run"
+    assert not out.exists() and (d / "new").exists()  # what was there before stays
+
+
+# ---- 5. simulate refuses a mesh that fails the cheap checks
+
+
+def test_simulate_refuses_a_flat_tet(d):
+    m = slab()
+    m.points = m.points.copy()
+    t0 = m.tets[0]
+    m.points[t0[3]] = m.points[t0[0]] + 0.5 * (m.points[t0[1]] - m.points[t0[0]])  # a zero-volume tet
+    write_model(d / "flat.h5", m)
+    line = error_line(["simulate", d / "flat.h5", "--trajectory", d / "c.csv", "-o", d / "out"])
+    assert line.startswith(f"cutkit: error: {d / 'flat.h5'}: fails the mesh check \"positive orientation\" (")
+    assert line.endswith(f"); run `cutkit check {d / 'flat.h5'}`")
+    assert not (d / "out").exists()
+
+
+# ---- 3. memory: refused in one line before anything is written
+
+
+def test_simulate_refuses_a_model_that_does_not_fit(d, monkeypatch):
+    import cutkit.simulate.run as run_module
+
+    monkeypatch.setattr(run_module, "available_memory_bytes", lambda: 100 << 20)
+    line = error_line(["simulate", d / "m.h5", "--trajectory", d / "c.csv", "-o", d / "out"])
+    n = read_model(d / "m.h5").n_tets
+    need = run_module.simulate_memory_bytes(n, read_model(d / "m.h5").n_points)
+    assert line == (f"cutkit: error: {d / 'm.h5'}: {n:,} tets need about {need / 2**30:.1f} GiB to simulate, "
+                    f"0.1 GiB is available; decimate it first (`cutkit decimate {d / 'm.h5'} --ratio R "
+                    "-o SMALLER.h5`)")
+    assert not (d / "out").exists()
+
+
+def test_available_memory_is_read():
+    from cutkit.simulate.run import available_memory_bytes
+
+    got = available_memory_bytes()
+    assert got is None or got > 0
+
+
+# ---- 8. SIGTERM takes Ctrl-C's path: a valid recording and summary, exit 143
+
+
+def _wait_for(cond, proc, timeout_s=600.0):
+    """Poll ``cond`` (no timing assertion: a generous bound for a loaded machine)."""
+    import time
+
+    end = time.monotonic() + timeout_s
+    while time.monotonic() < end:
+        if cond():
+            return True
+        if proc.poll() is not None:
+            return False
+        time.sleep(0.05)
+    return False
+
+
+@pytest.mark.slow
+def test_sigterm_leaves_a_valid_recording(d):
+    out = d / "out"
+    env = {**os.environ, "NUMBA_NUM_THREADS": "1"}
+    proc = subprocess.Popen([sys.executable, "-m", "cutkit.cli.main", "simulate", str(d / "m.h5"),
+                             "--trajectory", str(d / "c.csv"), "-o", str(out), "--hold", "600", "--fps", "20"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env)
+    try:
+        # a frame after the settle: the run is in its loop
+        started = _wait_for(lambda: len(list((out / "frames").glob("*.vtu"))) >= 3, proc)
+        assert started, proc.communicate()
+        proc.send_signal(signal.SIGTERM)
+        _, err = proc.communicate(timeout=600)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 143, err
+    assert err.decode().strip().splitlines()[-1] == "cutkit: terminated"
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["interrupted"] is True
+    assert (out / "forces.csv").read_text().startswith("t,state,")
+    pvd = (out / "cut.pvd").read_text()
+    assert pvd.rstrip().endswith("</VTKFile>")
+    assert pvd.count("<DataSet") == len(list((out / "frames").glob("*.vtu")))
+
+
+def test_sigterm_is_raised_as_an_interrupt(monkeypatch):
+    """In process: the handler raises Terminated (a KeyboardInterrupt) and the command exits 143."""
+    import click
+
+    from cutkit.cli import main as main_module
+
+    @click.command("term")
+    def term():
+        os.kill(os.getpid(), signal.SIGTERM)
+        for _ in range(1000):  # the handler runs at the next bytecode of the main thread
+            pass
+        raise AssertionError("SIGTERM did not stop the command")
+
+    monkeypatch.setattr(main_module._TableGroup, "get_command", lambda self, ctx, name: term)
+    before = signal.getsignal(signal.SIGTERM)
+    assert main_module.main(["term"]) == 143
+    assert signal.getsignal(signal.SIGTERM) == before
