@@ -30,7 +30,7 @@ def command(model, output, target_tets, ratio, tolerance, min_dihedral, level, o
 
     from cutkit.cli._ui import check_model_output
     from cutkit.io.atomic import check_writable
-    from cutkit.cli._ui import console, progress, table
+    from cutkit.cli._ui import console, progress, say, table, warn
     from cutkit.decimate import decimate, extract_level, n_levels, quality_summary
     from cutkit.errors import InputError
     from cutkit.io.model_h5 import read_model, write_model
@@ -78,10 +78,9 @@ def command(model, output, target_tets, ratio, tolerance, min_dihedral, level, o
     ]
     console.print(table(f"{what} in {seconds:.2f} s -> {output}", ["", "input", "output"], rows))
     if opt is not None:
-        verdict = "[green]accepted[/]" if opt["accepted"] else "[yellow]rejected[/]"
-        console.print(f"{optimizer} optimiser ({opt['seconds']:.2f} s): min dihedral {opt['min_dihedral_before_deg']:.2f} -> "
-                      f"{opt['min_dihedral_after_deg']:.2f} deg, {opt['tets_before']} -> {opt['tets_after']} tets: "
-                      f"{verdict} ({opt['reason']})")
+        verdict = "accepted" if opt["accepted"] else "rejected"
+        say(f"{optimizer} optimiser ({opt['seconds']:.2f} s): min dihedral {opt['min_dihedral_before_deg']:.2f} -> "
+            f"{opt['min_dihedral_after_deg']:.2f} deg, {opt['tets_before']} -> {opt['tets_after']} tets: "
+            f"{verdict} ({opt['reason']})")
     if level is None and out.n_tets > out.provenance["decimate"]["target_tets"]:
-        console.print(f"[yellow]warning:[/] no legal collapse left at {out.n_tets} tets "
-                      f"(target {out.provenance['decimate']['target_tets']})")
+        warn(f"no legal collapse left at {out.n_tets} tets (target {out.provenance['decimate']['target_tets']})")

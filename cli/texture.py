@@ -14,7 +14,7 @@ def command(model, volume_path, seg_path, method, max_voxels, output):
     """Give every node of MODEL coordinates into a 3D texture (paper section 7.2)."""
     from cutkit.cli._ui import check_model_output
     from cutkit.io.atomic import check_writable
-    from cutkit.cli._ui import console
+    from cutkit.cli._ui import say, warn
     from cutkit.io.model_h5 import read_model, write_model
     from cutkit.texture import register_texture
     from cutkit.volumes import read_volume
@@ -23,7 +23,7 @@ def command(model, volume_path, seg_path, method, max_voxels, output):
     check_writable(output)
     if seg_path is None and method != "none":
         method_note = f"--register {method} needs --segmentation; registering with 'none'"
-        console.print(f"[yellow]warning:[/] {method_note}")
+        warn(method_note)
         method = "none"
     kwargs = {"max_voxels": max_voxels} if max_voxels else {}
     seg = read_volume(seg_path) if seg_path else None
@@ -34,4 +34,4 @@ def command(model, volume_path, seg_path, method, max_voxels, output):
     else:
         how = (f"registration {rep.method}: residual {rep.residual_before_mm:.3f} mm -> "
                f"{rep.residual_after_mm:.3f} mm in {rep.iterations} iterations")
-    console.print(f"texture {rep.texture_shape} (downsampled x{rep.downsample_factor}); {how} -> {output}")
+    say(f"texture {rep.texture_shape} (downsampled x{rep.downsample_factor}); {how} -> {output}")

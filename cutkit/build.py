@@ -118,9 +118,11 @@ def _stage_decimate(ctx: BuildContext) -> dict:
 def _stage_assign(ctx: BuildContext) -> dict:
     from cutkit.assign import assign
 
-    ctx.model = assign(ctx.model, ctx.recipe)
+    warnings: list[str] = []
+    ctx.model = assign(ctx.model, ctx.recipe, warnings=warnings)
     b = ctx.model.boundary
     return {
+        "warnings": warnings,
         "materials": len(ctx.model.materials.name),
         "fixed_nodes": int(b.fixed_nodes.size),
         "prescribed_nodes": int(b.prescribed_nodes.size),

@@ -291,3 +291,35 @@ def test_sigterm_is_raised_as_an_interrupt(monkeypatch):
     before = signal.getsignal(signal.SIGTERM)
     assert main_module.main(["term"]) == 143
     assert signal.getsignal(signal.SIGTERM) == before
+
+
+# ---- 9. user text is never rich markup
+
+
+@pytest.mark.parametrize("folder", ["a[/]b", "m[bold]x"])
+def test_bracketed_names_pass_through_every_command(tmp_path, folder):
+    d = tmp_path / folder
+    d.mkdir(parents=True)  # "a[/]b" is a folder "a[" holding "]b": the path's text holds "[/]"
+    seg, mesh, model = d / "s[1].nrrd", d / "m[bold]x.h5", d / "cut[final].h5"
+    steps = [
+        (["segment", BLOCK, "-o", seg], [f"-> {seg}"]),
+        (["isovolume", seg, "-o", mesh], [f"-> {mesh}"]),
+        (["info", mesh], [f"model {mesh}"]),
+        (["check", mesh], [f"check {mesh}"]),
+        (["export", mesh, d / "e[x].vtu"], [f"-> {d / 'e[x].vtu'}"]),
+        (["assign", mesh, "--recipe", d / "r[1].toml", "-o", model], [f"-> {model}"]),
+        (["trajectory", "--model", model, "--start", "4,6,10", "--end", "30,6,10", "--depth", "2",
+          "-o", d / "cut[final].csv"], [f"{d / 'cut[final].csv'}: "]),
+        (["cut", model, "--trajectory", d / "cut[final].csv", "-o", d / "o[ut]"], [f"-> {d / 'o[ut]'}/cut.pvd"]),
+        (["relax", model, "--seconds", "0.01", "--fps", "100", "-o", d / "r[/]"], [f"-> {d / 'r[/]'}/relax.pvd"]),
+        (["build-model", BLOCK, "--no-decimate", "-o", d / "b[bold].h5"],
+         [f"build-model -> {d / 'b[bold].h5'}", "add a [boundary] table"]),
+    ]
+    (d / "r[1].toml").write_text("[[materials]]\nlabel = 1\nname = 'muscle'\n\n[[materials]]\nlabel = 2\n"
+                                 "name = 'fat'\n\n[boundary]\nfixed_labels = [2]\n")
+    for args, expected in steps:
+        code, output = run(args)
+        assert code == 0, (args, output)
+        text = " ".join(output.split())
+        for e in expected:
+            assert e in text, (args, output)
