@@ -323,3 +323,47 @@ def test_bracketed_names_pass_through_every_command(tmp_path, folder):
         text = " ".join(output.split())
         for e in expected:
             assert e in text, (args, output)
+
+
+# ---- 2. assign: labels the model lacks, defaults it took
+
+
+def test_assign_refuses_labels_the_model_does_not_have(d):
+    (d / "r.toml").write_text("[[materials]]\nlabel = 7\nname = 'fat'\n\n[boundary]\nfixed_labels = [9]\n")
+    line = error_line(["assign", d / "m.h5", "--recipe", d / "r.toml", "-o", d / "a.h5"])
+    assert line == ("cutkit: error: the recipe names labels 7 (materials); 9 (boundary.fixed_labels) that no tet "
+                    "of the model has; the model's labels: 1")
+    assert not (d / "a.h5").exists()
+
+
+def test_assign_says_which_defaults_an_unknown_tissue_took(d):
+    (d / "r.toml").write_text("[[materials]]\nlabel = 1\nname = 'brain'\n")
+    code, output = run(["assign", d / "m.h5", "--recipe", d / "r.toml", "-o", d / "a.h5"])
+    assert code == 0, output
+    lines = [ln for ln in output.splitlines() if ln.startswith("warning:")]
+    assert lines == ["warning: material 'brain' (label 1) is not one of cutkit's tissues (skin, fat, muscle, "
+                     "tendon, bone): it takes the generic soft tissue's (muscle's) defaults for every field "
+                     "(E = 30000, poisson_ratio = 0.45, density = 1090)"]
+    (d / "r.toml").write_text("[[materials]]\nlabel = 1\nname = 'brain'\nE = 1000.0\npoisson_ratio = 0.49\n"
+                              "density = 1040.0\n")
+    code, output = run(["assign", d / "m.h5", "--recipe", d / "r.toml", "-o", d / "a.h5"])
+    assert code == 0 and "E = " not in output
+    assert "defaults for damping, F_enter" in " ".join(output.split())
+
+
+# ---- 3. build-model states its decimation and warns about size
+
+
+def test_build_model_states_the_default_and_warns_about_size(tmp_path, monkeypatch):
+    import cutkit.cli.build_model as bm
+
+    code, output = run(["build-model", "--help"])
+    assert "there is no decimation" in " ".join(output.split())
+    monkeypatch.setattr(bm, "SIZE_WARN_TETS", 1000)
+    code, output = run(["build-model", BLOCK, "-o", tmp_path / "m.h5"])
+    assert code == 0, output
+    n = read_model(tmp_path / "m.h5").n_tets
+    text = " ".join(output.split())
+    assert f"decimation: none (no --ratio and no recipe [decimate] table): all {n} isovolume tets kept" in text
+    assert f"warning: {n:,} tets (above 1,000): `cutkit simulate` would need about" in text
+    assert "--ratio" in text.split("(above 1,000)")[1]
