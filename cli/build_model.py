@@ -98,9 +98,9 @@ def command(volume, output, recipe_path, threshold, channel, otsu, labels_path, 
     from pathlib import Path
 
     if not Path(volume).exists():
-        raise InputError(f"{volume}: no such volume file or folder")
+        raise InputError(f"{volume}: no such file or folder")
     if labels_path is not None and not Path(labels_path).exists():
-        raise InputError(f"{labels_path}: no such label map file or folder")
+        raise InputError(f"{labels_path}: no such file or folder")
     warn_missing_geometry(volume, spacing)
 
     with progress() as bar:

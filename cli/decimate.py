@@ -26,6 +26,7 @@ def command(model, output, target_tets, ratio, tolerance, min_dihedral, level, o
     The collapses are recorded in the output (extra/progressive, compressed), so any
     coarser or finer level can be extracted later with --level (--no-record leaves it out).
     """
+    import math
     import time
 
     from cutkit.cli._ui import check_model_output
@@ -39,6 +40,15 @@ def command(model, output, target_tets, ratio, tolerance, min_dihedral, level, o
         raise InputError("--level extracts a recorded level; it cannot be combined with --target-tets or --ratio")
     if level is None and (target_tets is None) == (ratio is None):
         raise InputError("give exactly one of --target-tets or --ratio (or --level K)")
+    # the numbers first, with the flags' names, before any progress display
+    if target_tets is not None and target_tets < 1:
+        raise InputError(f"--target-tets must be a whole number >= 1, got {target_tets}")
+    if ratio is not None and not (0.0 < ratio <= 1.0):
+        raise InputError(f"--ratio must be the fraction of tets to keep, in (0, 1], got {ratio:g}")
+    if not (0.0 <= min_dihedral < 70.0):
+        raise InputError(f"--min-dihedral must lie in [0, 70) degrees, got {min_dihedral:g}")
+    if tolerance is not None and not (math.isfinite(tolerance) and tolerance >= 0.0):
+        raise InputError(f"--surface-tolerance must be a number of mm >= 0, got {tolerance:g}")
     check_model_output(output)
     check_writable(output)
     src = read_model(model)

@@ -17,7 +17,7 @@ def command(path: str) -> None:
 
     p = Path(path)
     if not p.exists():
-        raise InputError(f"file not found: {path}")
+        raise InputError(f"{path}: no such file or folder")
     if p.is_file() and p.suffix.lower() in (".h5", ".hdf5"):
         from cutkit.io.model_h5 import read_schema_version
 

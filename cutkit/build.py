@@ -220,7 +220,7 @@ def run_build(
 
     volume_path = Path(volume_path)
     if not volume_path.exists():
-        raise InputError(f"{volume_path}: no such volume file or folder")
+        raise InputError(f"{volume_path}: no such file or folder")
     ctx = BuildContext(recipe=recipe, volume_path=str(volume_path))
     t0 = time.perf_counter()
     ctx.volume = read_volume(volume_path, spacing=spacing) if spacing is not None else read_volume(volume_path)

@@ -367,3 +367,90 @@ def test_build_model_states_the_default_and_warns_about_size(tmp_path, monkeypat
     assert f"decimation: none (no --ratio and no recipe [decimate] table): all {n} isovolume tets kept" in text
     assert f"warning: {n:,} tets (above 1,000): `cutkit simulate` would need about" in text
     assert "--ratio" in text.split("(above 1,000)")[1]
+
+
+# ---- 10. messages that misled
+
+
+def test_isovolume_names_the_missing_label(tmp_path):
+    line = error_line(["isovolume", BLOCK, "--label", "9", "-o", tmp_path / "m.h5"])
+    assert line == "cutkit: error: isovolume: no voxel has label 9; the label map has labels 1, 2"
+    assert not (tmp_path / "m.h5").exists()
+
+
+@pytest.mark.parametrize("cmd", ["info", "segment"])
+def test_empty_volume_file(tmp_path, cmd):
+    (tmp_path / "e.nrrd").write_bytes(b"")
+    args = [cmd, tmp_path / "e.nrrd"] + (["-o", tmp_path / "s.nrrd"] if cmd == "segment" else [])
+    line = error_line(args)
+    assert line == f"cutkit: error: {tmp_path / 'e.nrrd'}: the file is empty (0 bytes), not a nrrd volume"
+    assert listing(tmp_path) == ["e.nrrd"]
+
+
+def test_trajectory_zero_inward(tmp_path):
+    line = error_line(["trajectory", "--start", "0,0,0", "--end", "10,0,0", "--inward", "0,0,0",
+                       "-o", tmp_path / "t.csv"])
+    assert line == "cutkit: error: incision: inward must be a non-zero direction, got 0,0,0"
+    assert not (tmp_path / "t.csv").exists()
+
+
+def test_trajectory_far_from_the_model(d):
+    line = error_line(["trajectory", "--model", d / "m.h5", "--start", "800,1,1", "--end", "810,1,1",
+                       "-o", d / "t.csv"])
+    assert line == ("cutkit: error: incision: start 800,1,1 is 794 mm from the model's surface (the model spans "
+                    "0..6, 0..3, 0..3 mm in x, y, z); give points on or near its skin")
+    line = error_line(["trajectory", "--model", d / "m.h5", "--start", "3,1,3.2", "--end", "3,1,3.3",
+                       "-o", d / "t.csv"])
+    assert line == ("cutkit: error: incision: start and end both move to the model's surface point 3,1,3; give "
+                    "points farther apart")
+    assert not (d / "t.csv").exists()
+
+
+@pytest.mark.parametrize("field,value,expected", [
+    ("E", "0.0", "E must be a positive number, got 0"),
+    ("E", "-5.0", "E must be a positive number, got -5"),
+    ("density", "0.0", "density must be a positive number, got 0"),
+    ("damping", "-1.0", "damping must be a number >= 0, got -1"),
+])
+def test_material_numbers_in_one_wording(d, field, value, expected):
+    (d / "r.toml").write_text(f"[[materials]]\nlabel = 1\nname = 'fat'\n{field} = {value}\n")
+    line = error_line(["assign", d / "m.h5", "--recipe", d / "r.toml", "-o", d / "a.h5"])
+    assert line == f"cutkit: error: {d / 'r.toml'}: [[materials]] #1: {expected}"
+
+
+@pytest.mark.parametrize("args,what", [
+    (lambda d: ["info", d / "no.h5"], "no.h5: no such file or folder"),
+    (lambda d: ["check", d / "no.h5"], "no.h5: no such file"),
+    (lambda d: ["import", d / "no.msh", "-o", d / "x.h5"], "no.msh: no such file"),
+    (lambda d: ["assign", d / "m.h5", "--recipe", d / "no.toml", "-o", d / "x.h5"], "no.toml: no such file"),
+    (lambda d: ["simulate", d / "no.h5", "--trajectory", d / "c.csv", "-o", d / "o"], "no.h5: no such file"),
+    (lambda d: ["simulate", d / "m.h5", "--trajectory", d / "no.csv", "-o", d / "o"], "no.csv: no such file"),
+    (lambda d: ["segment", d / "no.nrrd", "-o", d / "x.nrrd"], "no.nrrd: no such file or folder"),
+    (lambda d: ["build-model", d / "no.nrrd", "-o", d / "x.h5"], "no.nrrd: no such file or folder"),
+    (lambda d: ["render", d / "no"], "no: no such folder"),
+])
+def test_missing_inputs_in_one_wording(d, args, what):
+    before = listing(d)
+    line = error_line(args(d))
+    assert line == f"cutkit: error: {d}/{what}"
+    assert listing(d) == before
+
+
+def test_decimate_checks_its_numbers_before_any_progress(d):
+    code, output = run(["decimate", d / "m.h5", "--ratio", "1.5", "-o", d / "x.h5"])
+    assert code == 2
+    assert output.strip() == "cutkit: error: --ratio must be the fraction of tets to keep, in (0, 1], got 1.5"
+    code, output = run(["decimate", d / "m.h5", "--ratio", "0.5", "--min-dihedral", "75", "-o", d / "x.h5"])
+    assert output.strip() == "cutkit: error: --min-dihedral must lie in [0, 70) degrees, got 75"
+    assert not (d / "x.h5").exists()
+
+
+def test_simulate_miss_gives_extents(d):
+    traj = straight_incision([50.5, 1.37, 3.0], [55.5, 1.37, 3.0], [0, 0, -1.0], depth=1.5, approach=1.0,
+                             press_time=0.05, cut_time=0.1, rate=50.0, blade_length=5.0)
+    write_trajectory(d / "miss.csv", traj)
+    code, output = run(["simulate", d / "m.h5", "--trajectory", d / "miss.csv", "-o", d / "o", "--hold", "0"])
+    assert code == 0, output
+    text = " ".join(output.split())
+    assert ("warning: the trajectory never touches the tissue: no cut (the model spans 0..6, 0..3, 0..3 mm in "
+            "x, y, z; the trajectory 50.5..55.5, 1.37..1.37, ") in text

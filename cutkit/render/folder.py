@@ -94,7 +94,7 @@ def read_folder(path) -> Folder:
     """
     path = Path(path)
     if not path.is_dir():
-        raise InputError(f"{path}: no such output folder")
+        raise InputError(f"{path}: no such folder")
     pvd = path / "cut.pvd"
     if not pvd.is_file():
         raise InputError(f"{path}: not an output folder of cutkit simulate (no cut.pvd)")

@@ -57,7 +57,7 @@ def build_key(recipe: dict) -> str:
         if path:
             p = Path(path)
             if not p.is_file():
-                raise InputError(f"{p}: volume named by the recipe does not exist")
+                raise InputError(f"{p}: no such file or folder (a volume the demo recipe names)")
             h.update(hashlib.sha256(p.read_bytes()).digest())
     return h.hexdigest()
 
