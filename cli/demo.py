@@ -12,7 +12,8 @@ from cutkit.cli._ui import overwrite_option
                    "folder replaces the earlier run's outputs and reuses the built model; a folder holding "
                    "other files is refused without --overwrite.")
 @click.option("--fps", default=10.0, show_default=True, type=float,
-              help="Frames per simulated second (fewer than simulate's 30: a smaller folder, the same simulation).")
+              help="Frames per simulated second, as in `cutkit simulate` (output only: the same simulation "
+                   "at any rate).")
 @overwrite_option
 @click.option("--no-png", is_flag=True, help="Skip the pictures.")
 @click.option("--movie", is_flag=True, help="Also a movie of the cut, OUT/cut.mp4.")

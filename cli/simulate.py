@@ -10,9 +10,9 @@ from cutkit.cli._ui import overwrite_option
 @click.option("--trajectory", required=True, type=click.Path(dir_okay=False), help="Blade trajectory CSV.")
 @click.option("-o", "--output", "out_dir", required=True, type=click.Path(file_okay=False),
               help="Output folder (frames/, cut.pvd, cut_surface.pvd, forces.csv, summary.json, model.h5).")
-@click.option("--fps", default=30.0, show_default=True, type=float,
-              help="Frames per simulated second (output only: the simulation is the same at any rate; "
-                   "`cutkit demo` takes 10 to keep its folder small).")
+@click.option("--fps", default=10.0, show_default=True, type=float,
+              help="Frames per simulated second, as in `cutkit demo`. Output only: the simulation is the same "
+                   "at any rate; each frame of a large model costs disk and time (30 for a smooth movie).")
 @overwrite_option
 @click.option("--png", is_flag=True,
               help="Pictures of the cut half-way, at the trajectory's end and at the end (pictures/NNNN_cut.png); "
@@ -74,6 +74,13 @@ def render_with_progress(summary: dict, out_dir, png: bool, movie: bool) -> None
     summary["pictures"] = done["pictures"]
     if done["movie"]:
         summary["movie"] = done["movie"]
+    # summary.json was written before the pictures: it says what the folder holds now
+    from pathlib import Path
+
+    from cutkit.simulate.record import write_json
+
+    summary.setdefault("options", {})["png"] = bool(done["pictures"])
+    write_json(Path(out_dir) / "summary.json", summary)
 
 
 def _check_flags(**values) -> None:

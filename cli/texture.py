@@ -7,7 +7,10 @@ import click
 @click.argument("model", type=click.Path(dir_okay=False))
 @click.option("--volume", "volume_path", required=True, type=click.Path(), help="Texture volume (RGB or grey).")
 @click.option("--segmentation", "seg_path", type=click.Path(), help="Label map the mesh was built from (registration target).")
-@click.option("--register", "method", type=click.Choice(["none", "rigid", "affine"]), default="rigid", show_default=True)
+@click.option("--register", "method", type=click.Choice(["none", "rigid", "affine"]), default=None,
+              help="Align the texture to the mesh: rigid or affine ICP of the segmentation's surface onto the "
+                   "mesh's boundary (needs --segmentation), or none (the texture's own coordinates) "
+                   "[default: rigid with --segmentation, none without].")
 @click.option("--max-voxels", type=int, default=None, help="Block-average larger texture volumes down to this size.")
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="Output model file.")
 def command(model, volume_path, seg_path, method, max_voxels, output):
@@ -21,6 +24,8 @@ def command(model, volume_path, seg_path, method, max_voxels, output):
 
     check_model_output(output)
     check_writable(output)
+    if method is None:
+        method = "rigid" if seg_path is not None else "none"
     if seg_path is None and method != "none":
         method_note = f"--register {method} needs --segmentation; registering with 'none'"
         warn(method_note)

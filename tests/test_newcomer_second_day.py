@@ -454,3 +454,53 @@ def test_simulate_miss_gives_extents(d):
     text = " ".join(output.split())
     assert ("warning: the trajectory never touches the tissue: no cut (the model spans 0..6, 0..3, 0..3 mm in "
             "x, y, z; the trajectory 50.5..55.5, 1.37..1.37, ") in text
+
+
+# ---- 13. drift
+
+
+def test_model_format_doc_matches_the_writer():
+    from cutkit.io.model_h5 import SCHEMA_VERSION
+    from cutkit.model.tetmodel import MATERIAL_FIELDS
+
+    text = (ROOT / "docs" / "model-format.md").read_text()
+    assert f"| attr `schema_version` | int64 | | {SCHEMA_VERSION} " in text
+    for name in MATERIAL_FIELDS:
+        assert f"`{name}`" in text or f"materials/{name}`" in text or f", `{name}`" in text, name
+
+
+def test_every_haptics_and_texture_option_has_help():
+    import click
+
+    from cutkit.cli import haptics, texture
+
+    for cmd in [haptics.command.commands["bench"], haptics.command.commands["play"], texture.command]:
+        for p in cmd.params:
+            if isinstance(p, click.Option) and p.name != "threads":
+                assert p.help, (cmd.name, p.name)
+
+
+def test_texture_without_segmentation_does_not_warn(d):
+    code, output = run(["texture", d / "m.h5", "--volume", BLOCK, "-o", d / "t.h5"])
+    assert code == 0, output
+    assert "warning" not in output and "not registered" in output
+    code, output = run(["texture", d / "m.h5", "--volume", BLOCK, "--register", "rigid", "-o", d / "t.h5"])
+    assert "warning: --register rigid needs --segmentation; registering with 'none'" in output
+
+
+def test_simulate_and_demo_take_the_same_frame_rate():
+    texts = [" ".join(run([cmd, "--help"])[1].split()) for cmd in ("simulate", "demo")]
+    assert all("[default: 10.0]" in t.split("--fps")[1][:400] for t in texts), texts
+
+
+@pytest.mark.slow
+def test_pictures_are_in_the_summary_and_the_legend_names_the_material(d):
+    from cutkit.render import read_folder
+
+    out = d / "out"
+    code, output = run(FOLDER_COMMANDS["simulate"](d, out) + ["--png"])
+    assert code == 0, output
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["options"]["png"] is True and summary["pictures"]
+    assert all((out / p).is_file() for p in summary["pictures"])
+    assert read_folder(out).label_names == {1: "muscle"}
