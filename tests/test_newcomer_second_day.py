@@ -274,6 +274,29 @@ def test_sigterm_leaves_a_valid_recording(d):
     assert pvd.count("<DataSet") == len(list((out / "frames").glob("*.vtu")))
 
 
+@pytest.mark.slow
+def test_sigterm_ends_a_live_session_with_its_recording(d):
+    out = d / "live"
+    env = {**os.environ, "NUMBA_NUM_THREADS": "1"}
+    proc = subprocess.Popen([sys.executable, "-m", "cutkit.cli.main", "live", str(d / "m.h5"), "-o", str(out),
+                             "--trajectory", str(d / "c.csv"), "--speed", "0.001", "--no-window",
+                             "--seconds", "600"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env)
+    try:
+        line = proc.stdout.readline()  # the session prints one line once its clock runs
+        assert line.decode().strip() == "cutkit live: running", (line, proc.stderr.read() if proc.poll() else "")
+        proc.send_signal(signal.SIGTERM)
+        _, err = proc.communicate(timeout=600)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 143, err
+    assert err.decode().strip().splitlines()[-1] == "cutkit: terminated"
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["interrupted"] is True and (out / "forces.csv").is_file()
+    # the poses acted on so far (none to write when the signal came before a second pose)
+    assert (out / "trajectory.csv").is_file() == summary["live"]["trajectory_recorded"]
+
+
 def test_sigterm_is_raised_as_an_interrupt(monkeypatch):
     """In process: the handler raises Terminated (a KeyboardInterrupt) and the command exits 143."""
     import click
