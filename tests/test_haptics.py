@@ -192,7 +192,7 @@ def test_cut_through_the_service(server):
         _until(dev, lambda fr: fr.state == FREE)
 
 
-def _feed_until(dev, sim, done, tip, timeout=5.0):
+def _feed_until(dev, sim, done, tip, timeout=30.0):
     """Keep the simulation and the device sending until a FORCE frame satisfies ``done``."""
     t_end = time.monotonic() + timeout
     while time.monotonic() < t_end:
@@ -217,7 +217,7 @@ def test_watchdog_ramps_force_to_zero_when_the_simulation_stops(server):
         full = f.force[2]
         # the simulation goes quiet: the gain ramps down, one step per tick at most
         frames = [dev.read_force(1.0)]
-        t_end = time.monotonic() + 5.0
+        t_end = time.monotonic() + 30.0
         while frames[-1].gain > 0.0 and time.monotonic() < t_end:
             frames.append(dev.read_force(1.0))
         gains = np.array([fr.gain for fr in frames])
@@ -243,7 +243,7 @@ def test_newest_pose_wins(server):
             burst += P.frame(P.POSE, payload, seq=1000 + i, ts=i)
         dev.send_raw(burst)
         echoes, f = [], None
-        t_end = time.monotonic() + 5.0
+        t_end = time.monotonic() + 30.0
         while time.monotonic() < t_end:
             f = dev.read_force(2.0)
             echoes.append(f.echo_seq)

@@ -146,7 +146,7 @@ def test_a_client_may_not_send_device_pose(server):
     s.sendall(P.frame(P.HELLO, P.HELLO_FLAGS_PAYLOAD.pack(P.ROLE_SIMULATION, P.HELLO_FORWARD_POSES)))
     s.sendall(P.frame(P.DEVICE_POSE, bytes(P.DEVICE_POSE_PAYLOAD.size)))
     data = b""
-    t_end = time.monotonic() + 5.0
+    t_end = time.monotonic() + 30.0
     while time.monotonic() < t_end:
         chunk = s.recv(4096)
         if not chunk:
@@ -236,7 +236,7 @@ def test_the_source_after_the_server_is_gone():
         source = HapticsPoseSource(host, port)
         proc.terminate()
         proc.wait(10)
-        t_end = time.monotonic() + 10.0
+        t_end = time.monotonic() + 60.0
         while not source.finished and time.monotonic() < t_end:
             assert source.poll() is None
             time.sleep(0.01)
