@@ -567,3 +567,35 @@ def test_decimation_leaves_no_hanging_node(monkeypatch):
                         lambda p, t, h: (np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(8)))
     d = decimate(m, ratio=0.1)
     assert check_mesh(d.points, d.tets).failed == ["no hanging node (conforming)"]
+
+
+@pytest.mark.slow
+def test_demo_twice_into_its_folder(tmp_path, monkeypatch):
+    """`cutkit demo -o X` twice: the second run reuses the build and replaces the first run's outputs;
+    a folder with other files in it is refused (a small recipe stands in for the knee)."""
+    import cutkit.simulate.demo as demo_module
+    import cutkit.simulate.warmup as warmup
+
+    (tmp_path / "r.toml").write_text(
+        f"[recipe]\nvolume = '{BLOCK}'\n\n[segment]\nlabels = true\n\n[[materials]]\nlabel = 1\nname = 'fat'\n\n"
+        "[[materials]]\nlabel = 2\nname = 'muscle'\n\n[boundary]\n[[boundary.fixed_regions]]\naxis = 'z'\n"
+        "side = 'min'\ndepth_mm = 1.0\n")
+    traj = straight_incision([6.0, 9.2, 10.0], [30.0, 9.2, 10.0], [0, 0, -1.0], depth=3.0, approach=2.0,
+                             press_time=0.1, cut_time=0.3, rate=100.0)
+    write_trajectory(tmp_path / "c.csv", traj)
+    monkeypatch.setattr(demo_module, "demo_inputs", lambda: (tmp_path / "r.toml", tmp_path / "c.csv"))
+    monkeypatch.setattr(warmup, "start_background", lambda: None)
+    out = tmp_path / "X"
+    code, output = run(["demo", "-o", out, "--no-png"])
+    assert code == 0, output
+    stale = out / "frames" / "9999.vtu"
+    stale.write_text("an earlier, longer run\n")
+    code, output = run(["demo", "-o", out, "--no-png"])
+    assert code == 0, output
+    assert "(inputs unchanged, build reused)" in output
+    assert not stale.exists()
+    (out / "mine.txt").write_text("x\n")
+    line = error_line(["demo", "-o", out, "--no-png"])
+    assert line.startswith(f"cutkit: error: {out}: the output folder is not empty (") and "--overwrite" in line
+    code, output = run(["demo", "-o", out, "--no-png", "--overwrite"])
+    assert code == 0 and (out / "mine.txt").exists()
