@@ -288,10 +288,11 @@ def _complete(session, replay, summary: dict, out_dir: Path, opt: SimulateOption
     return summary
 
 
-#: Peak memory of a run, bytes per tet and per node of the model (``preflight``): the slope of the
-#: peak resident size of ``cutkit simulate`` (a 0.4 s cut and 0.5 s hold, one thread) between
-#: Kuhn-split boxes of 24,000 and 48,000 tets: +160 MB with the neo-Hookean elements, +65 MB
-#: with the springs; the larger is taken for both.
+#: Peak memory of a run, bytes per tet and per node of the model (``preflight``): fitted to the
+#: peak resident size of ``cutkit simulate`` (neo-Hookean elements, one thread, a 0.4 s cut and
+#: 0.2 s hold) on Kuhn-split boxes: 0.98 GB at 96,000 tets (18,491 nodes), 1.77 GB at 192,000
+#: (36,531 nodes); the estimate is 12 % and 1 % above those.  The springs need less (+65 MB
+#: from 24,000 to 48,000 tets, against +160 MB), so one estimate serves both.
 SIMULATE_BYTES_PER_TET = 6500
 SIMULATE_BYTES_PER_NODE = 3000
 #: Peak resident size of the same run on 6,000 tets: the interpreter and cutkit's libraries (bytes).
