@@ -27,6 +27,7 @@ def command(model, seconds, out_dir, overwrite, fps, gravity, dt0, n_lists):
     from cutkit.errors import InputError
     from cutkit.io.model_h5 import read_model
     from cutkit.relax.run import settle
+    from cutkit.simulate.run import preflight
 
     for flag, value in (("--seconds", seconds), ("--fps", fps), ("--dt", dt0)):
         if value is not None and not (np.isfinite(value) and value > 0):
@@ -36,6 +37,7 @@ def command(model, seconds, out_dir, overwrite, fps, gravity, dt0, n_lists):
     earlier = check_output_folder(out_dir, "relax", overwrite, inputs=(model,))
     g = np.asarray(parse_vec3(gravity, "--gravity"), np.float64) * 1000.0  # m/s^2 -> mm/s^2
     tet_model = read_model(model)
+    preflight(tet_model, str(model), memory=False)  # mesh and materials, before the folder
     clear_outputs(earlier)
     with folder_guard(out_dir), progress() as bar:
         task = bar.add_task("relaxing", total=seconds)

@@ -153,6 +153,13 @@ def test_model_without_materials_names_assign(d):
     assert not out.exists()
 
 
+def test_relax_names_assign_too(d):
+    line = error_line(["relax", d / "bare.h5", "--seconds", "0.01", "-o", d / "out"])
+    assert line == (f"cutkit: error: {d / 'bare.h5'}: the model has no materials yet; give them with "
+                    f"`cutkit assign {d / 'bare.h5'} --recipe R.toml -o MODEL.h5` (docs/recipes.md)")
+    assert not (d / "out").exists()
+
+
 def test_model_with_a_label_without_material():
     from cutkit.errors import InputError
     from cutkit.simulate.run import preflight
@@ -335,6 +342,12 @@ def test_bracketed_names_pass_through_every_command(tmp_path, folder):
           "-o", d / "cut[final].csv"], [f"{d / 'cut[final].csv'}: "]),
         (["cut", model, "--trajectory", d / "cut[final].csv", "-o", d / "o[ut]"], [f"-> {d / 'o[ut]'}/cut.pvd"]),
         (["relax", model, "--seconds", "0.01", "--fps", "100", "-o", d / "r[/]"], [f"-> {d / 'r[/]'}/relax.pvd"]),
+        (["simulate", model, "--trajectory", d / "cut[final].csv", "-o", d / "s[/]im", "--hold", "0.05"],
+         [f"ParaView: open {d / 's[/]im'}/cut.pvd"]),
+        (["render", d / "s[/]im", "--size", "160x120"], [f"picture: {d / 's[/]im'}/pictures/"]),
+        (["decimate", mesh, "--ratio", "0.5", "-o", d / "d[x].h5"], [f"-> {d / 'd[x].h5'}"]),
+        (["texture", mesh, "--volume", BLOCK, "-o", d / "t[x].h5"], [f"-> {d / 't[x].h5'}"]),
+        (["import", d / "e[x].vtu", "-o", d / "i[x].h5"], [f"-> {d / 'i[x].h5'}"]),
         (["build-model", BLOCK, "--no-decimate", "-o", d / "b[bold].h5"],
          [f"build-model -> {d / 'b[bold].h5'}", "add a [boundary] table"]),
     ]

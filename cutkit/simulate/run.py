@@ -325,7 +325,7 @@ def available_memory_bytes() -> int | None:
         return None
 
 
-def preflight(model, model_path: str = "MODEL", available: int | None = None) -> None:
+def preflight(model, model_path: str = "MODEL", available: int | None = None, memory: bool = True) -> None:
     """The cheap checks of a model before a run: mesh, materials, memory.
 
     Raises
@@ -334,7 +334,7 @@ def preflight(model, model_path: str = "MODEL", available: int | None = None) ->
         The mesh fails one of the quick checks of ``cutkit check`` (finite
         coordinates, indices, positive orientation, faces shared by <= 2 tets).
     InputError
-        A tet label has no material, or the run would not fit in the memory available.
+        A tet label has no material, or (``memory``) the run would not fit in the memory available.
     """
     from cutkit.errors import MeshError
     from cutkit.mesh.check import check_mesh
@@ -351,6 +351,8 @@ def preflight(model, model_path: str = "MODEL", available: int | None = None) ->
             f"has no material for tet label{'s' * (missing.size > 1)} {', '.join(str(int(v)) for v in missing)}"
         raise InputError(f"{model_path}: the model {what}; give them with `cutkit assign {model_path} "
                          "--recipe R.toml -o MODEL.h5` (docs/recipes.md)")
+    if not memory:
+        return
     need = simulate_memory_bytes(model.n_tets, model.n_points)
     available = available_memory_bytes() if available is None else available
     if available is not None and need > available:
