@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
 
+import click
 from rich.console import Console
 from rich.progress import BarColumn, Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
 from rich.table import Table
@@ -17,6 +19,63 @@ console = Console(highlight=False, soft_wrap=True)
 if not console.is_terminal and "COLUMNS" not in os.environ:
     # piped or redirected: rich would cut tables to 80 columns; a file has no width
     console = Console(highlight=False, soft_wrap=True, width=PIPED_WIDTH)
+
+
+def esc(value) -> str:
+    """``value`` as text that rich prints as it is: user paths and names are never markup."""
+    from rich.markup import escape
+
+    return escape(str(value))
+
+
+def say(text: str) -> None:
+    """Print a plain line (no rich markup in it: brackets in paths and names stay)."""
+    console.print(text, markup=False)
+
+
+def warn(text: str) -> None:
+    """Print ``warning: TEXT`` (TEXT plain, never markup)."""
+    console.print("[yellow]warning:[/] " + esc(text))
+
+
+def note(text: str) -> None:
+    """Print ``note: TEXT`` (TEXT plain, never markup)."""
+    console.print("[yellow]note:[/] " + esc(text))
+
+
+def overwrite_option(command):
+    """The ``--overwrite`` flag of the commands that write a folder."""
+    return click.option("--overwrite", is_flag=True,
+                        help="Replace the outputs of an earlier run in the output folder (only the files and "
+                             "folders this command writes; anything else there is kept). Without it a "
+                             "non-empty output folder is refused.")(command)
+
+
+@contextlib.contextmanager
+def folder_guard(path):
+    """Remove ``path`` again when the command fails and leaves it as it found it: missing, or created empty.
+
+    A run stopped by Ctrl-C or SIGTERM keeps what it wrote (a valid recording)."""
+    from pathlib import Path
+
+    existed = Path(path).exists()
+    try:
+        yield
+    except KeyboardInterrupt:
+        raise
+    except BaseException:
+        if not existed:
+            _remove_empty_tree(Path(path))
+        raise
+
+
+def _remove_empty_tree(path) -> None:
+    """Remove ``path`` and its sub-folders where they hold no file (bottom up)."""
+    if not path.is_dir():
+        return
+    for root, _dirs, _files in sorted(os.walk(path), key=lambda w: -len(w[0])):
+        with contextlib.suppress(OSError):
+            os.rmdir(root)
 
 
 def progress() -> Progress:
@@ -47,9 +106,15 @@ def stage_reporter(bar: Progress, task):
 def print_uncut_note(uncut: int) -> None:
     """Tell how many edges the blade met that its stroke could not cut (``CutMesh.edges_left_uncut``), if any."""
     if uncut:
-        console.print(f"[yellow]note:[/] {uncut} edge{'s' * (uncut != 1)} the blade met could not be cut in "
-                      "its stroke (deferred where it ended, or a copy along an earlier cut cut elsewhere) and "
-                      "stay joined; see docs/cutting.md")
+        note(f"{uncut} edge{'s' * (uncut != 1)} the blade met could not be cut in its stroke (deferred where "
+             "it ended, or a copy along an earlier cut cut elsewhere) and stay joined; see docs/cutting.md")
+
+
+def missed_message(points, tips) -> str:
+    """The warning of a blade that never cut: the model's extents and the trajectory's, in mm."""
+    from cutkit.simulate.record import extents_text
+
+    return f"the blade never cut the tissue: no tet was cut ({extents_text(points, tips)})"
 
 
 def table(title: str, columns: list[str], rows: list[list]) -> Table:
@@ -107,5 +172,4 @@ def warn_missing_geometry(path, spacing) -> None:
     except Exception:  # the reader reports unknown formats itself
         return
     if fmt.name in ("numpy", "tiff", "tiff-folder"):
-        console.print(f"[yellow]warning:[/] {path} stores no voxel size: taking 1 x 1 x 1 mm voxels "
-                      "(give --spacing SX,SY,SZ in mm)")
+        warn(f"{path} stores no voxel size: taking 1 x 1 x 1 mm voxels (give --spacing SX,SY,SZ in mm)")

@@ -16,8 +16,10 @@ import click
 @click.option("--voxel-size", type=float, help="Resample to this isotropic voxel size, mm.")
 @click.option("--smooth", type=float, help="Gaussian smoothing sigma, mm.")
 @click.option("--spacing", help="SX,SY,SZ voxel spacing in mm for formats without one (.npy).")
-@click.option("--ratio", type=float, help="Decimation ratio of tets kept (overrides the recipe).")
-@click.option("--no-decimate", is_flag=True, help="Skip the decimation stage.")
+@click.option("--ratio", type=float,
+              help="Decimation ratio of tets kept (overrides the recipe). Without --ratio or a recipe's "
+                   "[decimate] table there is no decimation: every isovolume tet is kept.")
+@click.option("--no-decimate", is_flag=True, help="Skip the decimation stage (even where the recipe has one).")
 @click.option("--keep-record", is_flag=True,
               help="Keep the decimation's progressive record (the finest mesh and its collapses, for "
                    "`cutkit decimate --level`); about ten times the model's own size, so off by default.")
@@ -29,13 +31,18 @@ import click
 @click.option("--texture", "texture_path", type=click.Path(), help="Texture volume (defaults to the recipe's, if any).")
 def command(volume, output, recipe_path, threshold, channel, otsu, labels_path, voxel_size, smooth, spacing, ratio,
             no_decimate, keep_record, clean, texture_path):
-    """Build a cuttable model from VOLUME (or the recipe's volume)."""
+    """Build a cuttable model from VOLUME (or the recipe's volume).
+
+    Without a recipe: no decimation (give --ratio), no materials named
+    (each label gets the generic soft tissue), no boundary condition.
+    A model above 1,000,000 tets is warned about with the memory and time
+    `cutkit simulate` would take."""
     import numpy as np
 
     from cutkit.io.atomic import check_writable
     from cutkit.build import STAGES, run_build
-    from cutkit.cli._ui import (check_model_output, console, parse_vec3, progress, stage_reporter, table,
-                                warn_missing_geometry)
+    from cutkit.cli._ui import (check_model_output, console, note, parse_vec3, progress, say, stage_reporter,
+                                table, warn, warn_missing_geometry)
     from cutkit.errors import InputError
     from cutkit.io.model_h5 import write_model
     from cutkit.recipe import load_recipe, validate_recipe
@@ -91,9 +98,9 @@ def command(volume, output, recipe_path, threshold, channel, otsu, labels_path, 
     from pathlib import Path
 
     if not Path(volume).exists():
-        raise InputError(f"{volume}: no such volume file or folder")
+        raise InputError(f"{volume}: no such file or folder")
     if labels_path is not None and not Path(labels_path).exists():
-        raise InputError(f"{labels_path}: no such label map file or folder")
+        raise InputError(f"{labels_path}: no such file or folder")
     warn_missing_geometry(volume, spacing)
 
     with progress() as bar:
@@ -134,13 +141,45 @@ def command(volume, output, recipe_path, threshold, channel, otsu, labels_path, 
     for name, figures in ctx.report.items():
         rows.append([f"time: {name} [s]", f"{figures['seconds']:.2f}"])
     console.print(table(f"build-model -> {output}", ["", "value"], rows))
+    dec = recipe.get("decimate")
+    if dec:
+        what = f"ratio {dec['ratio']:g}" if dec.get("ratio") is not None else f"target {dec.get('target_tets')} tets"
+        say(f"decimation: {what}, {ctx.report['isovolume'].get('tets', '?')} -> {m.n_tets} tets")
+    else:
+        say("decimation: none (" + ("--no-decimate" if no_decimate else "no --ratio and no recipe [decimate] table")
+            + f"): all {m.n_tets} isovolume tets kept")
     warning = cleanup_warning(seg_report)
     if warning:
-        console.print(f"[yellow]warning:[/] {warning}")
+        warn(warning)
+    for w in ctx.report.get("assign", {}).get("warnings", []):
+        warn(w)
+    size = size_warning(m.n_tets, m.n_points)
+    if size:
+        warn(size)
     if not recipe.get("boundary"):
-        console.print("note: no boundary condition: nothing holds this model when it is simulated; add a "
-                      "[boundary] table (fixed_labels, fixed_regions) to a recipe and run `cutkit assign "
-                      f"{output} --recipe R.toml -o OUT.h5` (docs/recipes.md)")
+        note("no boundary condition: nothing holds this model when it is simulated; add a "
+             "[boundary] table (fixed_labels, fixed_regions) to a recipe and run `cutkit assign "
+             f"{output} --recipe R.toml -o OUT.h5` (docs/recipes.md)")
+
+
+#: Above this many tets build-model warns with the memory and time of `cutkit simulate`.
+SIZE_WARN_TETS = 1_000_000
+
+
+def size_warning(n_tets: int, n_points: int) -> str | None:
+    """The warning of a model too large to simulate comfortably, or None."""
+    from cutkit.simulate.run import SIMULATE_S_PER_TET_SECOND, available_memory_bytes, simulate_memory_bytes
+
+    if n_tets <= SIZE_WARN_TETS:
+        return None
+    need = simulate_memory_bytes(n_tets, n_points)
+    avail = available_memory_bytes()
+    fits = "" if avail is None else f" ({avail / 2**30:.1f} GiB available now)"
+    per_s = n_tets * SIMULATE_S_PER_TET_SECOND
+    ratio = max(0.01, round(200_000 / n_tets, 2))
+    return (f"{n_tets:,} tets (above {SIZE_WARN_TETS:,}): `cutkit simulate` would need about "
+            f"{need / 2**30:.1f} GiB{fits} and about {per_s:.0f} s of wall time per simulated second on one "
+            f"core; --ratio {ratio:g} keeps about 200,000 tets")
 
 
 def _parse_threshold(text: str):

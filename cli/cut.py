@@ -2,22 +2,25 @@
 
 import click
 
+from cutkit.cli._ui import overwrite_option
+
 
 @click.command(name="cut")
 @click.argument("model", type=click.Path(dir_okay=False))
 @click.option("--trajectory", required=True, type=click.Path(dir_okay=False), help="Blade trajectory CSV.")
 @click.option("-o", "--output", "out_dir", required=True, type=click.Path(file_okay=False),
               help="Output folder (frames/NNNN.vtu, cut.pvd, model.h5).")
+@overwrite_option
 @click.option("--blade-length", default=None, type=float, help="Blade length, mm (default: the reader's).")
 @click.option("--centre-nodes", is_flag=True, help="Split faces with the Fig. 2c centre node (more tets, 16-20 per cut tet).")
-def command(model, trajectory, out_dir, blade_length, centre_nodes):
+def command(model, trajectory, out_dir, overwrite, blade_length, centre_nodes):
     """Cut MODEL along the poses of a trajectory; write a .vtu series and the cut model."""
     import os
 
     import numpy as np
 
-    from cutkit.io.atomic import check_writable
-    from cutkit.cli._ui import console, print_uncut_note, progress
+    from cutkit.cli._ui import folder_guard, missed_message, note, print_uncut_note, progress, say, warn
+    from cutkit.io.atomic import check_output_folder, clear_outputs
     from cutkit.cutting import CutMesh, cut_step, cut_surface_faces, to_model
     from cutkit.cutting.rebase import rebase_if_left
     from cutkit.cutting.trajectory import read_trajectory
@@ -28,12 +31,12 @@ def command(model, trajectory, out_dir, blade_length, centre_nodes):
 
     if blade_length is not None and not (np.isfinite(blade_length) and blade_length > 0):
         raise InputError(f"--blade-length must be a positive number, got {blade_length}")
-    check_writable(out_dir, folder=True)
+    earlier = check_output_folder(out_dir, "cut", overwrite, inputs=(model, trajectory))
     tet_model = read_model(model)
     kw = {} if blade_length is None else {"blade_length": blade_length}
     traj = read_trajectory(trajectory, **kw)
     cm = CutMesh.from_model(tet_model, blade_length=traj.blade_length, centre_nodes=centre_nodes)
-    os.makedirs(out_dir, exist_ok=True)
+    clear_outputs(earlier)
 
     def frame_data():
         on_cut = np.zeros(cm.n_points, np.uint8)
@@ -45,17 +48,19 @@ def command(model, trajectory, out_dir, blade_length, centre_nodes):
         return m, pd, {"new_tet": m.cell_data["new_tet"]}
 
     strokes = 0
-    with SeriesWriter(out_dir, "cut") as series, progress() as bar:
-        task = bar.add_task("cutting", total=len(traj.t))
-        for i in range(len(traj.t)):
-            cut_step(cm, traj.tip[i], traj.a[i])
-            # the blade out of the tissue after a stroke that cut: the next stroke may cross it
-            strokes += rebase_if_left(cm)
-            m, pd, cd = frame_data()
-            series.write(float(traj.t[i]), m.points, m.tets, point_data=pd, cell_data=cd)
-            bar.update(task, advance=1)
-    m, _, _ = frame_data()
-    write_model(os.path.join(out_dir, "model.h5"), m)
+    with folder_guard(out_dir):
+        os.makedirs(out_dir, exist_ok=True)
+        with SeriesWriter(out_dir, "cut") as series, progress() as bar:
+            task = bar.add_task("cutting", total=len(traj.t))
+            for i in range(len(traj.t)):
+                cut_step(cm, traj.tip[i], traj.a[i])
+                # the blade out of the tissue after a stroke that cut: the next stroke may cross it
+                strokes += rebase_if_left(cm)
+                m, pd, cd = frame_data()
+                series.write(float(traj.t[i]), m.points, m.tets, point_data=pd, cell_data=cd)
+                bar.update(task, advance=1)
+        m, _, _ = frame_data()
+        write_model(os.path.join(out_dir, "model.h5"), m)
     # the worst angle of the written mesh: cut nodes move after their tets are made
     is_new = m.cell_data["new_tet"] == 1
     new = m.tets[is_new]
@@ -64,16 +69,12 @@ def command(model, trajectory, out_dir, blade_length, centre_nodes):
     n_cut = np.unique(cm.model_tet[cm.tet_origin[is_new]]).size
     strokes += bool(cm.subtets)  # the last stroke, if it cut and did not end outside
     if not len(new):
-        lo, hi = tet_model.points.min(axis=0), tet_model.points.max(axis=0)
-        console.print(f"[yellow]warning:[/] the blade never cut the tissue: no tet was cut (the model spans "
-                      f"{', '.join(f'{a:g}..{b:g}' for a, b in zip(lo, hi))} mm in x, y, z; the trajectory "
-                      f"{', '.join(f'{a:g}..{b:g}' for a, b in zip(traj.tip.min(axis=0), traj.tip.max(axis=0)))})")
-        console.print(f"{len(traj.t)} poses, nothing cut -> {out_dir}/cut.pvd, {out_dir}/model.h5")
+        warn(missed_message(tet_model.points, traj.tip))
+        say(f"{len(traj.t)} poses, nothing cut -> {out_dir}/cut.pvd, {out_dir}/model.h5")
         return
-    console.print(f"{len(traj.t)} poses, {strokes} stroke{'s' * (strokes != 1)}, {n_cut} tets cut into "
-                  f"{len(new)}, worst new dihedral {worst:.1f} deg "
-                  f"-> {out_dir}/cut.pvd, {out_dir}/model.h5")
+    say(f"{len(traj.t)} poses, {strokes} stroke{'s' * (strokes != 1)}, {n_cut} tets cut into "
+        f"{len(new)}, worst new dihedral {worst:.1f} deg -> {out_dir}/cut.pvd, {out_dir}/model.h5")
     if cm.started_inside:
-        console.print("[yellow]note:[/] the blade lay inside the tissue at the first pose: the cut starts where "
-                      "it lay, with no entry through the surface")
+        note("the blade lay inside the tissue at the first pose: the cut starts where it lay, with no entry "
+             "through the surface")
     print_uncut_note(cm.edges_left_uncut())

@@ -26,11 +26,12 @@ def command(model, output, target_tets, ratio, tolerance, min_dihedral, level, o
     The collapses are recorded in the output (extra/progressive, compressed), so any
     coarser or finer level can be extracted later with --level (--no-record leaves it out).
     """
+    import math
     import time
 
     from cutkit.cli._ui import check_model_output
     from cutkit.io.atomic import check_writable
-    from cutkit.cli._ui import console, progress, table
+    from cutkit.cli._ui import console, progress, say, table, warn
     from cutkit.decimate import decimate, extract_level, n_levels, quality_summary
     from cutkit.errors import InputError
     from cutkit.io.model_h5 import read_model, write_model
@@ -39,6 +40,15 @@ def command(model, output, target_tets, ratio, tolerance, min_dihedral, level, o
         raise InputError("--level extracts a recorded level; it cannot be combined with --target-tets or --ratio")
     if level is None and (target_tets is None) == (ratio is None):
         raise InputError("give exactly one of --target-tets or --ratio (or --level K)")
+    # the numbers first, with the flags' names, before any progress display
+    if target_tets is not None and target_tets < 1:
+        raise InputError(f"--target-tets must be a whole number >= 1, got {target_tets}")
+    if ratio is not None and not (0.0 < ratio <= 1.0):
+        raise InputError(f"--ratio must be the fraction of tets to keep, in (0, 1], got {ratio:g}")
+    if not (0.0 <= min_dihedral < 70.0):
+        raise InputError(f"--min-dihedral must lie in [0, 70) degrees, got {min_dihedral:g}")
+    if tolerance is not None and not (math.isfinite(tolerance) and tolerance >= 0.0):
+        raise InputError(f"--surface-tolerance must be a number of mm >= 0, got {tolerance:g}")
     check_model_output(output)
     check_writable(output)
     src = read_model(model)
@@ -78,10 +88,9 @@ def command(model, output, target_tets, ratio, tolerance, min_dihedral, level, o
     ]
     console.print(table(f"{what} in {seconds:.2f} s -> {output}", ["", "input", "output"], rows))
     if opt is not None:
-        verdict = "[green]accepted[/]" if opt["accepted"] else "[yellow]rejected[/]"
-        console.print(f"{optimizer} optimiser ({opt['seconds']:.2f} s): min dihedral {opt['min_dihedral_before_deg']:.2f} -> "
-                      f"{opt['min_dihedral_after_deg']:.2f} deg, {opt['tets_before']} -> {opt['tets_after']} tets: "
-                      f"{verdict} ({opt['reason']})")
+        verdict = "accepted" if opt["accepted"] else "rejected"
+        say(f"{optimizer} optimiser ({opt['seconds']:.2f} s): min dihedral {opt['min_dihedral_before_deg']:.2f} -> "
+            f"{opt['min_dihedral_after_deg']:.2f} deg, {opt['tets_before']} -> {opt['tets_after']} tets: "
+            f"{verdict} ({opt['reason']})")
     if level is None and out.n_tets > out.provenance["decimate"]["target_tets"]:
-        console.print(f"[yellow]warning:[/] no legal collapse left at {out.n_tets} tets "
-                      f"(target {out.provenance['decimate']['target_tets']})")
+        warn(f"no legal collapse left at {out.n_tets} tets (target {out.provenance['decimate']['target_tets']})")

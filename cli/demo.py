@@ -2,30 +2,43 @@
 
 import click
 
+from cutkit.cli._ui import overwrite_option
+
 
 @click.command(name="demo")
 @click.option("-o", "--output", "out_dir", default="cutkit-demo", show_default=True,
-              type=click.Path(file_okay=False), help="Output folder (the model, the simulation, pictures).")
-@click.option("--fps", default=10.0, show_default=True, type=float, help="Frames per simulated second.")
+              type=click.Path(file_okay=False),
+              help="Output folder (the model, the simulation, pictures). Running the demo again into its own "
+                   "folder replaces the earlier run's outputs and reuses the built model; a folder holding "
+                   "other files is refused without --overwrite.")
+@click.option("--fps", default=10.0, show_default=True, type=float,
+              help="Frames per simulated second, as in `cutkit simulate` (output only: the same simulation "
+                   "at any rate).")
+@overwrite_option
 @click.option("--no-png", is_flag=True, help="Skip the pictures.")
 @click.option("--movie", is_flag=True, help="Also a movie of the cut, OUT/cut.mp4.")
 @click.option("--material-model", type=click.Choice(["neohookean", "springs"]), default=None,
               help="Tissue model [default: the recipe's, neohookean].")
-def command(out_dir, fps, no_png, movie, material_model):
+def command(out_dir, fps, overwrite, no_png, movie, material_model):
     """Build pipelines/knee.toml (reused when unchanged), cut sample_volumes/incision.csv, take pictures."""
     import time
 
-    from cutkit.io.atomic import check_writable
-    from cutkit.simulate.demo import demo_inputs
+    from cutkit.cli._ui import folder_guard
+    from cutkit.cli.simulate import _check_flags
+    from cutkit.io.atomic import clear_outputs
+    from cutkit.simulate.demo import demo_inputs, demo_outputs
     from cutkit.simulate.warmup import start_background
 
     t0 = time.perf_counter()
+    _check_flags(fps=fps)
     _, trajectory = demo_inputs()
-    check_writable(out_dir, folder=True)
+    # the earlier run's outputs go (its built model stays, to be reused): nothing of two runs mixes
+    clear_outputs(demo_outputs(out_dir, overwrite))
     # a second process compiles the decimation and simulation kernels while this one builds
     warm = start_background()
     try:
-        _run(out_dir, fps, no_png, movie, trajectory, warm, t0, material_model)
+        with folder_guard(out_dir):
+            _run(out_dir, fps, no_png, movie, trajectory, warm, t0, material_model)
     finally:
         if warm is not None and warm.poll() is None:
             warm.terminate()
@@ -36,7 +49,7 @@ def _run(out_dir, fps, no_png, movie, trajectory, warm, t0, material_model=None)
     import time
 
     from cutkit.build import STAGES
-    from cutkit.cli._ui import console, progress, stage_reporter
+    from cutkit.cli._ui import console, progress, say, stage_reporter
     from cutkit.cli.simulate import render_with_progress, report, run_with_progress
     from cutkit.cutting.trajectory import read_trajectory
     from cutkit.io.model_h5 import read_model
@@ -50,10 +63,10 @@ def _run(out_dir, fps, no_png, movie, trajectory, warm, t0, material_model=None)
     if warm is not None:
         warm.wait()
     model = read_model(model_path)
-    console.print(f"model {model_path}: {model.tets.shape[0]} tets, {model.points.shape[0]} nodes"
-                  + (" (inputs unchanged, build reused)" if reused else ""))
+    say(f"model {model_path}: {model.tets.shape[0]} tets, {model.points.shape[0]} nodes"
+        + (" (inputs unchanged, build reused)" if reused else ""))
     opt = SimulateOptions(fps=fps, png=False, material_model=material_model)
     summary = run_with_progress(model, read_trajectory(trajectory), out_dir, opt, model_path=str(model_path))
     render_with_progress(summary, out_dir, not no_png, movie)
     report(console, summary, out_dir)
-    console.print(f"demo finished in {time.perf_counter() - t0:.0f} s")
+    say(f"demo finished in {time.perf_counter() - t0:.0f} s")

@@ -20,7 +20,7 @@ def command(model: str, output: str, rest: bool) -> None:
     .f3grid, .mdpa, .post, .su2, .ele/.node, .ugrid and .h5m the mesh only.
     """
     from cutkit.io.atomic import check_writable
-    from cutkit.cli._ui import console
+    from cutkit.cli._ui import say
     from cutkit.io.meshes import export_mesh
     from cutkit.io.model_h5 import read_model
 
@@ -29,6 +29,6 @@ def command(model: str, output: str, rest: bool) -> None:
     done = export_mesh(m, output, rest=rest)
     data = "; ".join(f"{what}: {', '.join(done[key])}" for what, key in (("point data", "point_data"),
                                                                         ("cell data", "cell_data")) if done[key])
-    console.print(f"wrote {m.n_tets} tets, {m.n_points} nodes ({done['configuration']} configuration"
-                  + (f"; {data}" if data else f"; the {done['format']} format carries no data arrays")
-                  + f") -> {output}")
+    say(f"wrote {m.n_tets} tets, {m.n_points} nodes ({done['configuration']} configuration"
+        + (f"; {data}" if data else f"; the {done['format']} format carries no data arrays")
+        + f") -> {output}")

@@ -44,9 +44,11 @@ def serve(host, port, model_path, material, priority, verbose):
 
 
 @command.command(name="bench")
-@click.option("--host", default="127.0.0.1", show_default=True)
-@click.option("--port", default=4711, show_default=True, type=click.IntRange(1, 65535))
-@click.option("--seconds", default=3.0, show_default=True, type=click.FloatRange(0.1, 3600))
+@click.option("--host", default="127.0.0.1", show_default=True, help="Address of the running `cutkit haptics serve`.")
+@click.option("--port", default=4711, show_default=True, type=click.IntRange(1, 65535),
+              help="Port of the running `cutkit haptics serve` (ignored with --spawn).")
+@click.option("--seconds", default=3.0, show_default=True, type=click.FloatRange(0.1, 3600),
+              help="Length of the run, wall seconds.")
 @click.option("--spawn", is_flag=True, help="Start a server subprocess on a free port for the run.")
 @click.option("--priority", type=click.Choice(["normal", "high", "realtime"]), default="high", show_default=True,
               help="Scheduling priority of the device loop (and of a --spawn server).")
@@ -76,8 +78,9 @@ def bench(host, port, seconds, spawn, priority, as_json):
 
 @command.command(name="play")
 @click.argument("trajectory", type=click.Path(dir_okay=False))
-@click.option("--host", default="127.0.0.1", show_default=True)
-@click.option("--port", default=4711, show_default=True, type=click.IntRange(1, 65535))
+@click.option("--host", default="127.0.0.1", show_default=True, help="Address of the running `cutkit haptics serve`.")
+@click.option("--port", default=4711, show_default=True, type=click.IntRange(1, 65535),
+              help="Port of the running `cutkit haptics serve`.")
 @click.option("--rate", default=1000.0, show_default=True, type=click.FloatRange(1.0, 10000.0),
               help="Poses per second.")
 @click.option("--loop", is_flag=True, help="Start again after the last row, until Ctrl-C.")

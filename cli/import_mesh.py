@@ -13,7 +13,7 @@ def command(mesh: str, output: str) -> None:
 
     from cutkit.cli._ui import check_model_output
     from cutkit.io.atomic import check_writable
-    from cutkit.cli._ui import console
+    from cutkit.cli._ui import note, say
     from cutkit.io.meshes import import_mesh
     from cutkit.io.model_h5 import write_model
 
@@ -23,8 +23,11 @@ def command(mesh: str, output: str) -> None:
     write_model(output, model)
     info = model.provenance.get("import", {})
     labels, counts = np.unique(model.labels, return_counts=True)
-    console.print(f"imported {model.n_tets} tets, {model.n_points} nodes, {labels.size} labels "
-                  f"({', '.join(f'{int(l)}: {int(c)}' for l, c in zip(labels, counts))}) -> {output}")
+    say(f"imported {model.n_tets} tets, {model.n_points} nodes, {labels.size} labels "
+        f"({', '.join(f'{int(l)}: {int(c)}' for l, c in zip(labels, counts))}) -> {output}")
     if info.get("flipped_tets"):
-        console.print(f"fixed orientation of {info['flipped_tets']} negatively oriented tets")
-    console.print("run `cutkit check` to validate the mesh")
+        say(f"fixed orientation of {info['flipped_tets']} negatively oriented tets")
+    say(f"run `cutkit check {output}` to validate the mesh")
+    if model.materials.n_materials == 0:
+        note(f"the model has no materials yet: give them with `cutkit assign {output} --recipe R.toml "
+             "-o MODEL.h5` (docs/recipes.md), then `cutkit simulate`")

@@ -17,7 +17,7 @@ def command(path: str) -> None:
 
     p = Path(path)
     if not p.exists():
-        raise InputError(f"file not found: {path}")
+        raise InputError(f"{path}: no such file or folder")
     if p.is_file() and p.suffix.lower() in (".h5", ".hdf5"):
         from cutkit.io.model_h5 import read_schema_version
 
@@ -30,16 +30,16 @@ def command(path: str) -> None:
 def _model_info(path: str, version: int) -> None:
     import numpy as np
 
-    from cutkit.cli._ui import console, table
+    from cutkit.cli._ui import console, esc, say, table
     from cutkit.io.model_h5 import read_model
     from cutkit.mesh.quality import signed_volumes
 
     m = read_model(path)
     vol = signed_volumes(m.points, m.tets)
     lo, hi = (m.points.min(axis=0), m.points.max(axis=0)) if m.n_points else (np.zeros(3), np.zeros(3))
-    console.print(f"[bold]model[/] {path}  (schema version {version})")
-    console.print(f"  {m.n_points} nodes, {m.n_tets} tets, total volume {vol.sum():.6g} mm^3")
-    console.print(f"  bounding box [{', '.join(f'{v:.6g}' for v in lo)}] .. [{', '.join(f'{v:.6g}' for v in hi)}] mm")
+    console.print(f"[bold]model[/] {esc(path)}  (schema version {version})")
+    say(f"  {m.n_points} nodes, {m.n_tets} tets, total volume {vol.sum():.6g} mm^3")
+    say(f"  bounding box [{', '.join(f'{v:.6g}' for v in lo)}] .. [{', '.join(f'{v:.6g}' for v in hi)}] mm")
     labels, inv = np.unique(m.labels, return_inverse=True)
     counts = np.bincount(inv, minlength=labels.size)
     volumes = np.bincount(inv, weights=vol, minlength=labels.size)
@@ -55,7 +55,7 @@ def _model_info(path: str, version: int) -> None:
         heads = [f"{c} [{MATERIAL_FIELDS[c]}]" if MATERIAL_FIELDS.get(c, "1") != "1" else c for c in cols]
         console.print(table("materials (units in brackets; the others are ratios)", ["label", "name"] + heads, mrows))
     else:
-        console.print("  no materials assigned")
+        say("  no materials assigned")
     extras = []
     if m.texture is not None:
         extras.append(f"texture {tuple(m.texture.volume.shape)}")
@@ -72,13 +72,13 @@ def _model_info(path: str, version: int) -> None:
     if m.cell_data:
         extras.append("cell data: " + ", ".join(m.cell_data))
     if extras:
-        console.print("  " + "; ".join(extras))
+        say("  " + "; ".join(extras))
 
 
 def _volume_info(path: str) -> None:
     import numpy as np
 
-    from cutkit.cli._ui import console
+    from cutkit.cli._ui import console, esc, say
     from cutkit.errors import InputError
 
     try:
@@ -91,28 +91,28 @@ def _volume_info(path: str) -> None:
     v = read_volume(path)
     data = v.data
     d = describe_volume(v)
-    console.print(f"[bold]volume[/] {path}")
-    console.print(f"  dims {tuple(int(s) for s in data.shape[:3])}"
-                  + (f" x {data.shape[3]} channels" if data.ndim == 4 else "") + f", dtype {data.dtype}")
-    console.print(f"  spacing {', '.join(f'{s:g}' for s in v.spacing)} mm, origin "
-                  f"{', '.join(f'{s:g}' for s in v.origin)} mm, extent {' x '.join(f'{s:g}' for s in d['extent_mm'])} mm")
-    console.print(f"  orientation {orientation_code(v.direction)}: voxel axes i, j, k point to "
-                  f"{', '.join(AXIS_WORDS[c] for c in orientation_code(v.direction))}; world frame LPS "
-                  "(x left, y posterior, z superior, as DICOM and ITK; nibabel's RAS affine has x and y negated)")
+    console.print(f"[bold]volume[/] {esc(path)}")
+    say(f"  dims {tuple(int(s) for s in data.shape[:3])}"
+        + (f" x {data.shape[3]} channels" if data.ndim == 4 else "") + f", dtype {data.dtype}")
+    say(f"  spacing {', '.join(f'{s:g}' for s in v.spacing)} mm, origin "
+        f"{', '.join(f'{s:g}' for s in v.origin)} mm, extent {' x '.join(f'{s:g}' for s in d['extent_mm'])} mm")
+    say(f"  orientation {orientation_code(v.direction)}: voxel axes i, j, k point to "
+        f"{', '.join(AXIS_WORDS[c] for c in orientation_code(v.direction))}; world frame LPS "
+        "(x left, y posterior, z superior, as DICOM and ITK; nibabel's RAS affine has x and y negated)")
     if not np.allclose(v.direction, np.eye(3)):
-        console.print(f"  direction {np.asarray(v.direction).round(6).tolist()}")
+        say(f"  direction {np.asarray(v.direction).round(6).tolist()}")
     if np.issubdtype(data.dtype, np.floating):
-        console.print(f"  NaN voxels: {d['n_nan']}")
+        say(f"  NaN voxels: {d['n_nan']}")
     if data.size and np.issubdtype(data.dtype, np.integer):
         vals, counts = np.unique(data, return_counts=True)
         if vals.size <= MAX_VOLUME_LABELS:
             rows = [[int(a), int(c), f"{c * d['voxel_mm3']:.6g}"] for a, c in zip(vals, counts)]
             console.print(table("values", ["value", "voxels", "volume [mm^3]"], rows))
         else:
-            console.print(f"  {vals.size} distinct values in [{vals.min()}, {vals.max()}] (intensity image)")
+            say(f"  {vals.size} distinct values in [{vals.min()}, {vals.max()}] (intensity image)")
     elif data.size:
         lo, hi = d["value_range"]
-        console.print(f"  values in [{lo:.6g}, {hi:.6g}]" if lo is not None else "  no finite value")
+        say(f"  values in [{lo:.6g}, {hi:.6g}]" if lo is not None else "  no finite value")
 
 
 #: Letter of the world direction each voxel axis points to (LPS world frame).

@@ -18,7 +18,7 @@ def command(volume_path, output, level, snap, labels):
 
     from cutkit.cli._ui import check_model_output
     from cutkit.io.atomic import check_writable
-    from cutkit.cli._ui import console, table
+    from cutkit.cli._ui import console, say, table
     from cutkit.io.model_h5 import write_model
     from cutkit.isovolume import SNAP_FRACTION, dihedral_summary, isovolume
     from cutkit.mesh.geometry import tet_volumes
@@ -51,7 +51,7 @@ def command(volume_path, output, level, snap, labels):
         rows.append([int(lab), int(np.count_nonzero(model.labels == lab)), f"{mesh_mm3:.1f}", f"{vox_mm3:.1f}", f"{diff:+.2f}%"])
     console.print(table("volume per label", ["label", "tets", "mesh [mm^3]", "voxels [mm^3]", "difference"], rows))
     min_dih, p1_dih = dihedral_summary(model.points, model.tets)
-    console.print(
+    say(
         f"{model.n_tets} tets, {model.n_points} nodes ({stats.n_grid_nodes} samples, {stats.n_crossing_nodes} crossings, "
         f"{stats.n_centre_nodes} centres; {stats.n_snapped} samples snapped); "
         f"dihedral min {min_dih:.2f} deg, 1st percentile {p1_dih:.2f} deg -> {output}"

@@ -2,11 +2,14 @@
 
 import click
 
+from cutkit.cli._ui import overwrite_option
+
 
 @click.command(name="live")
 @click.argument("model", type=click.Path(dir_okay=False))
 @click.option("-o", "--output", "out_dir", required=True, type=click.Path(file_okay=False),
               help="Recording folder: trajectory.csv, forces.csv, summary.json, model.h5.")
+@overwrite_option
 @click.option("--haptics", metavar="HOST:PORT", help="Poses from a device through a running `cutkit haptics serve`.")
 @click.option("--trajectory", type=click.Path(dir_okay=False), help="Poses from a trajectory file, on the wall clock.")
 @click.option("--speed", default=1.0, show_default=True, type=click.FloatRange(min=1e-3),
@@ -35,12 +38,14 @@ import click
 @click.option("--blade-length", default=None, type=float, help="Blade length, mm [default: 20].")
 @click.option("--material-model", type=click.Choice(["neohookean", "springs"]), default=None,
               help="Tissue model [default: what the model file names].")
-def command(model, out_dir, haptics, trajectory, speed, igtl_port, igtl_device, no_window, fps, seconds, until_idle,
-            geometry_rate_hz, blade_length, material_model, **igtl_opts):
+def command(model, out_dir, overwrite, haptics, trajectory, speed, igtl_port, igtl_device, no_window, fps, seconds,
+            until_idle, geometry_rate_hz, blade_length, material_model, **igtl_opts):
     """Cut MODEL live; Ctrl-C (or closing the window) ends the session, its recording stays valid."""
     from cutkit.cli._ui import console
     from cutkit.errors import InputError
-    from cutkit.io.atomic import check_writable
+    from cutkit.cli._ui import folder_guard
+    from cutkit.io.atomic import check_output_folder, clear_outputs
+    from cutkit.simulate.run import preflight
     from cutkit.io.model_h5 import read_model
     from cutkit.simulate import SimulateOptions
     from cutkit.simulate.live import run_live
@@ -53,12 +58,15 @@ def command(model, out_dir, haptics, trajectory, speed, igtl_port, igtl_device, 
     opt = SimulateOptions(geometry_rate_hz=geometry_rate_hz, blade_length=blade_length,
                           material_model=material_model, frames=False)
     opt.check()
-    check_writable(out_dir, folder=True)
+    earlier = check_output_folder(out_dir, "live", overwrite, inputs=(model, trajectory))
     tet_model = read_model(model)
+    preflight(tet_model, str(model))
+    clear_outputs(earlier)
     source, views, closers = _open(haptics, trajectory, speed, igtl_port, igtl_device, no_window, igtl)
     try:
-        summary = run_live(tet_model, source, views, out_dir, opt, max_seconds=seconds, fps=fps,
-                           until_idle_s=until_idle, model_path=str(model), on_start=_started)
+        with folder_guard(out_dir):
+            summary = run_live(tet_model, source, views, out_dir, opt, max_seconds=seconds, fps=fps,
+                               until_idle_s=until_idle, model_path=str(model), on_start=_started)
     finally:
         source.close()
         for v in views:
@@ -159,16 +167,16 @@ def _open(haptics, trajectory, speed, igtl_port, igtl_device, no_window, igtl):
 
 
 def _report(console, summary, out_dir) -> None:
-    from cutkit.cli._ui import print_uncut_note
+    from cutkit.cli._ui import print_uncut_note, say, warn
 
     live = summary["live"]
     for w in summary["warnings"]:
-        console.print(f"[yellow]warning:[/yellow] {w}")
+        warn(w)
     lat = live.get("latency_ms") or {}
-    console.print(f"{summary['cut_tets']} tets cut; cut opening {summary['cut_opening_mm']['final_mean']:.2f} mm mean; "
-                  f"{live['wall_s']:.1f} s, haptics {live['haptic_hz']:.0f} Hz, {live['fps']:.0f} fps, "
-                  f"relaxation {live['relax_passes_per_s']:.0f} passes/s"
-                  + (f", pose-to-picture latency p50 {lat['p50']:.0f} ms p95 {lat['p95']:.0f} ms" if lat else ""))
+    say(f"{summary['cut_tets']} tets cut; cut opening {summary['cut_opening_mm']['final_mean']:.2f} mm mean; "
+        f"{live['wall_s']:.1f} s, haptics {live['haptic_hz']:.0f} Hz, {live['fps']:.0f} fps, "
+        f"relaxation {live['relax_passes_per_s']:.0f} passes/s"
+        + (f", pose-to-picture latency p50 {lat['p50']:.0f} ms p95 {lat['p95']:.0f} ms" if lat else ""))
     print_uncut_note(summary["edges_left_uncut"])
-    console.print(f"recorded: {out_dir}/trajectory.csv (replay: cutkit simulate MODEL --trajectory "
+    say(f"recorded: {out_dir}/trajectory.csv (replay: cutkit simulate MODEL --trajectory "
                   f"{out_dir}/trajectory.csv -o OUT/), forces.csv, summary.json, model.h5")

@@ -2,20 +2,31 @@
 
 The group is built from :data:`cutkit.cli.commands.COMMANDS`.  User errors
 (:class:`cutkit.errors.CutkitError`) become one line on stderr and exit
-code 2; Ctrl-C exits with 130.
+code 2; Ctrl-C exits with 130.  SIGTERM takes Ctrl-C's path (a run stopped
+by it leaves a valid recording and summary) and exits with 143.
 """
 
 from __future__ import annotations
 
 import importlib
 import importlib.util
+import signal
 import sys
+import threading
 
 import click
 
 from cutkit import __version__
 from cutkit.cli.commands import COMMANDS
 from cutkit.errors import CutkitError
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised on the main thread: it takes every path Ctrl-C takes (recordings are closed)."""
+
+
+def _on_sigterm(signum, frame):
+    raise Terminated()
 
 
 class _TableGroup(click.Group):
@@ -39,15 +50,24 @@ class _TableGroup(click.Group):
                 formatter.write_dl(rows)
 
     def invoke(self, ctx):
+        previous = None
+        if threading.current_thread() is threading.main_thread():
+            previous = signal.signal(signal.SIGTERM, _on_sigterm)
         try:
             return super().invoke(ctx)
         except CutkitError as err:
             message = " ".join(str(err).split())  # exactly one line
             click.echo(f"cutkit: error: {message}", err=True)
             ctx.exit(err.exit_code)
+        except Terminated:
+            click.echo("cutkit: terminated", err=True)
+            ctx.exit(143)
         except KeyboardInterrupt:
             click.echo("cutkit: interrupted", err=True)
             ctx.exit(130)
+        finally:
+            if previous is not None:
+                signal.signal(signal.SIGTERM, previous)
 
 
 def _set_threads(ctx, param, value):

@@ -18,7 +18,7 @@ import click
 def command(out_dir, views, movie, no_png, size, fps):
     """Render OUT (a folder of `cutkit simulate` or `cutkit demo`) again: key-frame pictures
     under OUT/pictures/ and, with --movie, a movie of the whole cut."""
-    from cutkit.cli._ui import console, progress
+    from cutkit.cli._ui import progress, say
     from cutkit.errors import InputError
     from cutkit.io.atomic import check_writable
     from cutkit.render import read_folder, render_output
@@ -43,6 +43,6 @@ def command(out_dir, views, movie, no_png, size, fps):
         sizes = {"size": (w, h)} if size is None else {"size": (w, h), "movie_size": (w, h)}
         done = render_output(out_dir, pictures=not no_png, views=views, movie=movie, movie_fps=fps, **sizes, progress=lambda k, n: bar.update(task, completed=k, total=n))
     for p in done["pictures"]:
-        console.print(f"picture: {out_dir}/{p}")
+        say(f"picture: {out_dir}/{p}")
     if done["movie"]:
-        console.print(f"movie: {out_dir}/{done['movie']}" if not done["movie"].startswith("/") else f"movie: {done['movie']}")
+        say(f"movie: {out_dir}/{done['movie']}" if not done["movie"].startswith("/") else f"movie: {done['movie']}")

@@ -44,7 +44,7 @@ def command(volume_path, output, threshold, channel, otsu, labels_path, smooth, 
     """
     import numpy as np
 
-    from cutkit.cli._ui import console, parse_vec3, table, warn_missing_geometry
+    from cutkit.cli._ui import console, parse_vec3, say, table, warn, warn_missing_geometry
     from cutkit.errors import InputError
     from cutkit.io.atomic import check_writable
     from cutkit.segment import check_sizes, cleanup_warning, looks_like_labels, segment
@@ -86,10 +86,10 @@ def command(volume_path, output, threshold, channel, otsu, labels_path, smooth, 
     rows = [[int(v), int(c), f"{c * voxel_mm3:.1f}"] for v, c in zip(values, counts) if v != 0]
     console.print(table("segmentation", ["label", "voxels", "volume [mm^3]"], rows))
     sp = ", ".join(f"{s:g}" for s in seg.spacing)
-    console.print(f"{seg.shape[0]} x {seg.shape[1]} x {seg.shape[2]} voxels of {sp} mm -> {output}")
+    say(f"{seg.shape[0]} x {seg.shape[1]} x {seg.shape[2]} voxels of {sp} mm -> {output}")
     if cleanup.get("voxels_selected"):
-        console.print(f"clean-up: {cleanup['voxels_selected']} voxels segmented, {cleanup['voxels_kept']} kept "
-                      f"({cleanup['cleanup_change_percent']:+.2f} %)")
+        say(f"clean-up: {cleanup['voxels_selected']} voxels segmented, {cleanup['voxels_kept']} kept "
+            f"({cleanup['cleanup_change_percent']:+.2f} %)")
     warning = cleanup_warning(cleanup)
     if warning:
-        console.print(f"[yellow]warning:[/] {warning}")
+        warn(warning)

@@ -2,13 +2,18 @@
 
 import click
 
+from cutkit.cli._ui import overwrite_option
+
 
 @click.command(name="simulate")
 @click.argument("model", type=click.Path(dir_okay=False))
 @click.option("--trajectory", required=True, type=click.Path(dir_okay=False), help="Blade trajectory CSV.")
 @click.option("-o", "--output", "out_dir", required=True, type=click.Path(file_okay=False),
               help="Output folder (frames/, cut.pvd, cut_surface.pvd, forces.csv, summary.json, model.h5).")
-@click.option("--fps", default=30.0, show_default=True, type=float, help="Frames per simulated second.")
+@click.option("--fps", default=10.0, show_default=True, type=float,
+              help="Frames per simulated second, as in `cutkit demo`. Output only: the simulation is the same "
+                   "at any rate; each frame of a large model costs disk and time (30 for a smooth movie).")
+@overwrite_option
 @click.option("--png", is_flag=True,
               help="Pictures of the cut half-way, at the trajectory's end and at the end (pictures/NNNN_cut.png); "
                    "`cutkit render OUT/` makes others.")
@@ -27,14 +32,15 @@ import click
               help="Springs only: each tet resists a change of volume with bulk = this x E (0: springs only, "
                    "as in the paper; 0.3 leaves a tenth of the inverted tets on the demo knee, at about four "
                    "times the relaxation time).")
-def command(model, trajectory, out_dir, fps, png, movie, realtime, haptics, hold_s, geometry_rate_hz, blade_length,
-            material_model, volume_stiffness):
+def command(model, trajectory, out_dir, fps, overwrite, png, movie, realtime, haptics, hold_s, geometry_rate_hz,
+            blade_length, material_model, volume_stiffness):
     """Cut MODEL along TRAJECTORY with the scalpel force model and relax it; write frames and logs."""
-    from cutkit.io.atomic import check_writable
-    from cutkit.cli._ui import console
+    from cutkit.cli._ui import console, folder_guard
     from cutkit.cutting.trajectory import read_trajectory
+    from cutkit.io.atomic import check_output_folder, clear_outputs
     from cutkit.io.model_h5 import read_model
     from cutkit.simulate import SimulateOptions
+    from cutkit.simulate.run import preflight
 
     _check_flags(fps=fps, hold=hold_s, geometry_rate=geometry_rate_hz, blade_length=blade_length,
                  volume_stiffness=volume_stiffness)
@@ -42,11 +48,14 @@ def command(model, trajectory, out_dir, fps, png, movie, realtime, haptics, hold
                           geometry_rate_hz=geometry_rate_hz, blade_length=blade_length,
                           volume_stiffness=volume_stiffness, material_model=material_model)
     opt.check()
-    check_writable(out_dir, folder=True)
+    earlier = check_output_folder(out_dir, "simulate", overwrite, inputs=(model, trajectory))
     tet_model = read_model(model)
     traj = read_trajectory(trajectory)
-    summary = run_with_progress(tet_model, traj, out_dir, opt, model_path=str(model))
-    render_with_progress(summary, out_dir, png, movie)
+    preflight(tet_model, str(model))
+    clear_outputs(earlier)
+    with folder_guard(out_dir):
+        summary = run_with_progress(tet_model, traj, out_dir, opt, model_path=str(model))
+        render_with_progress(summary, out_dir, png, movie)
     report(console, summary, out_dir)
     return 0
 
@@ -65,6 +74,13 @@ def render_with_progress(summary: dict, out_dir, png: bool, movie: bool) -> None
     summary["pictures"] = done["pictures"]
     if done["movie"]:
         summary["movie"] = done["movie"]
+    # summary.json was written before the pictures: it says what the folder holds now
+    from pathlib import Path
+
+    from cutkit.simulate.record import write_json
+
+    summary.setdefault("options", {})["png"] = bool(done["pictures"])
+    write_json(Path(out_dir) / "summary.json", summary)
 
 
 def _check_flags(**values) -> None:
@@ -83,7 +99,7 @@ def _check_flags(**values) -> None:
                 raise InputError(f"{flag} must be a number >= 0, got {v:g}")
         elif not (np.isfinite(v) and v > 0):
             raise InputError(f"{flag} must be a positive number, got {v:g}")
-    if values["geometry_rate"] > 1.0 / HAPTIC_DT:
+    if values.get("geometry_rate", 0.0) > 1.0 / HAPTIC_DT:
         raise InputError(f"--geometry-rate must be at most the haptic rate {1.0 / HAPTIC_DT:.0f} Hz, "
                          f"got {values['geometry_rate']:g}")
 
@@ -112,27 +128,27 @@ def run_with_progress(tet_model, traj, out_dir, opt, model_path=None):
 
 def report(console, summary, out_dir) -> None:
     """Print the closing lines: warnings, counts, rates, what to open."""
-    from cutkit.cli._ui import print_uncut_note
+    from cutkit.cli._ui import print_uncut_note, say, warn
 
     for w in summary["warnings"]:
-        console.print(f"[yellow]warning:[/yellow] {w}")
+        warn(w)
     t = summary["time_per_task_s"]
-    console.print(
+    say(
         f"{summary['cut_tets']} tets cut into {summary['new_tets']} "
         f"({summary['new_tets_per_cut_tet']:.1f} per cut tet); {states_line(summary['states'])}; "
         f"cut opening {summary['cut_opening_mm']['final_mean']:.2f} mm mean")
     print_uncut_note(summary["edges_left_uncut"])
-    console.print(
+    say(
         f"{summary['simulated_s']:.2f} s simulated in {summary['wall_s']:.1f} s "
         f"(simulated/wall {summary['simulated_per_wall']:.2f}; relaxation {t['relaxation']:.1f} s, "
         f"cutting {t['collision_and_cut']:.1f} s, output {t['output']:.1f} s)")
     if "rates_hz" in summary:
         r = summary["rates_hz"]
-        console.print(f"rates: haptics {r['haptics']:.0f} Hz, geometry {r['geometry_updates']:.0f} Hz, "
+        say(f"rates: haptics {r['haptics']:.0f} Hz, geometry {r['geometry_updates']:.0f} Hz, "
                       f"relaxation list passes {r['relaxation_list_passes']:.0f}/s, frames {r['frames']:.1f}/s")
-    console.print(f"ParaView: open {out_dir}/cut.pvd (tissue) and {out_dir}/cut_surface.pvd (cut surface); "
+    say(f"ParaView: open {out_dir}/cut.pvd (tissue) and {out_dir}/cut_surface.pvd (cut surface); "
                   f"forces in {out_dir}/forces.csv, summary in {out_dir}/summary.json")
     for p in summary["pictures"]:
-        console.print(f"picture: {out_dir}/{p}")
+        say(f"picture: {out_dir}/{p}")
     if summary.get("movie"):
-        console.print(f"movie: {out_dir}/{summary['movie']}")
+        say(f"movie: {out_dir}/{summary['movie']}")

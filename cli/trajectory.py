@@ -29,7 +29,7 @@ def command(output, start, end, model, inward, arc_height, depth, approach, blad
     """Write the trajectory of an incision from START to END (see docs/trajectory-format.md)."""
     import json
 
-    from cutkit.cli._ui import console, parse_vec3
+    from cutkit.cli._ui import parse_vec3, say
     from cutkit.cutting.incision import Incision, incision
     from cutkit.cutting.trajectory import write_trajectory
 
@@ -49,6 +49,6 @@ def command(output, start, end, model, inward, arc_height, depth, approach, blad
         comment += f"\nonto the surface of {model}"
     write_trajectory(output, traj, comment=comment)
     length = float(sum(((traj.tip[1:] - traj.tip[:-1]) ** 2).sum(axis=1) ** 0.5))
-    console.print(f"{output}: {len(traj)} rows over {traj.t[-1]:.2f} s, tip path {length:.1f} mm; "
-                  f"entry at {', '.join(f'{v:.2f}' for v in traj.tip[0] + params.approach * traj.a[0])} mm")
+    say(f"{output}: {len(traj)} rows over {traj.t[-1]:.2f} s, tip path {length:.1f} mm; "
+        f"entry at {', '.join(f'{v:.2f}' for v in traj.tip[0] + params.approach * traj.a[0])} mm")
     return 0

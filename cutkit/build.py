@@ -118,9 +118,11 @@ def _stage_decimate(ctx: BuildContext) -> dict:
 def _stage_assign(ctx: BuildContext) -> dict:
     from cutkit.assign import assign
 
-    ctx.model = assign(ctx.model, ctx.recipe)
+    warnings: list[str] = []
+    ctx.model = assign(ctx.model, ctx.recipe, warnings=warnings)
     b = ctx.model.boundary
     return {
+        "warnings": warnings,
         "materials": len(ctx.model.materials.name),
         "fixed_nodes": int(b.fixed_nodes.size),
         "prescribed_nodes": int(b.prescribed_nodes.size),
@@ -218,7 +220,7 @@ def run_build(
 
     volume_path = Path(volume_path)
     if not volume_path.exists():
-        raise InputError(f"{volume_path}: no such volume file or folder")
+        raise InputError(f"{volume_path}: no such file or folder")
     ctx = BuildContext(recipe=recipe, volume_path=str(volume_path))
     t0 = time.perf_counter()
     ctx.volume = read_volume(volume_path, spacing=spacing) if spacing is not None else read_volume(volume_path)

@@ -64,7 +64,7 @@ def load_recipe(path: str | Path) -> dict:
     """
     path = Path(path)
     if not path.is_file():
-        raise InputError(f"{path}: no such recipe file")
+        raise InputError(f"{path}: no such file")
     raw = path.read_bytes()
     try:
         data = tomllib.loads(raw.decode("utf-8"))
@@ -122,10 +122,11 @@ def validate_recipe(data: dict, where: str = "recipe") -> None:
             raise InputError(f"{here} repeats label {mat['label']}")
         labels_seen.add(mat["label"])
         for key in MATERIAL_FIELDS:
-            if key in mat and mat[key] < 0:
-                raise InputError(f"{here}: {key} must not be negative")
-        if mat.get("E", 1.0) <= 0 or mat.get("density", 1.0) <= 0:
-            raise InputError(f"{here}: E and density must be positive")
+            # one wording for every field: E and density > 0, the others >= 0
+            if key in ("E", "density") and key in mat and not mat[key] > 0:
+                raise InputError(f"{here}: {key} must be a positive number, got {mat[key]:g}")
+            if key in mat and not mat[key] >= 0:
+                raise InputError(f"{here}: {key} must be a number >= 0, got {mat[key]:g}")
         if not 0.0 <= mat.get("poisson_ratio", 0.25) < 0.5:
             raise InputError(f"{here}: poisson_ratio must lie in [0, 0.5), got {mat['poisson_ratio']}")
     model_name = data.get("mechanics", {}).get("material_model")

@@ -85,7 +85,7 @@ def test_export_cli_and_labels_default(tmp_path):
 def test_bad_inputs_one_line(tmp_path):
     r = run("import", tmp_path / "missing.msh", "-o", tmp_path / "x.h5")
     assert r.exit_code == 2
-    assert r.output.strip() == f"cutkit: error: mesh file not found: {tmp_path / 'missing.msh'}"
+    assert r.output.strip() == f"cutkit: error: {tmp_path / 'missing.msh'}: no such file"
     (tmp_path / "bad.vtu").write_text("<VTKFile garbage")
     with pytest.raises(InputError, match=r"^cannot read mesh .*bad\.vtu: "):
         import_mesh(tmp_path / "bad.vtu")
@@ -104,7 +104,7 @@ def test_bad_inputs_one_line(tmp_path):
         export_mesh(m, tmp_path / "o.xyz")
     assert not (tmp_path / "o.xyz").exists()
     r = run("info", tmp_path / "nope.h5")
-    assert r.exit_code == 2 and "file not found" in r.output
+    assert r.exit_code == 2 and "no such file" in r.output
 
 
 @pytest.mark.parametrize("fmt,name,readname", [("tetgen", "c.node", "c.ele"), ("medit", "c.mesh", "c.mesh")])

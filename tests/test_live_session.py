@@ -122,8 +122,10 @@ def test_igtl_transforms_in_polydata_out_with_the_cut(model):
         s = run_live(model, source, [view], Path(__import__("tempfile").mkdtemp()), max_seconds=60,
                      until_idle_s=1.0, on_frame=collect)
         sender.join(timeout=10)
-        time.sleep(0.2)
-        collect(None)
+        t_end = time.monotonic() + 30.0  # the last messages on their way: wait for them, not a fixed time
+        while not ("CutkitCutSurface" in got and "CutkitTissue" in got) and time.monotonic() < t_end:
+            collect(None)
+            time.sleep(0.01)
     finally:
         client.stop()
         source.close()

@@ -183,7 +183,7 @@ def test_build_model_takes_a_label_map_as_input(tmp_path):
 
 def test_missing_input_is_named(tmp_path):
     line = error_line(["build-model", tmp_path / "absent.nrrd", "-o", tmp_path / "m.h5"])
-    assert line == f"cutkit: error: {tmp_path / 'absent.nrrd'}: no such volume file or folder"
+    assert line == f"cutkit: error: {tmp_path / 'absent.nrrd'}: no such file or folder"
 
 
 def test_intensity_volume_without_rule_asks_for_one(tmp_path):

@@ -32,7 +32,7 @@ def test_knee_recipe_loads_and_resolves_paths():
         ("[segment]\nthreshold = 'high'\n", "[segment]: threshold must be a list"),
         ("[segment]\nthreshold = [1, 2, 3]\n", "[segment] threshold must be [low] or [low, high]"),
         ("[isovolume]\nlevel = 'x'\n", "[isovolume]: level must be a number, not 'x'"),
-        ("[[materials]]\nlabel = 1\nname = 'skin'\nE = -5\n", "[[materials]] #1: E must not be negative"),
+        ("[[materials]]\nlabel = 1\nname = 'skin'\nE = -5\n", "[[materials]] #1: E must be a positive number, got -5"),
         ("[[materials]]\nlabel = 1\nname = 'a'\n[[materials]]\nlabel = 1\nname = 'b'\n", "[[materials]] #2 repeats label 1"),
         ("[[materials]]\nlabel = 1\nname = 'a'\nstiffness = 3\n", "unknown key 'stiffness'"),
         ("[[prestress]]\nlabel = 3\nfibre_direction = [0, 0]\nprestrain = 0.1\n", "fibre_direction must be a list of three numbers"),

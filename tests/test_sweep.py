@@ -211,8 +211,9 @@ def test_cli_on_an_existing_cluster(tmp_path, client, capsys):
     # results there already: refused without --resume, nothing to do with it
     assert main(["sweep", str(spec_path), "-o", str(out), "--scheduler", address]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert err == [f"cutkit: error: {out}: holds the results of an earlier sweep; add --resume to continue it, "
-                   "or choose another folder"]
+    assert err == [f"cutkit: error: {out}: the output folder is not empty (results.csv, results.parquet, runs); "
+                   "give --resume to continue the earlier sweep there, --overwrite to replace the outputs of an "
+                   "earlier `cutkit sweep` there, or another folder"]
     assert main(["sweep", str(spec_path), "-o", str(out), "--scheduler", address, "--resume"]) == 0
     assert "0 runs in" in capsys.readouterr().out
 

@@ -13,7 +13,7 @@ from cutkit.model.tetmodel import DEFAULT_MATERIAL_MODEL, MATERIAL_FIELDS, Bound
 _AXES = {"x": 0, "y": 1, "z": 2}
 
 
-def assign(model: TetModel, recipe: dict) -> TetModel:
+def assign(model: TetModel, recipe: dict, warnings: list | None = None) -> TetModel:
     """Return a copy of ``model`` with the recipe's materials, boundary conditions and prestress.
 
     Parameters
@@ -29,9 +29,21 @@ def assign(model: TetModel, recipe: dict) -> TetModel:
     ``tissue_<label>``.  Fixed nodes are the nodes of tets whose label is in
     ``boundary.fixed_labels`` (rigid bone) plus the nodes of each
     ``boundary.fixed_regions`` entry.
+
+    ``warnings``, when given, receives one line per default the materials
+    took: a tissue name cutkit has no defaults for, a label the recipe does
+    not name.
+
+    Raises
+    ------
+    InputError
+        The recipe names a label (materials, boundary.fixed_labels,
+        prestress) that no tet of the model has.
     """
+    _check_labels(model, recipe)
+    notes = [] if warnings is None else warnings
     materials = _materials(model, recipe.get("materials", []),
-                           recipe.get("mechanics", {}).get("material_model", DEFAULT_MATERIAL_MODEL))
+                           recipe.get("mechanics", {}).get("material_model", DEFAULT_MATERIAL_MODEL), notes)
     boundary = _boundary(model, recipe.get("boundary", {}))
     prestress = _prestress(model, recipe.get("prestress", []))
     provenance = dict(model.provenance)
@@ -45,15 +57,38 @@ def assign(model: TetModel, recipe: dict) -> TetModel:
     return dataclasses.replace(model, materials=materials, boundary=boundary, prestress=prestress, provenance=provenance)
 
 
-def _materials(model: TetModel, rows: list[dict], material_model: str) -> Materials:
+def _check_labels(model: TetModel, recipe: dict) -> None:
+    """A recipe label no tet has is an error naming the labels the model has."""
+    have = {int(v) for v in np.unique(model.labels)}
+    named = [("materials", [r["label"] for r in recipe.get("materials", [])]),
+             ("boundary.fixed_labels", recipe.get("boundary", {}).get("fixed_labels", [])),
+             ("prestress", [r["label"] for r in recipe.get("prestress", [])])]
+    bad = [f"{', '.join(str(v) for v in sorted(missing))} ({where})"
+           for where, labels in named if (missing := {int(v) for v in labels} - have)]
+    if bad:
+        raise InputError(f"the recipe names label{'s' * (len(bad) > 1 or ',' in bad[0])} {'; '.join(bad)} that no "
+                         f"tet of the model has; the model's labels: {', '.join(str(v) for v in sorted(have))}")
+
+
+def _materials(model: TetModel, rows: list[dict], material_model: str, notes: list) -> Materials:
     by_label = {int(r["label"]): r for r in rows}
     out = []
     for label in np.unique(model.labels):
         label = int(label)
         spec = by_label.get(label, {"label": label, "name": f"tissue_{label}"})
+        known = spec["name"] in DEFAULT_MATERIALS
         base = DEFAULT_MATERIALS.get(spec["name"], GENERIC_SOFT_TISSUE)
         row = {"label": label, "name": spec["name"]}
         row.update({k: float(spec.get(k, base[k])) for k in MATERIAL_FIELDS})
+        taken = [k for k in MATERIAL_FIELDS if k not in spec]
+        if not known and taken:
+            what = (f"label {label} is not in the recipe's materials" if label not in by_label
+                    else f"material {spec['name']!r} (label {label}) is not one of cutkit's tissues "
+                         f"({', '.join(DEFAULT_MATERIALS)})")
+            main = [k for k in ("E", "poisson_ratio", "density") if k in taken]
+            notes.append(f"{what}: it takes the generic soft tissue's (muscle's) defaults for "
+                         f"{'every field' if len(taken) == len(MATERIAL_FIELDS) else ', '.join(taken)}"
+                         + (f" ({', '.join(f'{k} = {base[k]:g}' for k in main)})" if main else ""))
         out.append(row)
     if not out:
         return dataclasses.replace(Materials.empty(), material_model=material_model)

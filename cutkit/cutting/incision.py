@@ -28,6 +28,9 @@ from cutkit.errors import InputError
 MAX_BLADE_ANGLE = 80.0
 #: With tremor the trajectory has at least this many rows per tremor period.
 ROWS_PER_TREMOR_PERIOD = 20
+#: ``start`` or ``end`` farther from the model's surface than this fraction of the model's
+#: bounding-box diagonal is refused: such a point is a typo or another model's coordinates.
+FAR_FROM_SURFACE_FRACTION = 0.5
 
 
 @dataclass
@@ -198,6 +201,10 @@ def _closest_on_triangles(p, a, b, c):
     return q, np.einsum("ij,ij->i", diff, diff)
 
 
+def _xyz(v) -> str:
+    return ",".join(f"{float(x):g}" for x in np.asarray(v).reshape(-1))
+
+
 def incision(params: Incision, model=None) -> Trajectory:
     """The blade trajectory of an incision.
 
@@ -224,9 +231,21 @@ def incision(params: Incision, model=None) -> Trajectory:
     start = np.asarray(params.start, np.float64)
     end = np.asarray(params.end, np.float64)
     inward = None if params.inward is None else np.asarray(params.inward, np.float64)
+    if inward is not None and not (np.all(np.isfinite(inward)) and np.linalg.norm(inward) > 0):
+        raise InputError(f"incision: inward must be a non-zero direction, got {_xyz(inward)}")
     if model is not None:
+        given = {"start": start, "end": end}
         start, n_start = closest_boundary_point(model, start)
         end, n_end = closest_boundary_point(model, end)
+        pts = np.asarray(model.points, np.float64)
+        lo, hi = pts.min(axis=0), pts.max(axis=0)
+        far = FAR_FROM_SURFACE_FRACTION * float(np.linalg.norm(hi - lo))
+        for name, on in (("start", start), ("end", end)):
+            dist = float(np.linalg.norm(given[name] - on))
+            if dist > far:
+                raise InputError(f"incision: {name} {_xyz(given[name])} is {dist:.0f} mm from the model's surface "
+                                 f"(the model spans {', '.join(f'{a:g}..{b:g}' for a, b in zip(lo, hi))} mm in "
+                                 "x, y, z); give points on or near its skin")
         if inward is None:
             inward = n_start + n_end
     if inward is None:
@@ -234,7 +253,9 @@ def incision(params: Incision, model=None) -> Trajectory:
     chord = end - start
     length = float(np.linalg.norm(chord))
     if length == 0:
-        raise InputError("incision: start and end coincide on the model's surface")
+        raise InputError(f"incision: start and end both move to the model's surface point {_xyz(start)}; give "
+                         "points farther apart" if model is not None else
+                         f"incision: start and end are the same point {_xyz(start)}")
     along = chord / length
     a0 = inward - np.dot(inward, along) * along
     if np.linalg.norm(a0) < 1e-9 * max(1.0, np.linalg.norm(inward)):

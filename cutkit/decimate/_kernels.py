@@ -13,6 +13,7 @@ from cutkit.decimate._legality import (
     P_VOL_EPS,
     _new_stamp,
     can_collapse,
+    conforming_after,
     label_volume_change,
     surface_faces,
 )
@@ -277,7 +278,7 @@ def collapse(u, v, points, tets, tet_alive, tet_maxcos, adj_start, adj_len, adj_
 
 
 @njit(cache=True)
-def _try_vertex(u, nc, cand, grad, gbase, newcos, points, tets, labels, tet_lab, vol_drift, vol_budget, tet_alive, tet_maxcos, adj_start, adj_len, adj_cap, pool, vert_alive, vclass, locked, ver, qkey, qlow, own_pts, own_tail, own_next, mark, mark2, heap_key, heap_u, heap_stamp, collapse_u, collapse_v, tet_counts, counters, params):
+def _try_vertex(u, nc, cand, grad, gbase, newcos, points, tets, labels, tet_lab, vol_drift, vol_budget, tet_alive, tet_maxcos, adj_start, adj_len, adj_cap, pool, vert_alive, vclass, locked, ver, qkey, qlow, own_pts, own_tail, own_next, mark, mark2, heap_key, heap_u, heap_stamp, collapse_u, collapse_v, tet_counts, counters, params, bnd_keys, bnd_nodes, grid):
     """Collapse ``u`` onto the first legal of its ``nc`` cheapest neighbours ``cand``; False if none is legal.
 
     ``grad`` (k, 3) float64, ``gbase`` (k,) int64 and ``newcos`` (k,) float64
@@ -299,6 +300,9 @@ def _try_vertex(u, nc, cand, grad, gbase, newcos, points, tets, labels, tet_lab,
         counters[C_CHECKS] += 1
         ok, _err = can_collapse(u, v, points, tets, labels, tet_lab, tet_maxcos, adj_start, adj_len, pool, vclass, own_pts, own_next, mark, mark2, vol_drift, vol_budget, counters, params, newcos)
         if not ok:
+            continue
+        if vclass[u] != 0 and bnd_keys.shape[0] and not conforming_after(
+                u, v, points, tets, labels, adj_start, adj_len, pool, vert_alive, bnd_keys, bnd_nodes, grid):
             continue
         if vclass[u] != 0:
             dvol = np.empty(vol_drift.shape[0])
@@ -367,7 +371,7 @@ def _requeue_touched(v, touched, nt, points, vclass, locked, ver, qkey, qlow, he
 
 
 @njit(cache=True)
-def run_collapses(points, tets, labels, tet_lab, vol_drift, vol_budget, tet_alive, tet_maxcos, adj_start, adj_len, adj_cap, pool, vert_alive, vclass, locked, ver, qkey, qlow, own_pts, own_tail, own_next, mark, mark2, heap_key, heap_u, heap_stamp, collapse_u, collapse_v, tet_counts, counters, params, max_pops):
+def run_collapses(points, tets, labels, tet_lab, vol_drift, vol_budget, tet_alive, tet_maxcos, adj_start, adj_len, adj_cap, pool, vert_alive, vclass, locked, ver, qkey, qlow, own_pts, own_tail, own_next, mark, mark2, heap_key, heap_u, heap_stamp, collapse_u, collapse_v, tet_counts, counters, params, max_pops, bnd_keys, bnd_nodes, grid):
     """Pop the heap until the target tet count, an empty heap, or ``max_pops`` pops.
 
     Returns one of ``STATUS_TARGET``, ``STATUS_EMPTY``, ``STATUS_BUDGET``.
@@ -399,6 +403,6 @@ def run_collapses(points, tets, labels, tet_lab, vol_drift, vol_budget, tet_aliv
                 qkey[u] = cost
                 heap_push(cost, u, ver[u], heap_key, heap_u, heap_stamp, ver, counters)
             continue
-        if not _try_vertex(u, nc, cand, grad, gbase, newcos, points, tets, labels, tet_lab, vol_drift, vol_budget, tet_alive, tet_maxcos, adj_start, adj_len, adj_cap, pool, vert_alive, vclass, locked, ver, qkey, qlow, own_pts, own_tail, own_next, mark, mark2, heap_key, heap_u, heap_stamp, collapse_u, collapse_v, tet_counts, counters, params):
+        if not _try_vertex(u, nc, cand, grad, gbase, newcos, points, tets, labels, tet_lab, vol_drift, vol_budget, tet_alive, tet_maxcos, adj_start, adj_len, adj_cap, pool, vert_alive, vclass, locked, ver, qkey, qlow, own_pts, own_tail, own_next, mark, mark2, heap_key, heap_u, heap_stamp, collapse_u, collapse_v, tet_counts, counters, params, bnd_keys, bnd_nodes, grid):
             qlow[u] = cost  # no legal collapse now; a lower bound once its star changes
     return STATUS_TARGET

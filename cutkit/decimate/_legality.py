@@ -579,3 +579,97 @@ def can_collapse(u, v, points, tets, labels, tet_lab, tet_maxcos, adj_start, adj
     if ok:
         ok, worst = sample_distance_rule(u, v, points, nu, fa, fb, tol2, worst)
     return ok, math.sqrt(worst)
+
+
+@njit(cache=True)
+def _on_triangle(points, x, pa, pb, pc, rel_tol):
+    """Whether node ``x`` lies on triangle (pa, pb, pc) without being at a corner: the rule of
+    ``cutkit check``'s hanging-node test (:func:`cutkit.mesh._check_kernels.hanging_nodes`)."""
+    ux, uy, uz = pb[0] - pa[0], pb[1] - pa[1], pb[2] - pa[2]
+    vx, vy, vz = pc[0] - pa[0], pc[1] - pa[1], pc[2] - pa[2]
+    nx = uy * vz - uz * vy
+    ny = uz * vx - ux * vz
+    nz = ux * vy - uy * vx
+    nn = nx * nx + ny * ny + nz * nz
+    if nn == 0.0:
+        return False
+    wx, wy, wz = pc[0] - pb[0], pc[1] - pb[1], pc[2] - pb[2]
+    L = math.sqrt(max(ux * ux + uy * uy + uz * uz, vx * vx + vy * vy + vz * vz, wx * wx + wy * wy + wz * wz))
+    tol = rel_tol * L
+    px, py, pz = points[x, 0] - pa[0], points[x, 1] - pa[1], points[x, 2] - pa[2]
+    if abs((px * nx + py * ny + pz * nz) / math.sqrt(nn)) > tol:
+        return False
+    beta = ((py * vz - pz * vy) * nx + (pz * vx - px * vz) * ny + (px * vy - py * vx) * nz) / nn
+    gamma = ((uy * pz - uz * py) * nx + (uz * px - ux * pz) * ny + (ux * py - uy * px) * nz) / nn
+    if 1.0 - beta - gamma < -rel_tol or beta < -rel_tol or gamma < -rel_tol:
+        return False
+    for q in (pa, pb, pc):
+        dx, dy, dz = points[x, 0] - q[0], points[x, 1] - q[1], points[x, 2] - q[2]
+        if dx * dx + dy * dy + dz * dz <= tol * tol:
+            return False
+    return True
+
+
+@njit(cache=True)
+def conforming_after(u, v, points, tets, labels, adj_start, adj_len, pool, vert_alive, bnd_keys, bnd_nodes, grid):
+    """Rule 4: no boundary node lies on an outer boundary face the collapse ``u -> v`` makes.
+
+    Such a node hangs (``cutkit check`` refuses the mesh): thin structures
+    whose two sides touch put nodes of one side on the plane of the other's
+    faces.  Nodes never move in a half-edge collapse, so the boundary nodes
+    are binned once: ``bnd_keys`` their sorted linear cell keys,
+    ``bnd_nodes`` the node of each, ``grid`` = (lo x, y, z, cell size,
+    cells along x, y, z, relative tolerance).  Run after :func:`can_collapse` found the collapse
+    legal (``u`` on the surface).
+    """
+    nsu = adj_len[u]
+    fa = np.empty(3 * nsu, np.int64)
+    fb = np.empty(3 * nsu, np.int64)
+    fs0 = np.empty(3 * nsu, np.int64)
+    fs1 = np.empty(3 * nsu, np.int64)
+    nu = surface_faces(u, tets, labels, adj_start, adj_len, pool, fa, fb, fs0, fs1)
+    h = grid[3]
+    rel_tol = grid[7]
+    dims = np.empty(3, np.int64)
+    for d in range(3):
+        dims[d] = int(grid[4 + d])
+    pv = points[v]
+    i0 = np.empty(3, np.int64)
+    i1 = np.empty(3, np.int64)
+    for i in range(nu):
+        if fs0[i] != -1 or fa[i] == v or fb[i] == v:
+            continue  # an interface face, or one that dies with the edge
+        a = fa[i]
+        b = fb[i]
+        pa = points[a]
+        pb = points[b]
+        big = 0.0
+        for d in range(3):
+            big = max(big, abs(pa[d] - pv[d]), abs(pb[d] - pv[d]), abs(pa[d] - pb[d]))
+        tol = rel_tol * 2.0 * big
+        for d in range(3):
+            mn = min(pv[d], pa[d], pb[d]) - tol
+            mx = max(pv[d], pa[d], pb[d]) + tol
+            i0[d] = max(0, int(math.floor((mn - grid[d]) / h)))
+            i1[d] = min(dims[d] - 1, int(math.floor((mx - grid[d]) / h)))
+        for ci in range(i0[0], i1[0] + 1):
+            for cj in range(i0[1], i1[1] + 1):
+                for ck in range(i0[2], i1[2] + 1):
+                    key = (ci * dims[1] + cj) * dims[2] + ck
+                    lo = 0
+                    hi = bnd_keys.shape[0]
+                    while lo < hi:
+                        mid = (lo + hi) // 2
+                        if bnd_keys[mid] < key:
+                            lo = mid + 1
+                        else:
+                            hi = mid
+                    s = lo
+                    while s < bnd_keys.shape[0] and bnd_keys[s] == key:
+                        x = bnd_nodes[s]
+                        s += 1
+                        if x == u or x == v or x == a or x == b or vert_alive[x] == 0:
+                            continue
+                        if _on_triangle(points, x, pv, pa, pb, rel_tol):
+                            return False
+    return True

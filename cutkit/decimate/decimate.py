@@ -44,6 +44,10 @@ SURFACE_SAFETY = 0.9
 POPS_PER_CALL = 20_000
 #: Rounds of re-costing every vertex once the heap runs dry.
 MAX_ROUNDS = 8
+#: A collapse may not put a boundary node within this fraction of a new boundary face's size of
+#: that face (rule 4, docs/decimation.md): ten times ``cutkit check``'s hanging-node tolerance, so
+#: that a decimated mesh passes the check with room to spare.
+HANGING_MARGIN = 10.0
 
 
 def reference_length(points: np.ndarray, tets: np.ndarray) -> float:
@@ -96,6 +100,30 @@ def _target_count(m: int, target_tets, ratio) -> int:
     if not (isinstance(ratio, (int, float)) and 0.0 < ratio <= 1.0):
         raise InputError(f"ratio must be the fraction of tets to keep, in (0, 1], got {ratio}")
     return max(1, int(math.floor(ratio * m)))
+
+
+def _boundary_grid(points: np.ndarray, tets: np.ndarray, h: float):
+    """The outer boundary's nodes binned in a uniform grid of cell size about ``h`` (rule 4 of
+    :mod:`cutkit.decimate._legality`): sorted linear cell keys, their nodes, and
+    ``(lo x, y, z, cell size, cells along x, y, z, relative tolerance)``."""
+    from cutkit.mesh.check import HANGING_NODE_REL_TOL
+    from cutkit.mesh.topology import boundary_faces
+
+    faces, _ = boundary_faces(tets)
+    nodes = np.unique(faces).astype(np.int64)
+    if nodes.size == 0:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(8)
+    cp = points[nodes]
+    lo = cp.min(axis=0)
+    ext = cp.max(axis=0) - lo
+    cell = max(float(h), float(ext.max()) / 1024.0, 1e-300)
+    dims = np.minimum(np.floor(ext / cell).astype(np.int64) + 1, 1 << 20)
+    cell = max(cell, float((ext / dims).max()))
+    ijk = np.minimum(np.floor((cp - lo) / cell).astype(np.int64), dims - 1)
+    keys = (ijk[:, 0] * dims[1] + ijk[:, 1]) * dims[2] + ijk[:, 2]
+    order = np.argsort(keys, kind="stable")
+    grid = np.array([*lo, cell, *dims.astype(np.float64), HANGING_MARGIN * HANGING_NODE_REL_TOL])
+    return np.ascontiguousarray(keys[order]), np.ascontiguousarray(nodes[order]), grid
 
 
 def _adjacency(tets: np.ndarray, n: int):
@@ -222,6 +250,8 @@ def decimate(
     tet_counts = np.empty(n + 1, np.int64)
     tet_counts[0] = m
 
+    bnd_keys, bnd_nodes, grid = _boundary_grid(points, tets0, h)
+
     to_remove = max(m - target, 0)
     rounds = 0
     done_at_round = -1
@@ -236,7 +266,7 @@ def decimate(
         status = K.run_collapses(
             points, tets, labels, tet_lab, vol_drift, vol_budget, tet_alive, tet_maxcos, adj_start, adj_len, adj_cap, pool, vert_alive, vclass,
             locked, ver, qkey, qlow, own_pts, own_tail, own_next, mark, mark2, heap_key, heap_u, heap_stamp, collapse_u, collapse_v,
-            tet_counts, counters, params, POPS_PER_CALL,
+            tet_counts, counters, params, POPS_PER_CALL, bnd_keys, bnd_nodes, grid,
         )
         if progress is not None:
             progress(int(min(m - counters[P.C_ALIVE_TETS], to_remove)), to_remove)

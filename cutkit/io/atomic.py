@@ -100,3 +100,74 @@ def check_writable(path: str | os.PathLike, folder: bool = False) -> None:
         raise InputError(f"cannot write {path}: folder {d} is not writable ({exc.strerror or exc})") from None
     os.close(fd)
     os.unlink(probe)
+
+
+#: What each command writes into its output folder: the only entries ``--overwrite`` removes.
+FOLDER_OUTPUTS: dict[str, tuple[str, ...]] = {
+    "simulate": ("frames", "surface", "pictures", "cut.pvd", "cut_surface.pvd", "forces.csv", "summary.json",
+                 "model.h5", "cut.mp4", "cut.gif"),
+    "cut": ("frames", "cut.pvd", "model.h5"),
+    "relax": ("frames", "relax.pvd"),
+    "live": ("trajectory.csv", "forces.csv", "summary.json", "model.h5"),
+    "sweep": ("results.parquet", "results.csv", "runs"),
+}
+#: The demo's folder: a simulate folder and the knee model the demo builds (kept and reused).
+DEMO_MODEL = ("knee.h5", "knee.h5.key")
+FOLDER_OUTPUTS["demo"] = FOLDER_OUTPUTS["simulate"] + DEMO_MODEL
+
+
+def check_output_folder(path: str | os.PathLike, command: str, overwrite: bool = False,
+                        inputs: tuple = ()) -> list[Path]:
+    """Check an output folder before any work; return what ``overwrite`` will remove.
+
+    A folder that does not exist or is empty is fine.  A non-empty one is
+    refused (an earlier run's files would mix with this run's) unless
+    ``overwrite``: then the entries of :data:`FOLDER_OUTPUTS` for ``command``
+    are returned, to be removed by :func:`clear_outputs` once the inputs are
+    checked; anything else in the folder is left alone.  Nothing is changed here.
+
+    Raises
+    ------
+    InputError
+        The folder cannot be written, is not empty (without ``overwrite``), or
+        holds one of ``inputs`` among the outputs ``overwrite`` would remove.
+    """
+    check_writable(path, folder=True)
+    p = Path(path)
+    if not p.is_dir():
+        return []
+    entries = sorted(e.name for e in p.iterdir())
+    if not entries:
+        return []
+    if not overwrite:
+        shown = ", ".join(entries[:3]) + (f" (+{len(entries) - 3} more)" if len(entries) > 3 else "")
+        resume = "--resume to continue the earlier sweep there, " if command == "sweep" else ""
+        raise InputError(f"{path}: the output folder is not empty ({shown}); give {resume}--overwrite to "
+                         f"replace the outputs of an earlier `cutkit {command}` there, or another folder")
+    ours = [p / name for name in FOLDER_OUTPUTS[command] if (p / name).exists() or (p / name).is_symlink()]
+    for inp in inputs:
+        if inp is None:
+            continue
+        q = Path(inp).resolve()
+        for o in ours:
+            r = o.resolve()
+            if q == r or r in q.parents:
+                raise InputError(f"{inp}: an input of this run is one of the outputs --overwrite would "
+                                 f"replace in {path}; move it or write to another folder")
+    return ours
+
+
+def clear_outputs(paths: list[Path]) -> None:
+    """Remove the files and folders :func:`check_output_folder` returned (an earlier run's outputs)."""
+    import shutil
+
+    for q in paths:
+        try:
+            if q.is_dir() and not q.is_symlink():
+                shutil.rmtree(q)
+            else:
+                q.unlink()
+        except FileNotFoundError:
+            pass
+        except OSError as exc:
+            raise InputError(f"cannot remove {q}: {exc.strerror or exc}") from None

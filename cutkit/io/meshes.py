@@ -55,7 +55,7 @@ def import_mesh(path: str | os.PathLike) -> TetModel:
     """
     path = Path(path)
     if not path.exists():
-        raise InputError(f"mesh file not found: {path}")
+        raise InputError(f"{path}: no such file")
     if path.is_dir():
         raise InputError(f"mesh path is a folder, not a file: {path}")
     mesh = _read(path)

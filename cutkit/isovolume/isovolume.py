@@ -130,6 +130,15 @@ def isovolume(volume: Volume, level: float = 0.5, labels=None, snap: float = SNA
             keep = np.atleast_1d(np.asarray(labels, np.int64))
             if np.any(keep <= 0):
                 raise InputError(f"isovolume: tissue labels must be > 0, got {keep.tolist()}")
+            present = np.unique(lab)
+            present = present[present > 0]
+            absent = np.setdiff1d(keep, present)
+            if absent.size:
+                s = "s" * (absent.size > 1)
+                raise EmptySegmentationError(
+                    f"isovolume: no voxel has label{s} {', '.join(str(int(v)) for v in absent)}; the label map has "
+                    + (f"label{'s' * (present.size > 1)} {', '.join(str(int(v)) for v in present)}"
+                       if present.size else "no voxel with a label > 0"))
             lab = np.where(np.isin(lab, keep), lab, 0).astype(np.int32)
         on = np.zeros(n_grid, np.uint8)
         f = np.zeros(1, np.float64)

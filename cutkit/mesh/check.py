@@ -74,7 +74,7 @@ def _name(ids, what: str) -> str:
     return f"{ids.size} {what}: {shown}{more}"
 
 
-def check_mesh(points, tets, labels=None, min_dihedral: float = 0.0) -> CheckReport:
+def check_mesh(points, tets, labels=None, min_dihedral: float = 0.0, quick: bool = False) -> CheckReport:
     """Check that a tet mesh is a valid, conforming, positively oriented mesh.
 
     Parameters
@@ -85,6 +85,9 @@ def check_mesh(points, tets, labels=None, min_dihedral: float = 0.0) -> CheckRep
         Checked for shape and integer type when given.
     min_dihedral : float
         The dihedral-angle row fails when the worst angle (degrees) is below this.
+    quick : bool
+        Only the cheap checks (a few passes over the tets): finite coordinates,
+        indices, labels, positive orientation, faces shared by at most two tets.
 
     Returns
     -------
@@ -141,6 +144,8 @@ def check_mesh(points, tets, labels=None, min_dihedral: float = 0.0) -> CheckRep
     rep.add("faces shared by <= 2 tets", over.size == 0,
             f"{faces.shape[0]} faces" if over.size == 0
             else f"{over.size} faces in 3+ tets, e.g. nodes {faces[over[0]].tolist()}")
+    if quick:
+        return rep
 
     # boundary: faces used once, outward-oriented
     local = np.flatnonzero(count[finv] == 1)

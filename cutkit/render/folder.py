@@ -34,6 +34,8 @@ class Folder:
         Magnitude of the force on the hand, N.
     summary : dict
         ``summary.json`` (empty when missing).
+    label_names : dict
+        Material name of each tissue label, from the folder's ``model.h5`` (empty when missing).
     """
 
     path: Path
@@ -44,6 +46,7 @@ class Folder:
     path_state: list = field(default_factory=list)
     force: np.ndarray = field(default_factory=lambda: np.zeros(0))
     summary: dict = field(default_factory=dict)
+    label_names: dict = field(default_factory=dict)
 
     def surface_at(self, t: float) -> Path | None:
         """The cut-surface file of the frame at time ``t`` (the last one not after it)."""
@@ -94,7 +97,7 @@ def read_folder(path) -> Folder:
     """
     path = Path(path)
     if not path.is_dir():
-        raise InputError(f"{path}: no such output folder")
+        raise InputError(f"{path}: no such folder")
     pvd = path / "cut.pvd"
     if not pvd.is_file():
         raise InputError(f"{path}: not an output folder of cutkit simulate (no cut.pvd)")
@@ -125,4 +128,19 @@ def read_folder(path) -> Folder:
             folder.summary = json.loads((path / "summary.json").read_text())
         except ValueError:
             folder.summary = {}
+    folder.label_names = _label_names(path / "model.h5")
     return folder
+
+
+def _label_names(model_path: Path) -> dict:
+    """``{label: material name}`` of a model file; empty when it is missing or unreadable."""
+    if not model_path.is_file():
+        return {}
+    from cutkit.errors import CutkitError
+    from cutkit.io.model_h5 import read_model
+
+    try:
+        mat = read_model(model_path).materials
+    except (CutkitError, OSError):
+        return {}
+    return {int(lab): str(name) for lab, name in zip(mat.label, mat.name)}

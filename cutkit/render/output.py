@@ -37,7 +37,7 @@ def _title(folder: Folder, t: float, final: bool = False) -> str:
 def _frame_image(folder: Folder, index: int, camera, size, final=False):
     t, frame = folder.frames[index]
     return render_frame(frame, folder.surface_at(t), path_done=folder.path_until(t), path_all=folder.path_tip,
-                        camera=camera, title=_title(folder, t, final), size=size)
+                        camera=camera, title=_title(folder, t, final), size=size, label_names=folder.label_names)
 
 
 def _save_png(path: Path, img: np.ndarray) -> None:

@@ -117,7 +117,7 @@ def _nice_length(span: float) -> float:
 
 
 def render_frame(frame_path, surface_path=None, path_done=None, path_all=None, camera: Camera | None = None,
-                 title: str = "", size=(1200, 900), show_path: bool = True):
+                 title: str = "", size=(1200, 900), show_path: bool = True, label_names: dict | None = None):
     """Render one frame to an image.
 
     Parameters
@@ -132,6 +132,8 @@ def render_frame(frame_path, surface_path=None, path_done=None, path_all=None, c
     title : str
         Shown in a band above the scene, never over the tissue.
     size : (width, height)
+    label_names : dict, optional
+        Material name of each tissue label, for the legend of an untextured model.
 
     Returns
     -------
@@ -175,7 +177,9 @@ def render_frame(frame_path, surface_path=None, path_done=None, path_all=None, c
             colour = palette[i % len(palette)]
             pl.add_mesh(part, color=colour, smooth_shading=True, split_sharp_edges=True, feature_angle=60.0,
                         specular=0.15, ambient=0.15)
-            legend.append([f"tissue label {int(v)}", tuple(0.65 * c for c in colour)])
+            name = (label_names or {}).get(int(v))
+            legend.append([f"{name} (label {int(v)})" if name else f"tissue label {int(v)}",
+                           tuple(0.65 * c for c in colour)])
     else:
         pl.add_mesh(surf, color=TISSUE_COLOUR, smooth_shading=True, split_sharp_edges=True, feature_angle=60.0)
         legend.append(["tissue", tuple(0.65 * c for c in TISSUE_COLOUR)])

@@ -28,6 +28,23 @@ def demo_inputs() -> tuple[Path, Path]:
     return recipe, trajectory
 
 
+def demo_outputs(out_dir, overwrite: bool = False) -> list[Path]:
+    """What of ``out_dir`` a new demo run replaces: the earlier run's outputs, never its built model.
+
+    The demo's folder is its own: one that holds only what the demo writes is
+    reused as it is (the model is rebuilt only when its inputs changed).  A
+    folder with anything else in it is refused unless ``overwrite``; other
+    files are never removed.
+    """
+    from cutkit.io.atomic import DEMO_MODEL, FOLDER_OUTPUTS, check_output_folder
+
+    folder = Path(out_dir)
+    ours = set(FOLDER_OUTPUTS["demo"])
+    own = folder.is_dir() and all(e.name in ours for e in folder.iterdir())
+    earlier = check_output_folder(out_dir, "demo", overwrite or own)
+    return [p for p in earlier if p.name not in DEMO_MODEL]
+
+
 def build_key(recipe: dict) -> str:
     """sha256 over what decides the build: the recipe, its input volumes and the cutkit version."""
     import cutkit
@@ -40,7 +57,7 @@ def build_key(recipe: dict) -> str:
         if path:
             p = Path(path)
             if not p.is_file():
-                raise InputError(f"{p}: volume named by the recipe does not exist")
+                raise InputError(f"{p}: no such file or folder (a volume the demo recipe names)")
             h.update(hashlib.sha256(p.read_bytes()).digest())
     return h.hexdigest()
 

@@ -95,10 +95,10 @@ class LiveLoop:
 
         self.opt = opt or SimulateOptions(frames=False)
         self.opt.check()
-        out_dir.mkdir(parents=True, exist_ok=True)
         self.out_dir, self.source, self.views, self.model_path = out_dir, source, list(views), model_path
         blade_length = self.opt.blade_length or DEFAULT_BLADE_LENGTH
         self.session = s = Session(model, self.opt, blade_length, DEFAULT_BLADE_BREADTH)
+        out_dir.mkdir(parents=True, exist_ok=True)  # once the model is known to run
         self.service = isinstance(source, HapticsPoseSource)
         self.poses = PoseRecorder(blade_length, DEFAULT_BLADE_BREADTH)
         self.meter = TickMeter(source, poses=self.poses) if self.service else None
@@ -142,12 +142,14 @@ class LiveLoop:
         self.relax = RelaxThread(s, clock, chunk)
         self.relax.start()
         self.interrupted = False
+        stopped_by = None
         try:
             if on_start is not None:
                 on_start()
             self._loop(max_seconds, idle_end_s, stop or threading.Event(), on_frame, until_idle_s)
-        except KeyboardInterrupt:
+        except KeyboardInterrupt as exc:  # Ctrl-C, or SIGTERM as the command line raises it
             self.interrupted = True
+            stopped_by = exc
         finally:
             self.relax.halt()
             self.loop_wall = self.now()
@@ -155,7 +157,7 @@ class LiveLoop:
         if self.relax.error is not None:
             raise self.relax.error
         if self.interrupted:
-            raise KeyboardInterrupt
+            raise stopped_by
         return summary
 
     def now(self) -> float:

@@ -223,10 +223,22 @@ def _cut_step_ms(cut) -> dict | None:
             "handover_median": float(np.median(handover)), "handover_p90": float(np.percentile(handover, 90))}
 
 
-def closing_warnings(session) -> None:
-    """The warnings a finished session adds: no touch, or a touch without a cut."""
+def extents_text(points, tips) -> str:
+    """``the model spans X0..X1, ... mm in x, y, z; the trajectory ...``: where a blade that missed went."""
+    points = np.asarray(points, np.float64).reshape(-1, 3)
+    tips = np.asarray(tips, np.float64).reshape(-1, 3)
+    lo, hi = points.min(axis=0), points.max(axis=0)
+    return (f"the model spans {', '.join(f'{a:g}..{b:g}' for a, b in zip(lo, hi))} mm in x, y, z; the trajectory "
+            f"{', '.join(f'{a:g}..{b:g}' for a, b in zip(tips.min(axis=0), tips.max(axis=0)))}")
+
+
+def closing_warnings(session, tips=None) -> None:
+    """The warnings a finished session adds: no touch, or a touch without a cut.
+
+    ``tips`` (the trajectory's blade tips, mm) adds the model's and the trajectory's extents."""
     if session.counts["entries"] == 0:
-        session.warnings.append("the trajectory never touches the tissue: no cut")
+        where = f" ({extents_text(session.model.points, tips)})" if tips is not None and len(tips) else ""
+        session.warnings.append(f"the trajectory never touches the tissue: no cut{where}")
     elif not session.tets_cut:
         session.warnings.append("the blade touched the tissue but never cut it (F_enter not reached)")
 

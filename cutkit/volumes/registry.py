@@ -112,12 +112,16 @@ def read_volume(path: str | os.PathLike, spacing=None, origin=None) -> Volume:
     if not path.exists():
         raise InputError(f"{path}: no such file or folder")
     fmt = format_for(path)
+    if path.is_file() and path.stat().st_size == 0:
+        raise InputError(f"{path}: the file is empty (0 bytes), not a {fmt.name} volume")
     try:
         vol = fmt.reader(path)
     except InputError:
         raise
     except Exception as exc:  # the libraries raise many types; the user needs one line
-        msg = " ".join(str(exc).split()) or type(exc).__name__
+        msg = " ".join(str(exc).split())
+        if not msg or isinstance(exc, (StopIteration, EOFError)):
+            msg = "the file ends before its header is complete"
         raise InputError(f"{path}: cannot read as {fmt.name}: {msg}") from exc
     if spacing is not None:
         vol.spacing = _positive_vec3(spacing, path, "spacing")
