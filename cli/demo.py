@@ -27,13 +27,17 @@ def command(out_dir, fps, overwrite, no_png, movie, material_model):
     from cutkit.cli.simulate import _check_flags
     from cutkit.io.atomic import clear_outputs
     from cutkit.simulate.demo import demo_inputs, demo_outputs
-    from cutkit.simulate.warmup import start_background
+    from cutkit.cli._ui import note
+    from cutkit.simulate.warmup import kernels_compiled, start_background
 
     t0 = time.perf_counter()
     _check_flags(fps=fps)
     _, trajectory = demo_inputs()
     # the earlier run's outputs go (its built model stays, to be reused): nothing of two runs mixes
     clear_outputs(demo_outputs(out_dir, overwrite))
+    if kernels_compiled() is False:
+        note("compiling the numba kernels (first run only: several minutes on two cores; later runs load "
+             "them from the cache)")
     # a second process compiles the decimation and simulation kernels while this one builds
     warm = start_background()
     try:
@@ -60,8 +64,10 @@ def _run(out_dir, fps, no_png, movie, trajectory, warm, t0, material_model=None)
         task = bar.add_task("build-model", total=len(STAGES))
         model_path, reused, _ = build_or_reuse(out_dir, on_stage=stage_reporter(bar, task))
         bar.update(task, completed=len(STAGES), description="build-model: " + ("reused" if reused else "done"))
-    if warm is not None:
-        warm.wait()
+    if warm is not None and warm.poll() is None:
+        with progress() as bar:  # the simulation waits for the kernels the second process compiles
+            bar.add_task("compiling kernels (first run only)", total=None)
+            warm.wait()
     model = read_model(model_path)
     say(f"model {model_path}: {model.tets.shape[0]} tets, {model.points.shape[0]} nodes"
         + (" (inputs unchanged, build reused)" if reused else ""))

@@ -135,3 +135,25 @@ def test_simulate_is_identical_with_one_and_two_threads(tmp_path, monkeypatch, m
     assert out[1][0] > 0  # it cut
     assert out[1][:4] == out[2][:4]
     np.testing.assert_array_equal(out[1][4], out[2][4])
+
+
+def test_a_first_run_is_told_that_kernels_compile(tmp_path, monkeypatch):
+    """`cutkit demo` says "compiling the numba kernels (first run only ...)" when numba's cache
+    next to the kernel sources is missing (kernels_compiled is False), not when it is there."""
+    from cutkit.simulate.warmup import CACHE_WITNESSES, kernels_compiled
+
+    monkeypatch.delenv("NUMBA_CACHE_DIR", raising=False)
+    for rel in CACHE_WITNESSES:
+        (tmp_path / rel).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / rel).write_text("")
+    assert kernels_compiled(tmp_path) is False
+    for rel in CACHE_WITNESSES[:-1]:
+        cache = tmp_path / rel.rsplit("/", 1)[0] / "__pycache__"
+        cache.mkdir(exist_ok=True)
+        (cache / (rel.rsplit("/", 1)[1][:-3] + ".kernel-12.py311.nbi")).write_text("")
+    assert kernels_compiled(tmp_path) is False  # one kernel module still to compile
+    rel = CACHE_WITNESSES[-1]
+    (tmp_path / rel.rsplit("/", 1)[0] / "__pycache__" / (rel.rsplit("/", 1)[1][:-3] + ".k-1.py311.nbi")).write_text("")
+    assert kernels_compiled(tmp_path) is True
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))
+    assert kernels_compiled(tmp_path) is None  # the cache lives elsewhere: unknown

@@ -55,6 +55,36 @@ def warm_up(outputs: bool = True, material_model: str | None = None) -> None:
                                                  settle_iterations=2, material_model=material_model))
 
 
+#: Kernel modules whose numba cache tells whether this installation has compiled its kernels:
+#: one of decimation, cutting and each tissue model (their caches are written on first use).
+CACHE_WITNESSES = ("decimate/_kernels.py", "cutting/_kernels_step.py", "relax/_elastic_kernels.py",
+                   "relax/_kernels.py")
+
+
+def kernels_compiled(root=None) -> bool | None:
+    """Whether the numba kernels of this installation are in numba's cache (next to the sources).
+
+    ``root`` is the package folder (default: this installation's ``cutkit``).
+
+    False on a first run: the kernels compile then (minutes on two cores) and
+    later runs load them.  None where the cache lives elsewhere
+    (``NUMBA_CACHE_DIR``) or the package folder is not writable: unknown.
+    """
+    import os
+    from pathlib import Path
+
+    if os.environ.get("NUMBA_CACHE_DIR"):
+        return None
+    root = Path(__file__).resolve().parent.parent if root is None else Path(root)
+    if not os.access(root, os.W_OK):
+        return None
+    for rel in CACHE_WITNESSES:
+        src = root / rel
+        if not any((src.parent / "__pycache__").glob(src.stem + ".*.nbi")):
+            return False
+    return True
+
+
 def start_background() -> subprocess.Popen | None:
     """Run :func:`warm_up` in a quiet child process; None if it cannot start."""
     try:
