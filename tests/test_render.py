@@ -136,3 +136,18 @@ def test_a_cut_that_does_not_open_still_shows(folder, tmp_path):
     assert near.sum() > 100  # the outline of the hidden cut
     hidden = render_frame(frame, None, camera=cam, size=(480, 360), show_path=False)
     assert (np.abs(hidden[scene].astype(float) - rim).max(axis=2) < 40).sum() < 10
+
+
+def test_a_hand_that_holds_still_is_titled_at_rest(tmp_path):
+    """The scalpel model keeps "cutting" while the hand rests after a stroke; the picture's title
+    says "blade at rest" once the tip has not moved over REST_WINDOW_S, and "cutting" while it moves."""
+    from cutkit.render.folder import REST_WINDOW_S, Folder
+    from cutkit.render.output import _title
+
+    t = np.arange(0.0, 0.5, 0.001)
+    tip = np.stack([np.minimum(t, 0.3) * 10.0, np.zeros_like(t), np.zeros_like(t)], axis=1)  # stops at 0.3 s
+    f = Folder(path=tmp_path, frames=[(0.0, None)], path_t=t, path_tip=tip, path_state=["cutting"] * t.size,
+               force=np.zeros(t.size))
+    assert "cutting" in _title(f, 0.2) and "at rest" not in _title(f, 0.2)
+    assert "cutting" in _title(f, 0.3 + 0.5 * REST_WINDOW_S)  # stopped, but not for the whole window yet
+    assert "blade at rest" in _title(f, 0.3 + 2 * REST_WINDOW_S)

@@ -13,6 +13,13 @@ import numpy as np
 from cutkit.errors import InputError
 
 
+#: A picture's title calls the blade at rest when its tip moved less than this, mm ...
+REST_TOLERANCE_MM = 1e-6
+#: ... over this many seconds before the picture (the scalpel model keeps the state it had,
+#: "cutting", while the hand holds still after a stroke).
+REST_WINDOW_S = 0.05
+
+
 @dataclass
 class Folder:
     """An output folder of ``cutkit simulate``.
@@ -65,6 +72,14 @@ class Folder:
             return ""
         i = int(np.searchsorted(self.path_t, t + 1e-9)) - 1
         return self.path_state[max(i, 0)]
+
+    def at_rest(self, t: float, window_s: float = REST_WINDOW_S) -> bool:
+        """Whether the blade tip has not moved (by more than :data:`REST_TOLERANCE_MM`) over the
+        ``window_s`` seconds up to ``t``: a hand that holds still after its stroke."""
+        if self.path_t.size == 0 or t - float(self.path_t[0]) < window_s:
+            return False
+        recent = self.path_tip[(self.path_t >= t - window_s - 1e-9) & (self.path_t <= t + 1e-9)]
+        return bool(recent.shape[0] > 1 and np.ptp(recent, axis=0).max() <= REST_TOLERANCE_MM)
 
     def force_at(self, t: float) -> float:
         if self.force.size == 0:

@@ -22,6 +22,8 @@ def _title(folder: Folder, t: float, final: bool = False) -> str:
     t0 = folder.frames[0][0]
     parts = [f"t = {t - t0:.2f} s"]
     state = folder.state_at(t)
+    if state == "cutting" and folder.at_rest(t):
+        state = "blade at rest"
     if state:
         parts.append(state)
     if folder.force.size:
