@@ -117,12 +117,14 @@ def test_a_blade_put_inside_the_tissue_cuts_from_where_it_lies():
 
 def _inside_incision(tmp_path):
     """A slab model and a trajectory whose first pose has the whole blade inside it."""
+    from cutkit.assign.defaults import DEFAULT_MATERIALS
     from cutkit.cutting.trajectory import Trajectory, write_trajectory
     from cutkit.io.model_h5 import write_model
-    from cutkit.model.tetmodel import TetModel
+    from cutkit.model.tetmodel import Materials, TetModel
 
     p, t = box_mesh((10, 6, 6), spacing=(2.0, 2.0, 2.0))
-    write_model(tmp_path / "slab.h5", TetModel.from_arrays(p, t))
+    row = dict(label=1, name="muscle", **DEFAULT_MATERIALS["muscle"])
+    write_model(tmp_path / "slab.h5", TetModel.from_arrays(p, t, materials=Materials.from_rows([row])))
     k = 40
     tip = np.stack([np.linspace(4.0, 22.0, k), np.full(k, 8.5), np.full(k, 6.3)], axis=1)
     traj = Trajectory(t=np.linspace(0.0, 0.39, k), tip=tip, a=np.tile([0.0, 1.0, 0.0], (k, 1)),
