@@ -25,8 +25,11 @@ import click
 @click.option("--blade-length", default=None, type=float, help="Blade length, mm [default: 20].")
 @click.option("--material-model", type=click.Choice(["neohookean", "springs"]), default=None,
               help="Tissue model [default: what the model file names].")
+@click.option("--solver", type=click.Choice(["newton", "vbd"]), default=None,
+              help="How the element model's relaxation steps are solved: projected Newton or vertex block "
+                   "descent [default: vbd].")
 def command(model, out_dir, haptics, trajectory, speed, igtl_port, igtl_device, no_window, fps, seconds, until_idle,
-            geometry_rate_hz, blade_length, material_model):
+            geometry_rate_hz, blade_length, material_model, solver):
     """Cut MODEL live; Ctrl-C (or closing the window) ends the session, its recording stays valid."""
     from cutkit.cli._ui import console
     from cutkit.errors import InputError
@@ -40,7 +43,7 @@ def command(model, out_dir, haptics, trajectory, speed, igtl_port, igtl_device, 
     if no_window and haptics is None and trajectory is None and igtl_port is None:
         raise InputError("--no-window needs a pose source: --haptics, --trajectory or --igtl (the mouse needs the window)")
     opt = SimulateOptions(geometry_rate_hz=geometry_rate_hz, blade_length=blade_length,
-                          material_model=material_model, frames=False)
+                          material_model=material_model, frames=False, solver=solver)
     opt.check()
     check_writable(out_dir, folder=True)
     tet_model = read_model(model)

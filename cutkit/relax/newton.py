@@ -11,8 +11,9 @@ by projected Newton (Smith, de Goes & Kim 2018, section 4.3; Teran et al.
 
     (M / h^2 + C M / h + K_+) d = r(x),   r = -dG/dx over the free dofs
 
-is solved by a sparse Cholesky factorisation (CHOLMOD through cholespy,
-:data:`LINEAR_SOLVERS`), and an energy line search backtracks from the
+is solved by a sparse Cholesky factorisation (cholespy) or, for large
+models, by conjugate gradients with a multigrid preconditioner (pyamg)
+(:data:`LINEAR_SOLVERS`), and an energy line search backtracks from the
 longest step that inverts no element (Li et al. 2020, incremental potential
 contact: filter the first trial by the first time any element's volume
 reaches zero, then Armijo on G).  Every iterate keeps every element that was
@@ -49,9 +50,12 @@ MAX_BACKTRACKS = 40
 #: A decrease of G this far below G's size (relative) is lost in rounding: there, a trial is
 #: accepted when it lowers the residual instead.
 ROUNDING = 1e-13
-#: The linear solvers: ``"cholesky"`` (cholespy, CHOLMOD's supernodal factorisation) or
-#: ``"cg"`` (conjugate gradients, smoothed-aggregation multigrid preconditioner, pyamg).
-LINEAR_SOLVERS = ("cholesky", "cg")
+#: The linear solvers: ``"cholesky"`` (cholespy's sparse Cholesky factorisation), ``"cg"``
+#: (conjugate gradients, smoothed-aggregation multigrid preconditioner, pyamg) or ``"auto"``.
+LINEAR_SOLVERS = ("auto", "cholesky", "cg")
+#: ``"auto"`` factorises systems of at most this many dofs and solves larger ones by CG
+#: (docs/relaxation.md, "Linear solves": cholespy's factorisation grows steeply past it).
+CHOLESKY_MAX_DOFS = 10000
 #: A static system (no inertia) that has a floating piece is singular: its diagonal gets this
 #: fraction of itself added (it changes the step, never the residual the solve stops on).
 STATIC_SHIFT = 1e-10
@@ -60,6 +64,11 @@ STATIC_SHIFT = 1e-10
 HESSIANS = ("auto", "projected", "exact")
 #: Relative tolerance of a CG solve (inexact Newton: the outer iteration corrects what it leaves).
 CG_RTOL = 1e-2
+#: CG iterations of one linear solve at most.
+CG_MAX_ITERATIONS = 500
+#: The multigrid hierarchy is built again when a solve takes this many times the CG iterations
+#: the first solve with it took (the matrix has drifted from the one it was built on).
+AMG_REBUILD_FACTOR = 3.0
 
 
 class NewtonSolver:
@@ -83,7 +92,7 @@ class NewtonSolver:
         takes the exact Hessian wherever it is positive definite.
     """
 
-    def __init__(self, em: ElementModel, *, linear: str = "cholesky", hessian: str = "auto"):
+    def __init__(self, em: ElementModel, *, linear: str = "auto", hessian: str = "auto"):
         if linear not in LINEAR_SOLVERS:
             raise InputError(f"linear solver must be one of {', '.join(LINEAR_SOLVERS)}, not {linear!r}")
         if hessian not in HESSIANS:
@@ -91,14 +100,16 @@ class NewtonSolver:
         self.em = em
         self.linear = linear
         self.hessian = hessian
-        self.counts = {"factorisations": 0, "indefinite": 0, "pattern_builds": 0, "cg_iterations": 0}
+        self.counts = {"factorisations": 0, "indefinite": 0, "pattern_builds": 0, "cg_iterations": 0,
+                       "amg_setups": 0}
+        self._amg = None  # (hierarchy, dofs it was built on, CG iterations of its first solve)
         self.reset()
 
     def reset(self) -> None:
-        """Forget the pattern (after a topology change)."""
+        """Forget the pattern (after a topology change).  The multigrid hierarchy stays: a cut only
+        appends nodes, so it still preconditions the dofs it was built on (:meth:`_preconditioner`)."""
         self._pattern = None
         self._key = None
-        self._amg = None
 
     # ------------------------------------------------------------ the linear system
     def _elements(self) -> KE.Elements:
@@ -117,7 +128,6 @@ class NewtonSolver:
             indptr, indices, diagonal = KN.scalar_pattern(ptr, idx)
             self._pattern = KN.Pattern(ptr, idx, blocks, indptr, indices, diagonal)
             self._key = key
-            self._amg = None
             self.counts["pattern_builds"] += 1
         return self._pattern
 
@@ -147,7 +157,7 @@ class NewtonSolver:
 
     def _solve_linear(self, A, r: np.ndarray):
         """d with A d = r, or None where a Cholesky factorisation finds A not positive definite."""
-        if self.linear == "cholesky":
+        if self.linear == "cholesky" or (self.linear == "auto" and A.shape[0] <= CHOLESKY_MAX_DOFS):
             import cholespy
 
             self.counts["factorisations"] += 1
@@ -161,25 +171,51 @@ class NewtonSolver:
             d = np.zeros_like(r)
             L.solve(np.ascontiguousarray(r), d)
             return d
+        if self._amg is None or self._amg[1] > A.shape[0]:
+            self._build_amg(A)
+        d, its = _pcg(A, r, self._preconditioner(A), CG_RTOL, CG_MAX_ITERATIONS)
+        self.counts["cg_iterations"] += its
+        if d is None:  # negative curvature: the exact Hessian is indefinite
+            self.counts["indefinite"] += 1
+            return None
+        ml, k, reference = self._amg
+        if reference == 0:
+            self._amg = (ml, k, its)  # the first solve with this hierarchy sets what "aged" means
+        elif its > AMG_REBUILD_FACTOR * max(reference, 10):  # the hierarchy has aged: build it again
+            self._amg = None
+        return d
+
+    def _build_amg(self, A) -> None:
+        """Smoothed-aggregation multigrid of A (pyamg), kept across iterations, steps and cuts."""
         import pyamg
+
+        saved = np.random.get_state()
+        np.random.seed(0)  # pyamg draws from numpy's global generator: a repeatable setup
+        try:
+            ml = pyamg.smoothed_aggregation_solver(A, symmetry="symmetric", max_coarse=500)
+        finally:
+            np.random.set_state(saved)
+        self._amg = (ml, A.shape[0], 0)
+        self.counts["amg_setups"] += 1
+
+    def _preconditioner(self, A):
+        """One V-cycle on the dofs the hierarchy was built on, Jacobi on the dofs a cut appended since."""
         import scipy.sparse.linalg as spla
 
-        if self._amg is None:  # one hierarchy per pattern: a preconditioner of the later matrices too
-            saved = np.random.get_state()
-            np.random.seed(0)  # pyamg draws from numpy's global generator: a repeatable setup
-            try:
-                self._amg = pyamg.smoothed_aggregation_solver(A, symmetry="symmetric", max_coarse=500)
-            finally:
-                np.random.set_state(saved)
-        count = [0]
-        d, _ = spla.cg(A, r, rtol=CG_RTOL, M=self._amg.aspreconditioner(cycle="V"), maxiter=500,
-                       callback=lambda _: count.__setitem__(0, count[0] + 1))
-        self.counts["cg_iterations"] += count[0]
-        return d
+        ml, k, _ = self._amg
+        cycle = ml.aspreconditioner(cycle="V")
+        if k == A.shape[0]:
+            return cycle
+        inv = 1.0 / A.diagonal()[k:]
+
+        def apply(v):
+            return np.concatenate([cycle @ v[:k], inv * v[k:]])
+
+        return spla.LinearOperator(A.shape, matvec=apply)
 
     # ------------------------------------------------------------ the iterations
     def solve(self, x: np.ndarray, terms: KE.NodeTerms, *, atol: float,
-              max_iterations: int = DEFAULT_MAX_ITERATIONS) -> SolveInfo:
+              max_iterations: int = DEFAULT_MAX_ITERATIONS, stop=None) -> SolveInfo:
         """Minimise G (of ``terms``) over x (n, 3) in place until ``||r|| <= atol`` (N).
 
         Parameters
@@ -192,6 +228,10 @@ class NewtonSolver:
             N: the residual norm over all free dofs the solve stops at.
         max_iterations : int
             Newton iterations before the solve gives up (reported, ``converged`` False).
+        stop : (1,) int64, optional
+            Read before every iteration: non-zero ends the solve at the iterate
+            reached (every iterate keeps every upright element upright).
+            Stopped before its first iteration, the result says ``taken`` False.
 
         Returns
         -------
@@ -205,6 +245,10 @@ class NewtonSolver:
         r0 = res = float(np.linalg.norm(r))
         it = 0
         while res > atol and it < max_iterations:
+            if stop is not None and stop[0]:
+                if it == 0:
+                    return SolveInfo(0, r0, r0, False, taken=False)
+                break
             d = self._direction(x, r, free, terms.inertia + terms.damping)
             if d is None:
                 break
@@ -219,8 +263,6 @@ class NewtonSolver:
     def _direction(self, x, r, free, diagonal_add):
         """The Newton step: exact Hessian first (``"auto"``), projected where that is indefinite."""
         modes = {"auto": (0, 1), "projected": (1,), "exact": (0,)}[self.hessian]
-        if self.linear == "cg":
-            modes = (1,)  # CG needs a positive definite matrix and cannot tell
         for mode in modes:
             d = self._solve_linear(self.matrix(x, free, diagonal_add, mode), r.ravel())
             if d is not None:
@@ -246,6 +288,32 @@ def _quiet_stderr():
         os.dup2(saved[1], 2)
         os.close(saved[0])
         os.close(saved[1])
+
+
+def _pcg(A, b: np.ndarray, M, rtol: float, max_iterations: int):
+    """Preconditioned conjugate gradients for A d = b, stopped at ``||b - A d|| <= rtol ||b||``;
+    (None, iterations) at negative curvature (an indefinite exact Hessian: the caller takes the
+    projected one).  Returns (d, iterations)."""
+    d = np.zeros_like(b)
+    r = b.copy()
+    z = M @ r
+    p = z.copy()
+    rz = float(r @ z)
+    stop = rtol * float(np.linalg.norm(b))
+    for k in range(max_iterations):
+        Ap = A @ p
+        curvature = float(p @ Ap)
+        if not curvature > 0.0:
+            return None, k
+        alpha = rz / curvature
+        d += alpha * p
+        r -= alpha * Ap
+        if np.linalg.norm(r) <= stop:
+            return d, k + 1
+        z = M @ r
+        rz, rz_old = float(r @ z), rz
+        p = z + (rz / rz_old) * p
+    return d, max_iterations
 
 
 class _Potential:
@@ -316,7 +384,7 @@ def _check_nodes(em: ElementModel, a, name: str) -> np.ndarray:
 
 def newton_step(em: ElementModel, state: ElementState, h: float, f_ext=None, gravity=None, *,
                 atol: float = DEFAULT_ATOL_N, max_iterations: int = DEFAULT_MAX_ITERATIONS,
-                solver: NewtonSolver | None = None) -> SolveInfo:
+                solver: NewtonSolver | None = None, stop=None) -> SolveInfo:
     """Advance ``state`` by one backward Euler step of ``h`` s, solved by projected Newton.
 
     Parameters
@@ -335,6 +403,9 @@ def newton_step(em: ElementModel, state: ElementState, h: float, f_ext=None, gra
     max_iterations : int
     solver : NewtonSolver, optional
         Keeps the pattern between steps (default: a new one).
+    stop : (1,) int64, optional
+        As :meth:`NewtonSolver.solve`'s; a step stopped before its first
+        iteration is not taken (positions and time stay).
 
     Returns
     -------
@@ -348,7 +419,9 @@ def newton_step(em: ElementModel, state: ElementState, h: float, f_ext=None, gra
     y = np.where(free, x0 + h * state.velocities, x0)
     # the iterations start from x^n, which inverts no element; y itself might fold one
     terms = _free_terms(em, x0, h, f_ext, gravity, y)
-    info = solver.solve(state.positions, terms, atol=float(atol), max_iterations=int(max_iterations))
+    info = solver.solve(state.positions, terms, atol=float(atol), max_iterations=int(max_iterations), stop=stop)
+    if not info.taken:
+        return info
     state.velocities[:] = np.where(free, (state.positions - x0) / h, 0.0)
     state.time += h
     return info
