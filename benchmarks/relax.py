@@ -221,13 +221,13 @@ def knee_to_residual(model, rtol: float) -> dict:
     res = {"tets": model.n_tets, "rtol": rtol}
     em = build_element_model(model)
     st = initial_element_state(model)
-    static_solve(em, st.positions.copy(), max_iterations=2)  # compile
+    static_solve(em, st.positions.copy(), max_iterations=2, solver="vbd")  # compile
     free = ~em.fixed
     for name in ("element_newton_amg", "element_vbd"):
         x = st.positions.copy()
         t0 = time.perf_counter()
         if name == "element_vbd":
-            info = static_solve(em, x, rtol=rtol, atol=0.0, max_iterations=2000, chebyshev=0.9)
+            info = static_solve(em, x, rtol=rtol, atol=0.0, max_iterations=2000, chebyshev=0.9, solver="vbd")
         else:
             info = settle_static(em, x, rtol=rtol)
         wall = time.perf_counter() - t0

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from cutkit.errors import InputError
 from cutkit.relax import _adjacency_kernels as KA
 from cutkit.relax import _elastic_kernels as K
 from cutkit.relax.elastic import ElementModel, ElementState
@@ -198,8 +199,24 @@ def local_step(em: ElementModel, state: ElementState, h: float, f_ext, r2, seeds
     return SolveInfo(it, r0, res, res <= atol, updates)
 
 
-def static_solve(em: ElementModel, positions, f_ext=None, gravity=None, **tolerances) -> SolveInfo:
-    """Relax ``positions`` (in place) to static equilibrium under the external forces."""
+def static_solve(em: ElementModel, positions, f_ext=None, gravity=None, *, solver: str = "newton",
+                 **tolerances) -> SolveInfo:
+    """Relax ``positions`` (n, 3) float64 (in place) to static equilibrium under the external forces.
+
+    ``solver="newton"`` (the default) solves by projected Newton
+    (:func:`cutkit.relax.newton.newton_static`; ``iterations`` counts Newton
+    iterations), which converges slender bodies in a few dozen iterations;
+    ``"vbd"`` by the sweeps of :func:`iterate` (``chebyshev`` only there).
+    ``tolerances``: ``rtol``, ``atol``, ``max_iterations``.
+    """
+    if solver == "newton":
+        from cutkit.relax.newton import newton_static
+
+        if "chebyshev" in tolerances:
+            raise InputError("chebyshev acceleration belongs to solver='vbd'")
+        return newton_static(em, positions, f_ext, gravity, **tolerances)
+    if solver != "vbd":
+        raise InputError(f"solver must be newton or vbd, not {solver!r}")
     return iterate(em, positions, _node_terms(em, positions, None, f_ext, gravity), **tolerances)
 
 
