@@ -165,6 +165,7 @@ def cantilever():
     return p, em, f, tip
 
 
+@pytest.mark.slow
 def test_static_newton_matches_the_reference_on_a_cantilever_by_default():
     p, em, f, tip = cantilever()
     x = p.copy()
