@@ -1,6 +1,7 @@
 """Relaxation throughput (paper section 5): spring updates per second, 1M-tet sweep, adaptive lists.
 
 Usage: python benchmarks/relax.py [--json] [--big N] [--small N] [--knee MODEL.h5] [--knee-simulate MODEL.h5]
+       python benchmarks/relax.py --json --knee-simulate knee.h5 --solvers newton,vbd [--hold 1.0]
 
 Prints one JSON object with ``--json``:
   spring_updates_per_s                  semi-implicit Jacobi sweep (numba, all threads), spring ends per s
@@ -19,7 +20,11 @@ Prints one JSON object with ``--json``:
   updates each took: the equal-accuracy comparison of docs/relaxation.md; and ``simulate``'s
   simulated/wall on it with the shipped incision, for both material models (knee.simulate), and
   for the element model over the incision shifted by 0 .. 5 um (``--knee-paths``; the cut follows the tissue, so
-  the work changes from path to path).  ``--knee-simulate MODEL.h5`` runs knee.simulate alone.
+  the work changes from path to path).  ``--knee-simulate MODEL.h5`` runs knee.simulate alone;
+  with ``--solvers newton,vbd`` it instead runs the demo incision and a ``--hold`` with each element
+  solver (knee.solvers: steps not converged, worst step residual, simulated/wall, the final
+  out-of-balance force over the force scale, the opening) and the wall time each takes to bring
+  the cut knee to 1e-3 of its force scale (knee.solvers.to_residual).
 """
 
 from __future__ import annotations
@@ -147,7 +152,7 @@ def knee_simulate(model, paths: int = KNEE_PATHS) -> dict:
 
 
 def knee_solvers(model, solvers=("newton", "vbd"), hold_s: float = 1.0, rtol: float = 1e-3,
-                 cap_s: float = 600.0) -> dict:
+                 cap_s: float = 600.0, trajectory=None) -> dict:
     """The demo incision with each element solver (``SimulateOptions.solver``) and a ``hold_s`` hold:
     steps not converged, worst step residual, simulated/wall, the final out-of-balance force over
     the force scale, the opening; then, on the cut model the first solver left, the wall time each
@@ -164,7 +169,7 @@ def knee_solvers(model, solvers=("newton", "vbd"), hold_s: float = 1.0, rtol: fl
     from cutkit.simulate import SimulateOptions, simulate
     from cutkit.simulate.demo import demo_inputs
 
-    traj = read_trajectory(demo_inputs()[1])
+    traj = trajectory if trajectory is not None else read_trajectory(demo_inputs()[1])
     out, cut = {}, None
     for name in solvers:
         with tempfile.TemporaryDirectory() as d:
@@ -209,6 +214,22 @@ def knee_solvers(model, solvers=("newton", "vbd"), hold_s: float = 1.0, rtol: fl
                            "relative": float(np.linalg.norm(elastic_forces(em, x)[free]) / scale)}
     out["to_residual"] = to
     return out
+
+
+def slab_solvers(hold_s: float = 1.0) -> dict:
+    """knee_solvers on the prestressed slab of tests/test_simulate.py (16 x 6 x 8 cubes of 2 mm,
+    4,608 tets, muscle, 15 % prestrain across the cut) with its 20 mm incision, 5 mm deep."""
+    import sys
+    from pathlib import Path
+
+    from cutkit.cutting.trajectory import straight_incision
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
+    from test_simulate import slab
+
+    traj = straight_incision([6.0, 0.0, 8.3], [26.0, 0.0, 8.3], inward=[0, 1, 0], depth=5.0, approach=3.0,
+                             press_time=0.3, cut_time=0.6, rate=100)
+    return knee_solvers(slab(0.15), hold_s=hold_s, trajectory=traj)
 
 
 def knee_to_residual(model, rtol: float) -> dict:
@@ -270,10 +291,15 @@ def main(argv=None):
     ap.add_argument("--solvers", default=None,
                     help="with --knee-simulate: compare these element solvers (e.g. newton,vbd) instead")
     ap.add_argument("--hold", type=float, default=1.0, help="hold after the incision of --solvers, s")
+    ap.add_argument("--slab-solvers", action="store_true",
+                    help="the --solvers comparison on tests/test_simulate.py's prestressed slab")
     ap.add_argument("--knee-paths", type=int, default=KNEE_PATHS,
                     help="incisions of knee.simulate, each shifted by 1 um more (the stalls vary from path to path)")
     args = ap.parse_args(argv)
     out = {}
+    if args.slab_solvers:
+        out["slab"] = {"solvers": slab_solvers(args.hold)}
+        return _print(out, args.json)
     if args.knee_simulate:
         from cutkit.io.model_h5 import read_model
 
