@@ -256,3 +256,15 @@ def test_a_crushing_point_load_never_inverts_a_tet(hessian, monkeypatch):
         newton_step(em, st, 0.01, f, atol=1e-9, solver=solver)
     assert min(lowest) > 0.0
     assert st.positions[top, 2] < 0.5 * p[top, 2]  # the load did squash the block
+
+
+def test_the_cg_solves_reach_the_same_static_answer():
+    """Multigrid-preconditioned CG (what models above CHOLESKY_MAX_DOFS use) against the factorisation."""
+    p, em, f, tip = cantilever()
+    f = 0.25 * f
+    x_chol, x_cg = p.copy(), p.copy()
+    assert newton_static(em, x_chol, f_ext=f, rtol=1e-10, atol=0.0, solver=NewtonSolver(em, linear="cholesky")).converged
+    cg = NewtonSolver(em, linear="cg")
+    info = newton_static(em, x_cg, f_ext=f, rtol=1e-10, atol=0.0, max_iterations=200, solver=cg)
+    assert info.converged and cg.counts["cg_iterations"] > 0 and cg.counts["factorisations"] == 0
+    assert np.abs(x_cg - x_chol).max() <= 1e-6 * np.abs(x_chol - p).max()

@@ -66,9 +66,10 @@ HESSIANS = ("auto", "projected", "exact")
 CG_RTOL = 1e-2
 #: CG iterations of one linear solve at most.
 CG_MAX_ITERATIONS = 500
-#: The multigrid hierarchy is built again when a solve takes this many times the CG iterations
-#: the first solve with it took (the matrix has drifted from the one it was built on).
-AMG_REBUILD_FACTOR = 3.0
+#: The multigrid hierarchy is built again after a solve that took more CG iterations than this
+#: (the matrix has drifted from the one it was built on): on the cut knee a setup costs about
+#: 5 s and a stale hierarchy 500 iterations, 100 s.
+AMG_REBUILD_ITERATIONS = 100
 
 
 class NewtonSolver:
@@ -102,7 +103,7 @@ class NewtonSolver:
         self.hessian = hessian
         self.counts = {"factorisations": 0, "indefinite": 0, "pattern_builds": 0, "cg_iterations": 0,
                        "amg_setups": 0}
-        self._amg = None  # (hierarchy, dofs it was built on, CG iterations of its first solve)
+        self._amg = None  # (hierarchy, dofs it was built on)
         self.reset()
 
     def reset(self) -> None:
@@ -178,10 +179,7 @@ class NewtonSolver:
         if d is None:  # negative curvature: the exact Hessian is indefinite
             self.counts["indefinite"] += 1
             return None
-        ml, k, reference = self._amg
-        if reference == 0:
-            self._amg = (ml, k, its)  # the first solve with this hierarchy sets what "aged" means
-        elif its > AMG_REBUILD_FACTOR * max(reference, 10):  # the hierarchy has aged: build it again
+        if its > AMG_REBUILD_ITERATIONS:  # the hierarchy has aged (or misses the appended dofs): build it again
             self._amg = None
         return d
 
@@ -195,14 +193,14 @@ class NewtonSolver:
             ml = pyamg.smoothed_aggregation_solver(A, symmetry="symmetric", max_coarse=500)
         finally:
             np.random.set_state(saved)
-        self._amg = (ml, A.shape[0], 0)
+        self._amg = (ml, A.shape[0])
         self.counts["amg_setups"] += 1
 
     def _preconditioner(self, A):
         """One V-cycle on the dofs the hierarchy was built on, Jacobi on the dofs a cut appended since."""
         import scipy.sparse.linalg as spla
 
-        ml, k, _ = self._amg
+        ml, k = self._amg
         cycle = ml.aspreconditioner(cycle="V")
         if k == A.shape[0]:
             return cycle
