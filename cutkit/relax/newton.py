@@ -428,9 +428,28 @@ def newton_step(em: ElementModel, state: ElementState, h: float, f_ext=None, gra
 def newton_static(em: ElementModel, positions, f_ext=None, gravity=None, *, rtol: float = 1e-6,
                   atol: float = DEFAULT_ATOL_N, max_iterations: int = DEFAULT_MAX_ITERATIONS,
                   solver: NewtonSolver | None = None) -> SolveInfo:
-    """Relax ``positions`` (n, 3) in place to static equilibrium by projected Newton.
+    """Relax ``positions`` in place to static equilibrium by projected Newton.
 
-    Stops when the residual norm is at most ``rtol`` times its first value or ``atol`` (N).
+    Parameters
+    ----------
+    em : ElementModel
+    positions : (n, 3) float64
+        mm; changed in place.
+    f_ext : (n, 3) float64, optional
+        External node forces, N.
+    gravity : (3,) float64, optional
+        mm/s^2.
+    rtol, atol : float
+        The solve stops when the residual norm over all free dofs is at most
+        ``rtol`` times its first value or ``atol`` (N).
+    max_iterations : int
+        Newton iterations at most (``converged`` False beyond).
+    solver : NewtonSolver, optional
+
+    Returns
+    -------
+    SolveInfo
+        ``initial_residual`` and ``residual`` are true residual norms, N.
     """
     solver = solver or NewtonSolver(em)
     terms = _free_terms(em, positions, None, f_ext, gravity)
