@@ -1,6 +1,7 @@
 """Relaxation throughput (paper section 5): spring updates per second, 1M-tet sweep, adaptive lists.
 
 Usage: python benchmarks/relax.py [--json] [--big N] [--small N] [--knee MODEL.h5] [--knee-simulate MODEL.h5]
+       python benchmarks/relax.py --json --knee-simulate knee.h5 --solvers newton,vbd [--hold 1.0]
 
 Prints one JSON object with ``--json``:
   spring_updates_per_s                  semi-implicit Jacobi sweep (numba, all threads), spring ends per s
@@ -19,7 +20,11 @@ Prints one JSON object with ``--json``:
   updates each took: the equal-accuracy comparison of docs/relaxation.md; and ``simulate``'s
   simulated/wall on it with the shipped incision, for both material models (knee.simulate), and
   for the element model over the incision shifted by 0 .. 5 um (``--knee-paths``; the cut follows the tissue, so
-  the work changes from path to path).  ``--knee-simulate MODEL.h5`` runs knee.simulate alone.
+  the work changes from path to path).  ``--knee-simulate MODEL.h5`` runs knee.simulate alone;
+  with ``--solvers newton,vbd`` it instead runs the demo incision and a ``--hold`` with each element
+  solver (knee.solvers: steps not converged, worst step residual, simulated/wall, the final
+  out-of-balance force over the force scale, the opening) and the wall time each takes to bring
+  the cut knee to 1e-3 of its force scale (knee.solvers.to_residual).
 """
 
 from __future__ import annotations
@@ -146,23 +151,105 @@ def knee_simulate(model, paths: int = KNEE_PATHS) -> dict:
     return res
 
 
+def knee_solvers(model, solvers=("newton", "vbd"), hold_s: float = 1.0, rtol: float = 1e-3,
+                 cap_s: float = 600.0, trajectory=None) -> dict:
+    """The demo incision with each element solver (``SimulateOptions.solver``) and a ``hold_s`` hold:
+    steps not converged, worst step residual, simulated/wall, the final out-of-balance force over
+    the force scale, the opening; then, on the cut model the first solver left, the wall time each
+    solver takes to bring it to ``rtol`` of the force scale (static; vertex block descent with
+    Chebyshev acceleration, stopped after ``cap_s``)."""
+    import tempfile
+    from pathlib import Path
+
+    from cutkit.cutting.trajectory import read_trajectory
+    from cutkit.io.model_h5 import read_model
+    from cutkit.relax.elastic import build_element_model
+    from cutkit.relax.newton import NewtonSolver, newton_static
+    from cutkit.relax.vbd import elastic_forces, iterate, _node_terms
+    from cutkit.simulate import SimulateOptions, simulate
+    from cutkit.simulate.demo import demo_inputs
+
+    traj = trajectory if trajectory is not None else read_trajectory(demo_inputs()[1])
+    out, cut = {}, None
+    for name in solvers:
+        with tempfile.TemporaryDirectory() as d:
+            t0 = time.perf_counter()
+            s = simulate(model, traj, Path(d), SimulateOptions(fps=10, frames=False, hold_s=hold_s, solver=name))
+            wall = time.perf_counter() - t0
+            cm = read_model(Path(d) / "model.h5")
+        rs = s["relax_steps"]
+        em = build_element_model(cm)
+        x = cm.points + cm.point_data["displacement"]
+        free = ~em.fixed & (em.adj_degree > 0)[:, None]
+        out[name] = {"steps": rs["count"], "steps_not_converged": rs["not_converged"],
+                     "worst_step_relative_residual": rs["worst_relative_residual"],
+                     "iterations_total": rs["iterations_total"], "force_scale_N": rs["force_scale_N"],
+                     "final_out_of_balance_relative": float(np.linalg.norm(elastic_forces(em, x)[free])
+                                                            / rs["force_scale_N"]),
+                     "simulated_per_wall": s["simulated_per_wall"], "simulate_wall_s": wall,
+                     "time_per_task_s": s["time_per_task_s"], "cut_tets": s["cut_tets"],
+                     "opening_mm": s["cut_opening_mm"]["final_mean"], "settle": s["settle"],
+                     "inverted_tets_deformed": s["inverted_tets_deformed"], "warnings": s["warnings"]}
+        if cut is None:
+            cut = (em, x, rs["force_scale_N"])
+    em, x0, scale = cut
+    free = ~em.fixed & (em.adj_degree > 0)[:, None]
+    atol = rtol * scale
+    to = {"rtol": rtol, "start_relative": float(np.linalg.norm(elastic_forces(em, x0)[free]) / scale)}
+    x = x0.copy()
+    t0 = time.perf_counter()
+    solver = NewtonSolver(em)
+    info = newton_static(em, x, rtol=0.0, atol=atol, solver=solver)
+    to["newton"] = {"wall_s": time.perf_counter() - t0, "iterations": info.iterations, "converged": info.converged,
+                    "relative": float(np.linalg.norm(elastic_forces(em, x)[free]) / scale), **solver.counts}
+    x = x0.copy()
+    terms = _node_terms(em, x, None, None, None)
+    t0, sweeps, info = time.perf_counter(), 0, None
+    while time.perf_counter() - t0 < cap_s:
+        info = iterate(em, x, terms, rtol=0.0, atol=atol, max_iterations=200, chebyshev=0.9)
+        sweeps += info.iterations
+        if info.converged:
+            break
+    to["vbd_chebyshev"] = {"wall_s": time.perf_counter() - t0, "sweeps": sweeps, "converged": bool(info.converged),
+                           "relative": float(np.linalg.norm(elastic_forces(em, x)[free]) / scale)}
+    out["to_residual"] = to
+    return out
+
+
+def slab_solvers(hold_s: float = 1.0) -> dict:
+    """knee_solvers on the prestressed slab of tests/test_simulate.py (16 x 6 x 8 cubes of 2 mm,
+    4,608 tets, muscle, 15 % prestrain across the cut) with its 20 mm incision, 5 mm deep."""
+    import sys
+    from pathlib import Path
+
+    from cutkit.cutting.trajectory import straight_incision
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
+    from test_simulate import slab
+
+    traj = straight_incision([6.0, 0.0, 8.3], [26.0, 0.0, 8.3], inward=[0, 1, 0], depth=5.0, approach=3.0,
+                             press_time=0.3, cut_time=0.6, rate=100)
+    return knee_solvers(slab(0.15), hold_s=hold_s, trajectory=traj)
+
+
 def knee_to_residual(model, rtol: float) -> dict:
     """Wall time and work to bring the settle problem to ``rtol`` with each model and schedule."""
     from cutkit.relax import spring_forces
     from cutkit.relax.elastic import build_element_model, initial_element_state
-    from cutkit.relax.vbd import elastic_forces, static_solve
+    from cutkit.relax.equilibrium import static_solve
+    from cutkit.relax.vbd import elastic_forces
     from cutkit.relax.settle import settle_static
 
     res = {"tets": model.n_tets, "rtol": rtol}
     em = build_element_model(model)
     st = initial_element_state(model)
-    static_solve(em, st.positions.copy(), max_iterations=2)  # compile
+    static_solve(em, st.positions.copy(), max_iterations=2, solver="vbd")  # compile
     free = ~em.fixed
     for name in ("element_newton_amg", "element_vbd"):
         x = st.positions.copy()
         t0 = time.perf_counter()
         if name == "element_vbd":
-            info = static_solve(em, x, rtol=rtol, atol=0.0, max_iterations=2000, chebyshev=0.9)
+            info = static_solve(em, x, rtol=rtol, atol=0.0, max_iterations=2000, chebyshev=0.9, solver="vbd")
         else:
             info = settle_static(em, x, rtol=rtol)
         wall = time.perf_counter() - t0
@@ -202,13 +289,25 @@ def main(argv=None):
     ap.add_argument("--knee", help="model file for the equal-accuracy comparison (e.g. cutkit-demo/knee.h5)")
     ap.add_argument("--rtol", type=float, default=1e-4, help="relative residual of the equal-accuracy comparison")
     ap.add_argument("--knee-simulate", metavar="MODEL", help="only simulate's simulated/wall on this model (knee.simulate)")
+    ap.add_argument("--solvers", default=None,
+                    help="with --knee-simulate: compare these element solvers (e.g. newton,vbd) instead")
+    ap.add_argument("--hold", type=float, default=1.0, help="hold after the incision of --solvers, s")
+    ap.add_argument("--slab-solvers", action="store_true",
+                    help="the --solvers comparison on tests/test_simulate.py's prestressed slab")
     ap.add_argument("--knee-paths", type=int, default=KNEE_PATHS,
                     help="incisions of knee.simulate, each shifted by 1 um more (the stalls vary from path to path)")
     args = ap.parse_args(argv)
     out = {}
+    if args.slab_solvers:
+        out["slab"] = {"solvers": slab_solvers(args.hold)}
+        return _print(out, args.json)
     if args.knee_simulate:
         from cutkit.io.model_h5 import read_model
 
+        if args.solvers:
+            out["knee"] = {"solvers": knee_solvers(read_model(args.knee_simulate), tuple(args.solvers.split(",")),
+                                                   hold_s=args.hold)}
+            return _print(out, args.json)
         out["knee"] = {"simulate": knee_simulate(read_model(args.knee_simulate), args.knee_paths)}
         return _print(out, args.json)
 

@@ -19,7 +19,10 @@ from cutkit.cli._ui import overwrite_option
 @click.option("--movie", is_flag=True, help="Also a movie of the cut, OUT/cut.mp4.")
 @click.option("--material-model", type=click.Choice(["neohookean", "springs"]), default=None,
               help="Tissue model [default: the recipe's, neohookean].")
-def command(out_dir, fps, overwrite, no_png, movie, material_model):
+@click.option("--solver", type=click.Choice(["newton", "vbd"]), default=None,
+              help="How the element model's relaxation steps are solved: projected Newton or vertex block "
+                   "descent [default: vbd].")
+def command(out_dir, fps, overwrite, no_png, movie, material_model, solver):
     """Build pipelines/knee.toml (reused when unchanged), cut sample_volumes/incision.csv, take pictures."""
     import time
 
@@ -42,14 +45,14 @@ def command(out_dir, fps, overwrite, no_png, movie, material_model):
     warm = start_background()
     try:
         with folder_guard(out_dir):
-            _run(out_dir, fps, no_png, movie, trajectory, warm, t0, material_model)
+            _run(out_dir, fps, no_png, movie, trajectory, warm, t0, material_model, solver)
     finally:
         if warm is not None and warm.poll() is None:
             warm.terminate()
             warm.wait()
 
 
-def _run(out_dir, fps, no_png, movie, trajectory, warm, t0, material_model=None):
+def _run(out_dir, fps, no_png, movie, trajectory, warm, t0, material_model=None, solver=None):
     import time
 
     from cutkit.build import STAGES
@@ -71,7 +74,7 @@ def _run(out_dir, fps, no_png, movie, trajectory, warm, t0, material_model=None)
     model = read_model(model_path)
     say(f"model {model_path}: {model.tets.shape[0]} tets, {model.points.shape[0]} nodes"
         + (" (inputs unchanged, build reused)" if reused else ""))
-    opt = SimulateOptions(fps=fps, png=False, material_model=material_model)
+    opt = SimulateOptions(fps=fps, png=False, material_model=material_model, solver=solver)
     summary = run_with_progress(model, read_trajectory(trajectory), out_dir, opt, model_path=str(model_path))
     render_with_progress(summary, out_dir, not no_png, movie)
     report(console, summary, out_dir)

@@ -38,8 +38,11 @@ from cutkit.cli._ui import overwrite_option
 @click.option("--blade-length", default=None, type=float, help="Blade length, mm [default: 20].")
 @click.option("--material-model", type=click.Choice(["neohookean", "springs"]), default=None,
               help="Tissue model [default: what the model file names].")
+@click.option("--solver", type=click.Choice(["newton", "vbd"]), default=None,
+              help="How the element model's relaxation steps are solved: projected Newton or vertex block "
+                   "descent [default: vbd].")
 def command(model, out_dir, overwrite, haptics, trajectory, speed, igtl_port, igtl_device, no_window, fps, seconds,
-            until_idle, geometry_rate_hz, blade_length, material_model, **igtl_opts):
+            until_idle, geometry_rate_hz, blade_length, material_model, solver, **igtl_opts):
     """Cut MODEL live; Ctrl-C (or closing the window) ends the session, its recording stays valid."""
     from cutkit.cli._ui import console
     from cutkit.errors import InputError
@@ -56,7 +59,7 @@ def command(model, out_dir, overwrite, haptics, trajectory, speed, igtl_port, ig
         raise InputError("--no-window needs a pose source: --haptics, --trajectory or --igtl (the mouse needs the window)")
     igtl = _igtl_options(igtl_port, **igtl_opts)
     opt = SimulateOptions(geometry_rate_hz=geometry_rate_hz, blade_length=blade_length,
-                          material_model=material_model, frames=False)
+                          material_model=material_model, frames=False, solver=solver)
     opt.check()
     earlier = check_output_folder(out_dir, "live", overwrite, inputs=(model, trajectory))
     tet_model = read_model(model)

@@ -28,12 +28,15 @@ from cutkit.cli._ui import overwrite_option
 @click.option("--material-model", type=click.Choice(["neohookean", "springs"]), default=None,
               help="Tissue model: stable neo-Hookean elements with the Poisson ratio of the materials table, "
                    "or the paper's springs [default: what the model file names, neohookean for most].")
+@click.option("--solver", type=click.Choice(["newton", "vbd"]), default=None,
+              help="How the element model's relaxation steps are solved: projected Newton or vertex block "
+                   "descent [default: vbd].")
 @click.option("--volume-stiffness", default=0.0, show_default=True, type=float,
               help="Springs only: each tet resists a change of volume with bulk = this x E (0: springs only, "
                    "as in the paper; 0.3 leaves a tenth of the inverted tets on the demo knee, at about four "
                    "times the relaxation time).")
 def command(model, trajectory, out_dir, fps, overwrite, png, movie, realtime, haptics, hold_s, geometry_rate_hz,
-            blade_length, material_model, volume_stiffness):
+            blade_length, material_model, volume_stiffness, solver):
     """Cut MODEL along TRAJECTORY with the scalpel force model and relax it; write frames and logs."""
     from cutkit.cli._ui import console, folder_guard
     from cutkit.cutting.trajectory import read_trajectory
@@ -46,7 +49,7 @@ def command(model, trajectory, out_dir, fps, overwrite, png, movie, realtime, ha
                  volume_stiffness=volume_stiffness)
     opt = SimulateOptions(fps=fps, png=False, realtime=realtime, haptics=haptics, hold_s=hold_s,
                           geometry_rate_hz=geometry_rate_hz, blade_length=blade_length,
-                          volume_stiffness=volume_stiffness, material_model=material_model)
+                          volume_stiffness=volume_stiffness, material_model=material_model, solver=solver)
     opt.check()
     earlier = check_output_folder(out_dir, "simulate", overwrite, inputs=(model, trajectory))
     tet_model = read_model(model)

@@ -11,7 +11,8 @@ from cutkit.relax import _elastic_kernels as K
 from cutkit.relax import elastic
 from cutkit.relax.materials import lame
 from cutkit.relax.elastic import ElementState, build_element_model, rest_shape
-from cutkit.relax.vbd import elastic_energy, elastic_forces, implicit_step, local_step, static_solve
+from cutkit.relax.equilibrium import static_solve
+from cutkit.relax.vbd import elastic_energy, elastic_forces, implicit_step, local_step
 
 
 def block(nu=0.45, prestrain=0.0, shape=(3, 2, 2)):

@@ -198,8 +198,9 @@ def local_step(em: ElementModel, state: ElementState, h: float, f_ext, r2, seeds
     return SolveInfo(it, r0, res, res <= atol, updates)
 
 
-def static_solve(em: ElementModel, positions, f_ext=None, gravity=None, **tolerances) -> SolveInfo:
-    """Relax ``positions`` (in place) to static equilibrium under the external forces."""
+def vbd_static(em: ElementModel, positions, f_ext=None, gravity=None, **tolerances) -> SolveInfo:
+    """Relax ``positions`` (n, 3) float64 (in place) to static equilibrium by the sweeps of
+    :func:`iterate` (``tolerances``: ``rtol``, ``atol``, ``max_iterations``, ``chebyshev``)."""
     return iterate(em, positions, _node_terms(em, positions, None, f_ext, gravity), **tolerances)
 
 

@@ -49,6 +49,13 @@ STEP_RTOL = 1e-2
 STEP_MAX_ITERATIONS = 50
 #: Relative residual the settle before a cut reaches (docs/relaxation.md).
 SETTLE_RTOL = 1e-3
+#: How each relaxation step is solved: projected Newton (:mod:`cutkit.relax.newton`) or
+#: vertex block descent (:func:`cutkit.relax.vbd.local_step`).
+SOLVERS = ("newton", "vbd")
+#: The solver of a run that names none (docs/relaxation.md, "Measured on the demo knee").
+DEFAULT_SOLVER = "vbd"
+#: Newton iterations one step may take before it moves on (reported, as the sweep cap is).
+NEWTON_STEP_MAX_ITERATIONS = 30
 
 
 #: A new or moved node within this (barycentric) distance outside the nearest tet of the
@@ -75,11 +82,30 @@ class ElasticTissue(TissueBase):
         Fig. 2c centre nodes in split faces.
     poisson_ratio : float, optional
         Overrides the materials table for every label.
+    step_rtol : float
+        Each step ends when the residual norm over all free dofs is at most
+        this fraction of :attr:`force_scale`.
+    step_max_iterations : int
+        Sweeps (vbd) one step may make; Newton steps take at most
+        :data:`NEWTON_STEP_MAX_ITERATIONS` iterations.
+    solver : str
+        ``"newton"`` or ``"vbd"`` (:data:`SOLVERS`).
+
+    Attributes
+    ----------
+    step_log : dict
+        Per relaxation step: ``iterations`` (Newton iterations or sweeps) and
+        ``relative_residual`` (true final residual over the force scale).
     """
 
     def __init__(self, model, *, blade_length: float, step_s: float, centre_nodes: bool = False,
                  poisson_ratio: float | None = None, step_rtol: float = STEP_RTOL,
-                 step_max_iterations: int = STEP_MAX_ITERATIONS):
+                 step_max_iterations: int = STEP_MAX_ITERATIONS, solver: str = DEFAULT_SOLVER):
+        from cutkit.errors import InputError
+
+        if solver not in SOLVERS:
+            raise InputError(f"solver must be one of {', '.join(SOLVERS)}, not {solver!r}")
+        self.solver = solver
         self.model = model
         self.cm = cm = CutMesh.from_model(model, blade_length=blade_length, centre_nodes=centre_nodes)
         self.rest_map_radius = rest_map_radius(model.points, model.tets)
@@ -102,10 +128,22 @@ class ElasticTissue(TissueBase):
         em.lay_out_rows()
         self.state: ElementState = initial_element_state(model)
         self.counts = {"steps": 0, "sweeps": 0, "node_updates": 0, "steps_not_converged": 0}
+        if solver == "newton":
+            self.counts["newton_iterations"] = 0
+        self.step_log: dict[str, list] = {"iterations": [], "relative_residual": []}
+        self._newton = self._newton_solver()
         self.force_scale = self._force_scale()
         # last squared residual of every node and the nodes a cut or a load wakes (vbd.local_step)
         self.r2 = np.zeros(em.n_nodes)
         self._seeds: list[np.ndarray] = []
+
+    def _newton_solver(self):
+        """A fresh :class:`~cutkit.relax.newton.NewtonSolver` of the element model (None for vbd)."""
+        if self.solver != "newton":
+            return None
+        from cutkit.relax.newton import NewtonSolver
+
+        return NewtonSolver(self.em)
 
     def _force_scale(self) -> float:
         """N: the out-of-balance force of the model as built (prestress, prescribed
@@ -147,8 +185,10 @@ class ElasticTissue(TissueBase):
     def settle(self, max_iterations: int, rtol: float = SETTLE_RTOL) -> dict:
         """Relax to static equilibrium under prestress and boundary conditions, then rest at time 0.
 
-        Modified Newton with the linear stiffness (:func:`cutkit.relax.settle.settle_static`):
-        ``max_iterations`` bounds its Newton steps.  The result is kept in the settle cache
+        Projected Newton (:func:`cutkit.relax.newton.newton_static`) with the ``"newton"``
+        solver, modified Newton with the linear stiffness
+        (:func:`cutkit.relax.settle.settle_static`) with ``"vbd"``: ``max_iterations``
+        bounds its Newton steps.  The result is kept in the settle cache
         (:mod:`cutkit.simulate.settle_cache`): a model and materials settled before are not
         solved again, and the positions are the very ones the solve gives.  The report says
         ``cached``.
@@ -157,16 +197,28 @@ class ElasticTissue(TissueBase):
         from cutkit.simulate import settle_cache
 
         params = {"rtol": float(rtol), "atol": float(DEFAULT_ATOL_N), "max_iterations": max(int(max_iterations), 1)}
+        if self.solver == "newton":
+            params["method"] = "newton"  # the vbd runs' cache keys stay as they were
         key = settle_cache.settle_key(self.em, self.state.positions, self.rest_positions, params)
         hit = settle_cache.load(key)
         if hit is not None and hit[0].shape == self.state.positions.shape:
             self.state.positions[:] = hit[0]
             report = dict(hit[1], cached=True)
         else:
-            info = settle_static(self.em, self.state.positions, rtol=rtol, atol=DEFAULT_ATOL_N,
-                                 max_iterations=params["max_iterations"])
-            report = {"iterations": info.iterations, "relative_residual": info.residual / info.initial_residual
-                      if info.initial_residual > 0 else 0.0, "converged": bool(info.converged), "rtol": rtol}
+            if self.solver == "newton":
+                from cutkit.relax.newton import newton_static
+
+                info = newton_static(self.em, self.state.positions, rtol=rtol, atol=DEFAULT_ATOL_N,
+                                     max_iterations=params["max_iterations"], solver=self._newton)
+            else:
+                info = settle_static(self.em, self.state.positions, rtol=rtol, atol=DEFAULT_ATOL_N,
+                                     max_iterations=params["max_iterations"])
+            if info.iterations == 0 and info.converged:  # nothing to do: no relative residual to speak of
+                report = {"iterations": 0, "skipped": f"already in balance (residual {info.initial_residual:.1e} N "
+                          f"<= {DEFAULT_ATOL_N:.0e} N)", "residual_N": info.initial_residual, "rtol": rtol}
+            else:
+                report = {"iterations": info.iterations, "relative_residual": info.residual / info.initial_residual
+                          if info.initial_residual > 0 else 0.0, "converged": bool(info.converged), "rtol": rtol}
             settle_cache.save(key, self.state.positions, report)
             report["cached"] = False
         self.state.velocities[:] = 0.0
@@ -185,22 +237,69 @@ class ElasticTissue(TissueBase):
         n_steps = int(np.floor((until - self.state.time) / self.step_s + 1e-6))
         sweeps = 0
         loaded = loaded_nodes(np.ascontiguousarray(f_ext, np.float64))
+        atol = max(self.step_rtol * self.force_scale, DEFAULT_ATOL_N)
         for _ in range(max(n_steps, 0)):
             if stop is not None and stop[0]:
                 break
-            seeds = np.concatenate([loaded, *self._seeds]) if self._seeds else loaded
-            info = local_step(self.em, self.state, self.step_s, f_ext, self.r2, seeds,
-                              atol=max(self.step_rtol * self.force_scale, DEFAULT_ATOL_N),
-                              max_iterations=self.step_max_iterations, stop=stop)
+            if self.solver == "newton":
+                from cutkit.relax.newton import newton_step
+
+                info = newton_step(self.em, self.state, self.step_s, f_ext, atol=atol,
+                                   max_iterations=NEWTON_STEP_MAX_ITERATIONS, solver=self._newton, stop=stop)
+                true_residual = info.residual
+            else:
+                seeds = np.concatenate([loaded, *self._seeds]) if self._seeds else loaded
+                x0, v0 = self.state.positions.copy(), self.state.velocities.copy()
+                info = local_step(self.em, self.state, self.step_s, f_ext, self.r2, seeds, atol=atol,
+                                  max_iterations=self.step_max_iterations, stop=stop)
+                true_residual = self._true_residual(x0, v0, f_ext) if info.taken else 0.0
             if not info.taken:
                 break  # stopped before its first sweep was done: its seeds stay for the next
             self._seeds = []
             sweeps += info.iterations
-            self.counts["steps"] += 1
-            self.counts["sweeps"] += info.iterations
-            self.counts["node_updates"] += info.node_updates
-            self.counts["steps_not_converged"] += int(not info.converged)
+            self._count(info, true_residual)
         return sweeps
+
+    def _true_residual(self, x0: np.ndarray, v0: np.ndarray, f_ext: np.ndarray) -> float:
+        """N: the norm over all free dofs of the backward Euler residual of the step just made from
+        (x0, v0) (vertex block descent's own residual keeps each sleeping node's last value)."""
+        from cutkit.relax.vbd import elastic_forces
+
+        em, x, h = self.em, self.state.positions, self.step_s
+        m = em.masses[:, None]
+        r = elastic_forces(em, x) + f_ext - m / (h * h) * (x - x0 - h * v0) - em.damping[:, None] * m / h * (x - x0)
+        free = ~em.fixed & (em.adj_degree > 0)[:, None]
+        return float(np.linalg.norm(r[free]))
+
+    def _count(self, info, true_residual: float) -> None:
+        """Book one relaxation step: the counters and the per-step log (the true residual)."""
+        self.counts["steps"] += 1
+        if self.solver == "newton":
+            self.counts["newton_iterations"] += info.iterations
+        else:
+            self.counts["sweeps"] += info.iterations
+        self.counts["node_updates"] += info.node_updates
+        self.counts["steps_not_converged"] += int(not info.converged)
+        self.step_log["iterations"].append(int(info.iterations))
+        self.step_log["relative_residual"].append(float(true_residual / self.force_scale)
+                                                  if self.force_scale > 0 else 0.0)
+
+    def relax_report(self) -> dict:
+        """``summary.json``'s ``relax_steps``: how the relaxation steps ended (docs/simulate.md).
+
+        Returns
+        -------
+        dict
+            ``solver``, ``count``, ``not_converged``, ``worst_relative_residual``,
+            ``iterations_total``, ``rtol``, and per step ``iterations`` and
+            ``relative_residual`` (true final residual over the force scale).
+        """
+        rel = self.step_log["relative_residual"]
+        return {"solver": self.solver, "count": len(rel), "not_converged": int(self.counts["steps_not_converged"]),
+                "worst_relative_residual": float(max(rel, default=0.0)),
+                "iterations_total": int(sum(self.step_log["iterations"])), "rtol": self.step_rtol,
+                "force_scale_N": float(self.force_scale),
+                "iterations": list(self.step_log["iterations"]), "relative_residual": list(rel)}
 
     # ------------------------------------------------------------ cut
     def apply_cut(self, res) -> dict:
@@ -246,6 +345,8 @@ class ElasticTissue(TissueBase):
         if redo.size:
             touched.append(em.tets[redo].ravel())
         self._seeds.append(np.unique(np.concatenate(touched)))
+        if self._newton is not None:
+            self._newton.reset()  # nodes and elements changed: the matrix pattern is built again
         return {"nodes_added": int(n_new - n_old), "elements_added": int(added.size),
                 "elements_removed": int(removed.size)}
 
@@ -449,3 +550,4 @@ class ElasticTissue(TissueBase):
         em.colour[:] = old.colour  # the same tets on the same nodes: the colouring stays valid
         em.lay_out_rows()
         self.em = em
+        self._newton = self._newton_solver()

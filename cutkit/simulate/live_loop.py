@@ -309,6 +309,13 @@ class LiveLoop:
                       interrupted=self.interrupted, rates=True)
         out["live"] = self._live_stats(recorded)
         closing_warnings(s)
+        if hasattr(s.tis, "relax_report"):
+            from cutkit.simulate.run import relax_steps_warning
+
+            out["relax_steps"] = s.tis.relax_report()
+            line = relax_steps_warning(out["relax_steps"])
+            if line:
+                s.warnings.append(line)
         rate = out["live"]["haptic_hz"]
         if rate < RATE_WARN_FRACTION / HAPTIC_DT:
             s.warnings.append(f"the haptic loop reached {rate:.0f} Hz, below "

@@ -98,6 +98,10 @@ class SimulateOptions:
         Write the cut model as ``model.h5``.
     frames : bool
         Write the frame series (off for benchmarks).
+    solver : str or None
+        How the element model's relaxation steps are solved: ``"newton"``
+        (projected Newton) or ``"vbd"`` (vertex block descent); None:
+        :data:`cutkit.simulate.elastic_tissue.DEFAULT_SOLVER`.  Ignored by the springs.
     """
 
     fps: float = 30.0
@@ -118,6 +122,7 @@ class SimulateOptions:
     haptics: str | None = None
     write_model: bool = True
     frames: bool = True
+    solver: str | None = None
 
     def check(self) -> None:
         for name in ("fps", "geometry_rate_hz", "dt0", "tolerance_fraction"):
@@ -141,6 +146,8 @@ class SimulateOptions:
             raise InputError(f"blade-length must be a positive number, got {self.blade_length}")
         if not (np.isfinite(self.volume_stiffness) and self.volume_stiffness >= 0):
             raise InputError(f"volume-stiffness must be a number >= 0, got {self.volume_stiffness}")
+        if self.solver is not None and self.solver not in ("newton", "vbd"):
+            raise InputError(f"solver must be newton or vbd, not {self.solver!r}")
         if not 1 <= int(self.n_lists) <= 12:
             raise InputError(f"n-lists must lie in 1..12, got {self.n_lists}")
         if self.haptics is not None:
@@ -283,6 +290,11 @@ def _complete(session, replay, summary: dict, out_dir: Path, opt: SimulateOption
     from cutkit.simulate.record import closing_warnings, write_cut_model, write_json
 
     closing_warnings(session, replay.trajectory.tip)
+    if hasattr(session.tis, "relax_report"):
+        summary["relax_steps"] = session.tis.relax_report()
+        line = relax_steps_warning(summary["relax_steps"])
+        if line:
+            session.warnings.append(line)
     if replay.realtime and "rates_hz" in summary:
         rate = summary["rates_hz"]["haptics"]
         if rate < RATE_WARN_FRACTION / HAPTIC_DT:
@@ -384,10 +396,19 @@ def make_tissue(model, material_model: str, opt: SimulateOptions, blade_length: 
         return Tissue(model, blade_length=blade_length, dt0=opt.dt0, n_lists=opt.n_lists,
                       tolerance_fraction=opt.tolerance_fraction, centre_nodes=opt.centre_nodes,
                       volume_stiffness=opt.volume_stiffness)
-    from cutkit.simulate.elastic_tissue import ElasticTissue
+    from cutkit.simulate.elastic_tissue import DEFAULT_SOLVER, ElasticTissue
 
     return ElasticTissue(model, blade_length=blade_length, step_s=1.0 / opt.geometry_rate_hz,
-                         centre_nodes=opt.centre_nodes)
+                         centre_nodes=opt.centre_nodes, solver=opt.solver or DEFAULT_SOLVER)
+
+
+def relax_steps_warning(report: dict) -> str | None:
+    """The one line a run's warnings get when a relaxation step ended unconverged, else None."""
+    if not report["not_converged"]:
+        return None
+    return (f"{report['not_converged']} of {report['count']} relaxation steps ended unconverged "
+            f"(worst residual {report['worst_relative_residual']:.1e} of the force scale, asked "
+            f"{report['rtol']:.0e}; solver {report['solver']})")
 
 
 def cut_model(tis, model, summary: dict | None = None):

@@ -37,11 +37,11 @@ def settle(tis, material_model: str, opt, warnings: list) -> dict:
 
     sweeps = SETTLE_MAX_SWEEPS[material_model] if opt.settle_iterations is None else opt.settle_iterations
     if sweeps <= 0:
-        return {"iterations": 0}
+        return {"iterations": 0, "skipped": "settle-iterations 0"}
     if material_model == "springs":
         return tis.settle(sweeps, opt.settle_step_s)
     info = tis.settle(sweeps, opt.settle_rtol)
-    if not info["converged"]:
+    if not info.get("converged", True):
         warnings.append(f"the settle stopped after {info['iterations']} sweeps at relative "
                         f"residual {info['relative_residual']:.1e} (asked: {opt.settle_rtol:.0e})")
     return info

@@ -1,0 +1,459 @@
+"""Projected Newton solves of the element model: implicit steps and static equilibrium.
+
+One backward Euler step of length ``h`` minimises the incremental potential
+of :mod:`cutkit.relax.elastic` (barrier included)
+
+    G(x) = sum_i m_i / (2 h^2) |x_i - y_i|^2 + c_i m_i / (2 h) |x_i - x_i^n|^2 + W(x) - f_ext . x
+
+by projected Newton (Smith, de Goes & Kim 2018, section 4.3; Teran et al.
+2005): each element's Hessian is projected to positive semi-definite
+(:mod:`cutkit.relax._newton_kernels`), the assembled system
+
+    (M / h^2 + C M / h + K_+) d = r(x),   r = -dG/dx over the free dofs
+
+is solved by a sparse Cholesky factorisation (cholespy) or, for large
+models, by conjugate gradients with a multigrid preconditioner (pyamg)
+(:data:`LINEAR_SOLVERS`), and an energy line search backtracks from the
+longest step that inverts no element (Li et al. 2020, incremental potential
+contact: filter the first trial by the first time any element's volume
+reaches zero, then Armijo on G).  Every iterate keeps every element that was
+not inverted non-inverted, so the barrier's invariant holds.  ``h = None``
+drops inertia and damping: the same iterations solve for static equilibrium.
+
+A solve stops on the true residual: ``||r|| <= atol`` over all free dofs
+(N), the same criterion as :func:`cutkit.relax.vbd.local_step`'s ``atol``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import sys
+
+import numpy as np
+
+from cutkit.errors import InputError
+from cutkit.relax import _elastic_kernels as KE
+from cutkit.relax import _newton_kernels as KN
+from cutkit.relax.elastic import ElementModel, ElementState
+from cutkit.relax.vbd import DEFAULT_ATOL_N, SolveInfo, _node_terms, elastic_energy, elastic_forces
+
+#: Newton iterations one solve makes before it reports that it did not converge.
+DEFAULT_MAX_ITERATIONS = 50
+#: Armijo's sufficient-decrease constant (Nocedal & Wright, eq. 3.4).
+ARMIJO_C1 = 1e-4
+#: The first trial of the line search stops short of the first element inversion by this factor
+#: (Li et al. 2020, section 4.4, use 0.8 of the time of impact; here of the time of zero volume).
+INVERSION_SAFETY = 0.9
+#: Halvings of the step before a line search gives up (the solve then reports not converged).
+MAX_BACKTRACKS = 40
+#: A decrease of G this far below G's size (relative) is lost in rounding: there, a trial is
+#: accepted when it lowers the residual instead.
+ROUNDING = 1e-13
+#: The linear solvers: ``"cholesky"`` (cholespy's sparse Cholesky factorisation), ``"cg"``
+#: (conjugate gradients, smoothed-aggregation multigrid preconditioner, pyamg) or ``"auto"``.
+LINEAR_SOLVERS = ("auto", "cholesky", "cg")
+#: ``"auto"`` factorises systems of at most this many dofs and solves larger ones by CG
+#: (docs/relaxation.md, "Linear solves": cholespy's factorisation grows steeply past it).
+CHOLESKY_MAX_DOFS = 10000
+#: A static system (no inertia) that has a floating piece is singular: its diagonal gets this
+#: fraction of itself added (it changes the step, never the residual the solve stops on).
+STATIC_SHIFT = 1e-10
+#: Which Hessian a Newton iteration takes: ``"auto"`` tries the exact one first and falls back to
+#: the projected one where the factorisation finds it indefinite; ``"projected"``; ``"exact"``.
+HESSIANS = ("auto", "projected", "exact")
+#: Relative tolerance of a CG solve (inexact Newton: the outer iteration corrects what it leaves).
+CG_RTOL = 1e-2
+#: CG iterations of one linear solve at most.
+CG_MAX_ITERATIONS = 500
+#: The multigrid hierarchy is built again after a solve that took more CG iterations than this
+#: (the matrix has drifted from the one it was built on): on the cut knee a setup costs about
+#: 5 s and a stale hierarchy 500 iterations, 100 s.
+AMG_REBUILD_ITERATIONS = 100
+
+
+class NewtonSolver:
+    """Projected Newton on one :class:`~cutkit.relax.elastic.ElementModel`.
+
+    Keeps the sparsity pattern of the model's Hessian between solves; call
+    :meth:`reset` after any topology change (a cut adds and removes nodes
+    and elements, so the pattern changes).
+
+    Parameters
+    ----------
+    em : ElementModel
+    linear : str
+        One of :data:`LINEAR_SOLVERS`.
+    hessian : str
+        One of :data:`HESSIANS`.  The projected Hessian is positive
+        semi-definite, so its step always descends, but on a slender body it
+        drops the curvature that bending needs and the iterations converge
+        only linearly (a cantilever: residual ratio 0.82 per iteration,
+        against quadratic convergence with the exact Hessian); ``"auto"``
+        takes the exact Hessian wherever it is positive definite.
+    """
+
+    def __init__(self, em: ElementModel, *, linear: str = "auto", hessian: str = "auto"):
+        if linear not in LINEAR_SOLVERS:
+            raise InputError(f"linear solver must be one of {', '.join(LINEAR_SOLVERS)}, not {linear!r}")
+        if hessian not in HESSIANS:
+            raise InputError(f"hessian must be one of {', '.join(HESSIANS)}, not {hessian!r}")
+        self.em = em
+        self.linear = linear
+        self.hessian = hessian
+        self.counts = {"factorisations": 0, "indefinite": 0, "pattern_builds": 0, "cg_iterations": 0,
+                       "amg_setups": 0}
+        self._amg = None  # (hierarchy, dofs it was built on)
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the pattern (after a topology change).  The multigrid hierarchy stays: a cut only
+        appends nodes, so it still preconditions the dofs it was built on (:meth:`_preconditioner`)."""
+        self._pattern = None
+        self._key = None
+
+    # ------------------------------------------------------------ the linear system
+    def _elements(self) -> KE.Elements:
+        em = self.em
+        m = em.n_elements
+        return KE.Elements(em.tets[:m], em.Dminv[:m], em.volume[:m], em.mu[:m], em.lam[:m])
+
+    def pattern(self) -> KN.Pattern:
+        """The sparsity pattern of the model's Hessian (built on first use after :meth:`reset`)."""
+        em = self.em
+        key = (em.n_nodes, em.n_elements)
+        if self._pattern is None or key != self._key:
+            el = self._elements()
+            ptr, idx = KN.node_neighbours(el.tets, el.volume, em.n_nodes)
+            blocks = KN.element_blocks(el.tets, el.volume, ptr, idx)
+            indptr, indices, diagonal = KN.scalar_pattern(ptr, idx)
+            self._pattern = KN.Pattern(ptr, idx, blocks, indptr, indices, diagonal)
+            self._key = key
+            self.counts["pattern_builds"] += 1
+        return self._pattern
+
+    def matrix(self, x: np.ndarray, free: np.ndarray, diagonal_add: np.ndarray, project: int = 1):
+        """The Hessian of G at x: (3n, 3n) scipy CSR, identity rows at held dofs.
+
+        Parameters
+        ----------
+        x : (n, 3) float64
+        free : (n, 3) bool
+        diagonal_add : (n,) float64
+            ``m / h^2 + c m / h`` per node (0 for a static solve).
+        project : int
+            0: exact element Hessians; 1: negative eigenvalues clamped to 0.
+        """
+        import scipy.sparse as sp
+
+        pat = self.pattern()
+        data = np.empty(pat.indices.shape[0])
+        KN.assemble_hessian(x, self._elements(), pat, int(project), data)
+        add = np.repeat(np.asarray(diagonal_add, np.float64), 3)
+        if not np.any(add > 0):
+            add = STATIC_SHIFT * np.abs(data[pat.diagonal])
+        KN.constrain(pat, ~free.ravel(), add, data)
+        n3 = 3 * self.em.n_nodes
+        return sp.csr_matrix((data, pat.indices, pat.indptr), shape=(n3, n3))
+
+    def _solve_linear(self, A, r: np.ndarray):
+        """d with A d = r, or None where a Cholesky factorisation finds A not positive definite."""
+        if self.linear == "cholesky" or (self.linear == "auto" and A.shape[0] <= CHOLESKY_MAX_DOFS):
+            import cholespy
+
+            self.counts["factorisations"] += 1
+            try:
+                with _quiet_stderr():  # CHOLMOD reports an indefinite matrix on stderr as well
+                    L = cholespy.CholeskySolverD(A.shape[0], A.indptr.astype(np.int32),
+                                                 A.indices.astype(np.int32), A.data, cholespy.MatrixType.CSR)
+            except ValueError:
+                self.counts["indefinite"] += 1
+                return None
+            d = np.zeros_like(r)
+            L.solve(np.ascontiguousarray(r), d)
+            return d
+        if self._amg is None or self._amg[1] > A.shape[0]:
+            self._build_amg(A)
+        d, its = _pcg(A, r, self._preconditioner(A), CG_RTOL, CG_MAX_ITERATIONS)
+        self.counts["cg_iterations"] += its
+        if d is None:  # negative curvature: the exact Hessian is indefinite
+            self.counts["indefinite"] += 1
+            return None
+        if its > AMG_REBUILD_ITERATIONS:  # the hierarchy has aged (or misses the appended dofs): build it again
+            self._amg = None
+        return d
+
+    def _build_amg(self, A) -> None:
+        """Smoothed-aggregation multigrid of A (pyamg), kept across iterations, steps and cuts."""
+        import pyamg
+
+        saved = np.random.get_state()
+        np.random.seed(0)  # pyamg draws from numpy's global generator: a repeatable setup
+        try:
+            ml = pyamg.smoothed_aggregation_solver(A, symmetry="symmetric", max_coarse=500)
+        finally:
+            np.random.set_state(saved)
+        self._amg = (ml, A.shape[0])
+        self.counts["amg_setups"] += 1
+
+    def _preconditioner(self, A):
+        """One V-cycle on the dofs the hierarchy was built on, Jacobi on the dofs a cut appended since."""
+        import scipy.sparse.linalg as spla
+
+        ml, k = self._amg
+        cycle = ml.aspreconditioner(cycle="V")
+        if k == A.shape[0]:
+            return cycle
+        inv = 1.0 / A.diagonal()[k:]
+
+        def apply(v):
+            return np.concatenate([cycle @ v[:k], inv * v[k:]])
+
+        return spla.LinearOperator(A.shape, matvec=apply)
+
+    # ------------------------------------------------------------ the iterations
+    def solve(self, x: np.ndarray, terms: KE.NodeTerms, *, atol: float,
+              max_iterations: int = DEFAULT_MAX_ITERATIONS, stop=None) -> SolveInfo:
+        """Minimise G (of ``terms``) over x (n, 3) in place until ``||r|| <= atol`` (N).
+
+        Parameters
+        ----------
+        x : (n, 3) float64
+            The start, changed in place; must invert no element that should stay upright.
+        terms : NodeTerms
+            Inertia, damping, held components, targets and loads (``vbd._node_terms``).
+        atol : float
+            N: the residual norm over all free dofs the solve stops at.
+        max_iterations : int
+            Newton iterations before the solve gives up (reported, ``converged`` False).
+        stop : (1,) int64, optional
+            Read before every iteration: non-zero ends the solve at the iterate
+            reached (every iterate keeps every upright element upright).
+            Stopped before its first iteration, the result says ``taken`` False.
+
+        Returns
+        -------
+        SolveInfo
+            ``iterations`` Newton iterations, ``residual`` the true final residual norm.
+        """
+        em = self.em
+        free = ~terms.fixed & (em.adj_degree > 0)[:, None]
+        problem = _Potential(em, terms, free, self._elements())
+        r = problem.residual(x)
+        r0 = res = float(np.linalg.norm(r))
+        it = 0
+        while res > atol and it < max_iterations:
+            if stop is not None and stop[0]:
+                if it == 0:
+                    return SolveInfo(0, r0, r0, False, taken=False)
+                break
+            d = self._direction(x, r, free, terms.inertia + terms.damping)
+            if d is None:
+                break
+            moved, r = _line_search(problem, x, d, r, res)
+            it += 1
+            res = float(np.linalg.norm(r))
+            if not moved:
+                break
+        return SolveInfo(it, r0, res, res <= atol)
+
+
+    def _direction(self, x, r, free, diagonal_add):
+        """The Newton step: exact Hessian first (``"auto"``), projected where that is indefinite."""
+        modes = {"auto": (0, 1), "projected": (1,), "exact": (0,)}[self.hessian]
+        for mode in modes:
+            d = self._solve_linear(self.matrix(x, free, diagonal_add, mode), r.ravel())
+            if d is not None:
+                d = d.reshape(-1, 3)
+                d[~free] = 0.0
+                return d
+        return None
+
+
+@contextlib.contextmanager
+def _quiet_stderr():
+    """File descriptors 1 and 2 to /dev/null for the block (CHOLMOD's printf of an indefinite matrix)."""
+    sys.stdout.flush()
+    sys.stderr.flush()
+    saved = [os.dup(1), os.dup(2)]
+    try:
+        with open(os.devnull, "w") as null:
+            os.dup2(null.fileno(), 1)
+            os.dup2(null.fileno(), 2)
+            yield
+    finally:
+        os.dup2(saved[0], 1)
+        os.dup2(saved[1], 2)
+        os.close(saved[0])
+        os.close(saved[1])
+
+
+def _pcg(A, b: np.ndarray, M, rtol: float, max_iterations: int):
+    """Preconditioned conjugate gradients for A d = b, stopped at ``||b - A d|| <= rtol ||b||``;
+    (None, iterations) at negative curvature (an indefinite exact Hessian: the caller takes the
+    projected one).  Returns (d, iterations)."""
+    d = np.zeros_like(b)
+    r = b.copy()
+    z = M @ r
+    p = z.copy()
+    rz = float(r @ z)
+    stop = rtol * float(np.linalg.norm(b))
+    for k in range(max_iterations):
+        Ap = A @ p
+        curvature = float(p @ Ap)
+        if not curvature > 0.0:
+            return None, k
+        alpha = rz / curvature
+        d += alpha * p
+        r -= alpha * Ap
+        if np.linalg.norm(r) <= stop:
+            return d, k + 1
+        z = M @ r
+        rz, rz_old = float(r @ z), rz
+        p = z + (rz / rz_old) * p
+    return d, max_iterations
+
+
+class _Potential:
+    """G and its true residual -dG/dx (zero at held dofs) for one step's node terms."""
+
+    def __init__(self, em: ElementModel, terms: KE.NodeTerms, free: np.ndarray, el: KE.Elements):
+        self.em, self.t, self.free, self.el = em, terms, free, el
+
+    def residual(self, x: np.ndarray) -> np.ndarray:
+        """(n, 3) float64 N."""
+        t = self.t
+        r = (elastic_forces(self.em, x) + t.force - t.inertia[:, None] * (x - t.target)
+             - t.damping[:, None] * (x - t.previous))
+        r[~self.free] = 0.0
+        return r
+
+    def energy(self, x: np.ndarray) -> float:
+        """G(x), N mm."""
+        t, f = self.t, self.free
+        kin = 0.5 * np.sum(t.inertia[:, None] * np.where(f, x - t.target, 0.0) ** 2)
+        damp = 0.5 * np.sum(t.damping[:, None] * np.where(f, x - t.previous, 0.0) ** 2)
+        return float(elastic_energy(self.em, x) + kin + damp - np.sum(np.where(f, t.force * x, 0.0)))
+
+
+def _line_search(problem: _Potential, x: np.ndarray, d: np.ndarray, r: np.ndarray, res: float):
+    """Backtracking (Armijo) along d from the longest step that inverts no element.
+
+    The first trial is ``min(1, INVERSION_SAFETY a0)`` with a0 the first
+    step length at which an upright element's volume reaches zero
+    (``_newton_kernels.step_bound``); each element's volume is a cubic in
+    the step length that is positive on [0, a0), so no trial inverts one.
+    Returns (moved, residual at the new x); x is changed in place when moved.
+    """
+    slope = float(np.sum(r * d))  # -dG/da at a = 0
+    if not slope > 0.0:
+        return False, r
+    a0 = KN.step_bound(x, d, problem.el, 1.0)
+    a = 1.0 if a0 > 1.0 else INVERSION_SAFETY * a0
+    g0 = problem.energy(x)
+    for _ in range(MAX_BACKTRACKS):
+        trial = x + a * d
+        g = problem.energy(trial)
+        if g <= g0 - ARMIJO_C1 * a * slope:
+            x[:] = trial
+            return True, problem.residual(x)
+        if a * slope <= ROUNDING * max(abs(g0), 1e-300):  # below what G can resolve: go by the residual
+            rt = problem.residual(trial)
+            if np.linalg.norm(rt) < res:
+                x[:] = trial
+                return True, rt
+        a *= 0.5
+    return False, r
+
+
+def _free_terms(em: ElementModel, x, h, f_ext, gravity, y=None) -> KE.NodeTerms:
+    f_ext = None if f_ext is None else _check_nodes(em, f_ext, "f_ext")
+    return _node_terms(em, x, h, f_ext, gravity, y)
+
+
+def _check_nodes(em: ElementModel, a, name: str) -> np.ndarray:
+    a = np.ascontiguousarray(a, np.float64)
+    if a.shape != (em.n_nodes, 3):
+        raise InputError(f"{name} must have shape ({em.n_nodes}, 3), got {a.shape}")
+    if not np.all(np.isfinite(a)):
+        raise InputError(f"{name} must be finite")
+    return a
+
+
+def newton_step(em: ElementModel, state: ElementState, h: float, f_ext=None, gravity=None, *,
+                atol: float = DEFAULT_ATOL_N, max_iterations: int = DEFAULT_MAX_ITERATIONS,
+                solver: NewtonSolver | None = None, stop=None) -> SolveInfo:
+    """Advance ``state`` by one backward Euler step of ``h`` s, solved by projected Newton.
+
+    Parameters
+    ----------
+    em : ElementModel
+    state : ElementState
+        Changed in place (positions, velocities, time).
+    h : float
+        s, > 0.
+    f_ext : (n, 3) float64, optional
+        External node forces, N.
+    gravity : (3,) float64, optional
+        mm/s^2.
+    atol : float
+        N: the step ends when the residual norm over all free dofs is at most this.
+    max_iterations : int
+    solver : NewtonSolver, optional
+        Keeps the pattern between steps (default: a new one).
+    stop : (1,) int64, optional
+        As :meth:`NewtonSolver.solve`'s; a step stopped before its first
+        iteration is not taken (positions and time stay).
+
+    Returns
+    -------
+    SolveInfo
+    """
+    if not (np.isfinite(h) and h > 0):
+        raise InputError(f"h must be a positive number, got {h}")
+    solver = solver or NewtonSolver(em)
+    x0 = state.positions.copy()
+    free = ~em.fixed
+    y = np.where(free, x0 + h * state.velocities, x0)
+    # the iterations start from x^n, which inverts no element; y itself might fold one
+    terms = _free_terms(em, x0, h, f_ext, gravity, y)
+    info = solver.solve(state.positions, terms, atol=float(atol), max_iterations=int(max_iterations), stop=stop)
+    if not info.taken:
+        return info
+    state.velocities[:] = np.where(free, (state.positions - x0) / h, 0.0)
+    state.time += h
+    return info
+
+
+def newton_static(em: ElementModel, positions, f_ext=None, gravity=None, *, rtol: float = 1e-6,
+                  atol: float = DEFAULT_ATOL_N, max_iterations: int = DEFAULT_MAX_ITERATIONS,
+                  solver: NewtonSolver | None = None) -> SolveInfo:
+    """Relax ``positions`` in place to static equilibrium by projected Newton.
+
+    Parameters
+    ----------
+    em : ElementModel
+    positions : (n, 3) float64
+        mm; changed in place.
+    f_ext : (n, 3) float64, optional
+        External node forces, N.
+    gravity : (3,) float64, optional
+        mm/s^2.
+    rtol, atol : float
+        The solve stops when the residual norm over all free dofs is at most
+        ``rtol`` times its first value or ``atol`` (N).
+    max_iterations : int
+        Newton iterations at most (``converged`` False beyond).
+    solver : NewtonSolver, optional
+
+    Returns
+    -------
+    SolveInfo
+        ``initial_residual`` and ``residual`` are true residual norms, N.
+    """
+    solver = solver or NewtonSolver(em)
+    terms = _free_terms(em, positions, None, f_ext, gravity)
+    free = ~terms.fixed & (em.adj_degree > 0)[:, None]
+    r0 = float(np.linalg.norm(_Potential(em, terms, free, solver._elements()).residual(positions)))
+    info = solver.solve(positions, terms, atol=max(float(atol), float(rtol) * r0), max_iterations=int(max_iterations))
+    return info

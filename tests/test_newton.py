@@ -1,0 +1,270 @@
+"""Projected Newton (cutkit.relax.newton): kernels against twins and finite differences, solves against
+a reference minimiser written here (scipy's trust-region Newton on the energy), the barrier's invariant."""
+
+import numpy as np
+import pytest
+
+import _twins_newton as T
+from _fem_reference import kuhn_box
+from _twins_elastic import deformation_gradients
+from cutkit.cutting import cut_step
+from cutkit.model.tetmodel import Materials, Prestress, TetModel
+from cutkit.relax import _newton_kernels as KN
+from cutkit.relax.elastic import ElementState, build_element_model
+from cutkit.relax.newton import NewtonSolver, newton_static, newton_step
+from cutkit.relax.vbd import elastic_energy, elastic_forces
+from cutkit.simulate.elastic_tissue import ElasticTissue
+
+ROW = dict(label=1, name="m", E=30e3, poisson_ratio=0.45, density=1090.0, damping=8.0, F_enter=0.8,
+           mu_static=1e-6, mu_dynamic=1e-6, rho_dynamic=1e-8, alpha_static=0.1, alpha_dynamic=0.1,
+           c_edge=1.0, c_shape=1.0)
+
+
+def model_of(p, t, prestrain=0.0, fibre=(1.0, 0.0, 0.0)):
+    ps = Prestress(label=np.array([1], np.int32), fibre_direction=np.array([fibre]), prestrain=np.array([prestrain]))
+    return TetModel.from_arrays(p, t, materials=Materials.from_rows([ROW]), prestress=ps)
+
+
+def arrays(em):
+    m = em.n_elements
+    return em.tets[:m], em.Dminv[:m], em.volume[:m], em.mu[:m], em.lam[:m]
+
+
+@pytest.fixture
+def deformed():
+    """A block under random displacements with one tet crushed into the barrier band (J = 0.04)."""
+    p, t = kuhn_box((3.0, 2.0, 2.0), (3, 2, 2))
+    em = build_element_model(model_of(p, t, prestrain=0.05))
+    x = p + np.random.default_rng(3).normal(scale=0.1, size=p.shape)
+    q = em.tets[0]
+    nrm = np.cross(x[q[2]] - x[q[1]], x[q[3]] - x[q[1]])
+    nrm /= np.linalg.norm(nrm)
+    J = np.linalg.det(deformation_gradients(x, em.tets[:1], em.Dminv[:1]))[0]
+    x[q[0]] -= (1.0 - 0.04 / J) * np.dot(x[q[0]] - x[q[1]], nrm) * nrm  # J is affine in one corner
+    return em, x
+
+
+@pytest.mark.parametrize("project", [0, 1])
+def test_element_terms_match_the_twin(deformed, project):
+    em, x = deformed
+    ids = np.arange(em.n_elements)
+    g, H = np.zeros((ids.size, 12)), np.zeros((ids.size, 12, 12))
+    KN.element_terms(x, em.elements, ids, project, g, H)
+    gt, Ht = T.element_terms(x, *arrays(em), project)
+    assert np.allclose(g, gt, rtol=1e-10, atol=1e-14)
+    assert np.allclose(H, Ht, rtol=1e-9, atol=1e-12 * np.abs(Ht).max())
+    J = np.linalg.det(deformation_gradients(x, *arrays(em)[:2]))
+    assert J.min() == pytest.approx(0.04)  # the barrier term is in the comparison
+
+
+def test_gradient_and_hessian_are_the_energy_derivatives(deformed):
+    """Element gradients summed are -elastic_forces (checked against differences of elastic_energy in
+    test_elastic); the exact Hessian is the central difference of the gradient, barrier tet included."""
+    em, x = deformed
+    n = em.n_nodes
+    ids = np.arange(em.n_elements)
+    g, H = np.zeros((ids.size, 12)), np.zeros((ids.size, 12, 12))
+    KN.element_terms(x, em.elements, ids, 0, g, H)
+    grad = np.zeros((n, 3))
+    np.add.at(grad, em.tets[:em.n_elements].ravel(), g.reshape(-1, 3))
+    assert np.allclose(grad, -elastic_forces(em, x), rtol=1e-9, atol=1e-15)
+    h = 1e-5
+    for i, c in [(int(em.tets[0, 0]), 2), (5, 0), (11, 1)]:
+        e = [elastic_energy(em, np.where((np.arange(n) == i)[:, None] & (np.arange(3) == c), x + s * h, x))
+             for s in (-1, 1)]
+        assert (e[1] - e[0]) / (2 * h) == pytest.approx(grad[i, c], rel=1e-6, abs=1e-12)
+    A = NewtonSolver(em, hessian="exact").matrix(x, np.ones((n, 3), bool), np.zeros(n), 0).toarray()
+    fd = np.zeros((3 * n, 3 * n))
+    for k in range(3 * n):
+        xp, xm = x.copy(), x.copy()
+        xp.ravel()[k] += h
+        xm.ravel()[k] -= h
+        fd[:, k] = -(elastic_forces(em, xp) - elastic_forces(em, xm)).ravel() / (2 * h)
+    assert np.allclose(A, fd, rtol=1e-5, atol=1e-6 * np.abs(fd).max())
+
+
+def test_projected_hessian_is_semidefinite_and_exact_where_that_is(deformed):
+    em, x = deformed
+    ids = np.arange(em.n_elements)
+    H0, H1 = np.zeros((ids.size, 12, 12)), np.zeros((ids.size, 12, 12))
+    g = np.zeros((ids.size, 12))
+    KN.element_terms(x, em.elements, ids, 0, g, H0)
+    KN.element_terms(x, em.elements, ids, 1, g, H1)
+    w1 = np.linalg.eigvalsh(H1)
+    assert w1.min() > -1e-10 * np.abs(w1).max()
+    psd = np.linalg.eigvalsh(H0).min(axis=1) > 0  # 12x12 of an element: 6 rigid zero modes at best
+    assert np.allclose(H0[psd], H1[psd], atol=1e-9 * np.abs(H0).max())
+
+
+@pytest.mark.parametrize("project", [0, 1])
+def test_assembled_matrix_matches_the_twin(deformed, project):
+    em, x = deformed
+    n = em.n_nodes
+    fixed = np.zeros((n, 3), bool)
+    fixed[:4] = True
+    fixed[7, 1] = True
+    add = np.linspace(1.0, 2.0, n)
+    A = NewtonSolver(em).matrix(x, ~fixed, add, project)
+    assert np.all(np.diff(A.indices[A.indptr[3]:A.indptr[4]]) > 0)  # columns sorted in each row
+    At = T.assembled(x, *arrays(em), project, fixed.ravel(), np.where(fixed, 0.0, np.repeat(add, 3).reshape(n, 3)
+                                                                      ).ravel())
+    assert np.allclose(A.toarray(), At, rtol=1e-9, atol=1e-12 * np.abs(At).max())
+
+
+def test_step_bound_matches_the_twin(deformed):
+    em, x = deformed
+    rng = np.random.default_rng(5)
+    for scale in (0.05, 0.3, 1.0):
+        d = rng.normal(scale=scale, size=x.shape)
+        a = KN.step_bound(x, d, em.elements, 1.0)
+        at = T.step_bound(x, d, em.tets[:em.n_elements], em.volume[:em.n_elements], 1.0)
+        assert a == pytest.approx(at, rel=1e-9)
+        if a <= 1.0:  # just before the bound every upright element is upright, just after one is not
+            J = np.linalg.det(deformation_gradients(x + (1 - 1e-9) * a * d, *arrays(em)[:2]))
+            assert J.min() > 0 and np.linalg.det(deformation_gradients(x + (1 + 1e-6) * a * d,
+                                                                     *arrays(em)[:2])).min() < 0
+
+
+# ---------------------------------------------------------------- solves against a reference
+
+def reference_minimum(em, x0, f, free):
+    """The static minimiser of W - f.x by scipy's trust-region Newton (trust-exact): gradient
+    -elastic_forces, Hessian by central differences of it; a method independent of the solver."""
+    from scipy.optimize import minimize
+
+    def full(z):
+        x = x0.copy()
+        x[free] = z
+        return x
+
+    fun = lambda z: elastic_energy(em, full(z)) - float(np.sum(f * full(z)))
+    jac = lambda z: -(elastic_forces(em, full(z)) + f)[free]
+
+    def hess(z, h=1e-6):
+        cols = []
+        for k in range(z.size):
+            zp, zm = z.copy(), z.copy()
+            zp[k] += h
+            zm[k] -= h
+            cols.append((jac(zp) - jac(zm)) / (2 * h))
+        H = np.array(cols).T
+        return 0.5 * (H + H.T)
+
+    res = minimize(fun, x0[free], jac=jac, hess=hess, method="trust-exact", options={"gtol": 1e-11, "maxiter": 500})
+    return full(res.x)
+
+
+def cantilever():
+    p, t = kuhn_box((20.0, 3.0, 3.0), (10, 2, 2))
+    em = build_element_model(model_of(p, t))
+    em.fixed[p[:, 0] == 0] = True
+    em._classes = None
+    f = np.zeros_like(p)
+    tip = p[:, 0] == 20.0
+    f[tip, 2] = -0.004 / tip.sum()  # N: the linear answer would be 55 mm down, past the bar's length
+    return p, em, f, tip
+
+
+@pytest.mark.slow
+def test_static_newton_matches_the_reference_on_a_cantilever_by_default():
+    p, em, f, tip = cantilever()
+    x = p.copy()
+    info = newton_static(em, x, f_ext=f)  # defaults
+    assert info.converged and info.residual <= max(1e-6 * info.initial_residual, 1e-7)
+    assert -x[tip, 2].mean() > 0.3 * 20.0  # large deflection
+    ref = reference_minimum(em, p.copy(), f, ~em.fixed)
+    u, ur = x - p, ref - p
+    assert np.linalg.norm(u - ur) <= 1e-4 * np.linalg.norm(ur)
+
+
+def cut_slab():
+    """A prestressed slab (fibres across the cut, base held) cut half way down by a blade."""
+    p, t = kuhn_box((6.0, 3.0, 3.0), (6, 3, 3))
+    model = model_of(p, t, prestrain=0.1, fibre=(0.0, 1.0, 0.0))
+    tis = ElasticTissue(model, blade_length=1.6, step_s=0.02)
+    tis.em.fixed[p[:, 2] == 0] = True
+    tis.bc_fixed = p[:, 2] == 0
+    for xb in np.linspace(-0.5, 6.5, 15):
+        tis.apply_cut(cut_step(tis.cm, [xb, 1.37, 3.5], [0.0, 0.0, 1.0]))
+    return tis
+
+
+def test_static_newton_matches_the_reference_on_a_cut_slab():
+    tis = cut_slab()
+    em = tis.em
+    assert em.n_nodes > tis.cm.n_orig_points  # the cut made nodes
+    x0 = tis.positions.copy()
+    free = ~em.fixed & (em.adj_degree > 0)[:, None]
+    x = x0.copy()
+    info = newton_static(em, x, rtol=1e-10, atol=0.0)
+    assert info.converged
+    ref = reference_minimum(em, x0, np.zeros_like(x0), free)
+    assert np.linalg.norm(x - ref) <= 1e-4 * np.linalg.norm(ref - tis.rest_positions)
+    # the cut opened: its two sides moved apart across the fibres
+    assert np.linalg.norm(x - tis.rest_positions, axis=1).max() > 0.05
+
+
+def test_implicit_steps_converge_on_the_true_residual():
+    p, em, f, tip = cantilever()
+    st = ElementState(p.copy(), np.zeros_like(p))
+    solver = NewtonSolver(em)
+    h, m = 0.02, em.masses[:, None]
+    for _ in range(5):
+        x0, v0 = st.positions.copy(), st.velocities.copy()
+        info = newton_step(em, st, h, f, atol=1e-9, solver=solver)
+        assert info.converged
+        x = st.positions  # the residual of backward Euler, recomputed here
+        r = elastic_forces(em, x) + f - m / h ** 2 * (x - x0 - h * v0) - em.damping[:, None] * m / h * (x - x0)
+        assert np.linalg.norm(r[~em.fixed]) == pytest.approx(info.residual, rel=1e-6, abs=1e-15)
+        assert info.residual <= 1e-9
+    assert solver.counts["pattern_builds"] == 1  # the pattern is kept between steps
+
+
+def test_a_solve_that_stops_early_says_so_with_its_residual():
+    p, em, f, tip = cantilever()
+    x = p.copy()
+    info = newton_static(em, x, f_ext=f, rtol=1e-12, atol=0.0, max_iterations=2)
+    assert not info.converged and info.iterations == 2
+    r = (elastic_forces(em, x) + f)[~em.fixed]
+    assert info.residual == pytest.approx(np.linalg.norm(r), rel=1e-12)
+    assert info.residual > 1e-12 * info.initial_residual
+
+
+@pytest.mark.parametrize("hessian", ["auto", "projected"])
+def test_a_crushing_point_load_never_inverts_a_tet(hessian, monkeypatch):
+    """A node pushed into the held base by ten times E over a face: no iterate of any step inverts a tet."""
+    import cutkit.relax.newton as N
+
+    p, t = kuhn_box((3.0, 3.0, 2.0), (3, 3, 2))
+    em = build_element_model(model_of(p, t))
+    em.fixed[p[:, 2] == 0] = True
+    top = int(np.flatnonzero(p[:, 2] == 2.0)[4])
+    f = np.zeros_like(p)
+    f[top, 2] = -0.3
+    lowest = []
+    search = N._line_search
+
+    def watched(problem, x, d, r, res):
+        out = search(problem, x, d, r, res)
+        lowest.append(np.linalg.det(deformation_gradients(x, *arrays(em)[:2])).min())
+        return out
+
+    monkeypatch.setattr(N, "_line_search", watched)
+    st = ElementState(p.copy(), np.zeros_like(p))
+    solver = NewtonSolver(em, hessian=hessian)
+    for _ in range(20):
+        newton_step(em, st, 0.01, f, atol=1e-9, solver=solver)
+    assert min(lowest) > 0.0
+    assert st.positions[top, 2] < 0.5 * p[top, 2]  # the load did squash the block
+
+
+def test_the_cg_solves_reach_the_same_static_answer():
+    """Multigrid-preconditioned CG (what models above CHOLESKY_MAX_DOFS use) against the factorisation."""
+    p, em, f, tip = cantilever()
+    f = 0.25 * f
+    x_chol, x_cg = p.copy(), p.copy()
+    assert newton_static(em, x_chol, f_ext=f, rtol=1e-10, atol=0.0, solver=NewtonSolver(em, linear="cholesky")).converged
+    cg = NewtonSolver(em, linear="cg")
+    info = newton_static(em, x_cg, f_ext=f, rtol=1e-10, atol=0.0, max_iterations=200, solver=cg)
+    assert info.converged and cg.counts["cg_iterations"] > 0 and cg.counts["factorisations"] == 0
+    assert np.abs(x_cg - x_chol).max() <= 1e-6 * np.abs(x_chol - p).max()

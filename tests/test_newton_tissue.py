@@ -1,0 +1,97 @@
+"""The Newton solver in the tissue being cut: steps that converge on the true residual, reported."""
+
+import numpy as np
+import pytest
+
+from _fem_reference import kuhn_box
+from cutkit.cutting import cut_step
+from cutkit.errors import CutkitError
+from cutkit.mesh.quality import signed_volumes
+from cutkit.model.tetmodel import Materials, Prestress, TetModel
+from cutkit.relax.vbd import elastic_forces
+from cutkit.simulate import SimulateOptions
+from cutkit.simulate.elastic_tissue import ElasticTissue
+from cutkit.simulate.run import relax_steps_warning
+
+ROW = dict(label=1, name="m", E=30e3, poisson_ratio=0.45, density=1090.0, damping=8.0, F_enter=0.8,
+           mu_static=1e-6, mu_dynamic=1e-6, rho_dynamic=1e-8, alpha_static=0.1, alpha_dynamic=0.1,
+           c_edge=1.0, c_shape=1.0)
+
+
+def slab(prestrain=0.1, solver="newton"):
+    p, t = kuhn_box((6.0, 3.0, 3.0), (6, 3, 3))
+    ps = Prestress(label=np.array([1], np.int32), fibre_direction=np.array([[0.0, 1.0, 0.0]]),
+                   prestrain=np.array([prestrain]))
+    model = TetModel.from_arrays(p, t, materials=Materials.from_rows([ROW]), prestress=ps)
+    tis = ElasticTissue(model, blade_length=1.6, step_s=0.02, solver=solver)
+    tis.em.fixed[p[:, 2] == 0] = True
+    tis.bc_fixed = p[:, 2] == 0
+    return tis
+
+
+def test_newton_steps_through_a_cut_converge_on_the_true_residual():
+    tis = slab()
+    f = np.zeros((tis.n_nodes, 3))
+    tis.advance(f, 0.1)
+    for xb in np.linspace(-0.5, 6.5, 8):
+        tis.apply_cut(cut_step(tis.cm, [xb, 1.37, 3.5], [0.0, 0.0, 1.0]))
+        tis.advance(np.zeros((tis.n_nodes, 3)), tis.time + 0.02)
+    tis.advance(np.zeros((tis.n_nodes, 3)), tis.time + 0.2)
+    rep = tis.relax_report()
+    assert rep["solver"] == "newton" and rep["count"] == len(rep["iterations"]) == tis.counts["steps"]
+    assert rep["not_converged"] == 0 and rep["worst_relative_residual"] <= rep["rtol"]
+    assert rep["iterations_total"] == tis.counts["newton_iterations"] > 0
+    assert tis.em.n_nodes > tis.cm.n_orig_points  # the cut made nodes, and the pattern followed
+    assert signed_volumes(tis.positions, tis.cm.tets).min() > 0
+    # the last step's recorded residual is the true one: recompute it from the elastic forces
+    # (one more step from rest at equilibrium is within its tolerance of a static balance)
+    free = ~tis.em.fixed & (tis.em.adj_degree > 0)[:, None]
+    static = np.linalg.norm(elastic_forces(tis.em, tis.positions)[free]) / tis.force_scale
+    assert static < 0.2
+
+
+def test_vbd_steps_report_their_true_residual_too():
+    tis = slab(solver="vbd")
+    x0, v0 = tis.positions.copy(), tis.velocities.copy()
+    tis.advance(np.zeros((tis.n_nodes, 3)), 0.02)
+    rep = tis.relax_report()
+    assert rep["solver"] == "vbd" and rep["count"] == 1 and rep["iterations"] == [tis.counts["sweeps"]]
+    assert rep["relative_residual"][0] == pytest.approx(tis._true_residual(x0, v0, np.zeros_like(x0))
+                                                        / tis.force_scale)
+
+
+def test_an_unconverged_step_gives_one_warning_line():
+    rep = {"count": 120, "not_converged": 55, "worst_relative_residual": 0.97, "rtol": 1e-2, "solver": "vbd"}
+    line = relax_steps_warning(rep)
+    assert line.startswith("55 of 120 relaxation steps ended unconverged") and "9.7e-01" in line
+    assert relax_steps_warning(dict(rep, not_converged=0)) is None
+
+
+def test_a_settle_with_nothing_to_do_says_skipped():
+    for solver in ("newton", "vbd"):
+        rep = slab(prestrain=0.0, solver=solver).settle(10)
+        assert rep["iterations"] == 0 and "skipped" in rep
+        assert "converged" not in rep and "relative_residual" not in rep
+
+
+def test_the_newton_settle_converges():
+    tis = slab()
+    rep = tis.settle(20, rtol=1e-6)
+    assert rep["converged"] and rep["relative_residual"] <= 1e-6
+
+
+def test_an_unknown_solver_is_refused():
+    with pytest.raises(CutkitError):
+        SimulateOptions(solver="jacobi").check()
+    with pytest.raises(CutkitError):
+        slab(solver="jacobi")
+
+
+@pytest.mark.parametrize("command", ["simulate", "demo", "live"])
+def test_the_commands_take_a_solver(command):
+    from click.testing import CliRunner
+
+    from cutkit.cli.main import cli
+
+    out = CliRunner().invoke(cli, [command, "--help"])
+    assert out.exit_code == 0 and "--solver" in out.output
