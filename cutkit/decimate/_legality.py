@@ -29,7 +29,7 @@ import numpy as np
 from numba import njit
 
 from cutkit.decimate._pool import C_STAMP
-from cutkit.mesh.geometry import point_triangle_dist2, tet_max_cos, tet_volume6
+from cutkit.mesh.geometry import point_on_triangle, point_triangle_dist2, tet_max_cos, tet_volume6
 
 #: Slots of the ``params`` (float64) array.
 P_H = 0  # reference edge length, mm
@@ -582,35 +582,6 @@ def can_collapse(u, v, points, tets, labels, tet_lab, tet_maxcos, adj_start, adj
 
 
 @njit(cache=True)
-def _on_triangle(points, x, pa, pb, pc, rel_tol):
-    """Whether node ``x`` lies on triangle (pa, pb, pc) without being at a corner: the rule of
-    ``cutkit check``'s hanging-node test (:func:`cutkit.mesh._check_kernels.hanging_nodes`)."""
-    ux, uy, uz = pb[0] - pa[0], pb[1] - pa[1], pb[2] - pa[2]
-    vx, vy, vz = pc[0] - pa[0], pc[1] - pa[1], pc[2] - pa[2]
-    nx = uy * vz - uz * vy
-    ny = uz * vx - ux * vz
-    nz = ux * vy - uy * vx
-    nn = nx * nx + ny * ny + nz * nz
-    if nn == 0.0:
-        return False
-    wx, wy, wz = pc[0] - pb[0], pc[1] - pb[1], pc[2] - pb[2]
-    L = math.sqrt(max(ux * ux + uy * uy + uz * uz, vx * vx + vy * vy + vz * vz, wx * wx + wy * wy + wz * wz))
-    tol = rel_tol * L
-    px, py, pz = points[x, 0] - pa[0], points[x, 1] - pa[1], points[x, 2] - pa[2]
-    if abs((px * nx + py * ny + pz * nz) / math.sqrt(nn)) > tol:
-        return False
-    beta = ((py * vz - pz * vy) * nx + (pz * vx - px * vz) * ny + (px * vy - py * vx) * nz) / nn
-    gamma = ((uy * pz - uz * py) * nx + (uz * px - ux * pz) * ny + (ux * py - uy * px) * nz) / nn
-    if 1.0 - beta - gamma < -rel_tol or beta < -rel_tol or gamma < -rel_tol:
-        return False
-    for q in (pa, pb, pc):
-        dx, dy, dz = points[x, 0] - q[0], points[x, 1] - q[1], points[x, 2] - q[2]
-        if dx * dx + dy * dy + dz * dz <= tol * tol:
-            return False
-    return True
-
-
-@njit(cache=True)
 def conforming_after(u, v, points, tets, labels, adj_start, adj_len, pool, vert_alive, bnd_keys, bnd_nodes, grid):
     """Rule 4: no boundary node lies on an outer boundary face the collapse ``u -> v`` makes.
 
@@ -670,6 +641,6 @@ def conforming_after(u, v, points, tets, labels, adj_start, adj_len, pool, vert_
                         s += 1
                         if x == u or x == v or x == a or x == b or vert_alive[x] == 0:
                             continue
-                        if _on_triangle(points, x, pv, pa, pb, rel_tol):
+                        if point_on_triangle(points[x], pv, pa, pb, rel_tol):
                             return False
     return True

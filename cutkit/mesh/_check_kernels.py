@@ -10,6 +10,8 @@ import math
 import numpy as np
 from numba import njit, prange
 
+from cutkit.mesh.geometry import point_on_triangle
+
 
 @njit(cache=True)
 def _lower_bound(a, x):
@@ -78,32 +80,6 @@ def hanging_nodes(points, tri, cand, cell_keys, cell_order, lo, h, dims, rel_tol
                         s += 1
                         if x == a or x == b or x == c:
                             continue
-                        px = points[x, 0] - points[a, 0]
-                        py = points[x, 1] - points[a, 1]
-                        pz = points[x, 2] - points[a, 2]
-                        dist = (px * nx + py * ny + pz * nz) / math.sqrt(nn)
-                        if abs(dist) > tol:
-                            continue
-                        # barycentrics from the sub-triangle normals (Cramer's rule)
-                        # x - a = beta u + gamma v  =>  beta = (p x v).n / |n|^2, gamma = (u x p).n / |n|^2
-                        bx = py * vz - pz * vy
-                        by = pz * vx - px * vz
-                        bz = px * vy - py * vx
-                        beta = (bx * nx + by * ny + bz * nz) / nn
-                        gx = uy * pz - uz * py
-                        gy = uz * px - ux * pz
-                        gz = ux * py - uy * px
-                        gamma = (gx * nx + gy * ny + gz * nz) / nn
-                        alpha = 1.0 - beta - gamma
-                        if alpha < -rel_tol or beta < -rel_tol or gamma < -rel_tol:
-                            continue
-                        near = False
-                        for q in (a, b, c):
-                            dx = points[x, 0] - points[q, 0]
-                            dy = points[x, 1] - points[q, 1]
-                            dz = points[x, 2] - points[q, 2]
-                            if dx * dx + dy * dy + dz * dz <= tol * tol:
-                                near = True
-                        if not near:
+                        if point_on_triangle(points[x], points[a], points[b], points[c], rel_tol):
                             out[x] = t
     return out

@@ -817,3 +817,49 @@ def segment_meets_any_tet(p0, p1, x, tets):
         if segment_meets_tet(p0, p1, x, tets[t]):
             return True
     return False
+
+
+@njit(cache=True, nogil=True, inline="always")
+def point_on_triangle(x, pa, pb, pc, rel_tol):
+    """Whether the point ``x`` lies on the triangle (pa, pb, pc) without being at one of its corners.
+
+    With L the triangle's longest edge: its distance to the triangle's plane
+    is at most ``rel_tol * L``, its barycentric coordinates (Cramer's rule on
+    the sub-triangle normals) are all >= -``rel_tol``, and it is farther than
+    ``rel_tol * L`` from each corner.  A degenerate (zero-area) triangle holds
+    no point.  This is the one hanging-node predicate: ``cutkit check``
+    (:func:`cutkit.mesh.check.check_mesh`) and decimation's rule that keeps
+    boundary nodes off new boundary faces both ask it.
+
+    Parameters
+    ----------
+    x, pa, pb, pc : (3,) float64
+
+    Returns
+    -------
+    bool
+    """
+    ux, uy, uz = pb[0] - pa[0], pb[1] - pa[1], pb[2] - pa[2]
+    vx, vy, vz = pc[0] - pa[0], pc[1] - pa[1], pc[2] - pa[2]
+    nx = uy * vz - uz * vy
+    ny = uz * vx - ux * vz
+    nz = ux * vy - uy * vx
+    nn = nx * nx + ny * ny + nz * nz
+    if nn == 0.0:
+        return False
+    wx, wy, wz = pc[0] - pb[0], pc[1] - pb[1], pc[2] - pb[2]
+    L = math.sqrt(max(ux * ux + uy * uy + uz * uz, vx * vx + vy * vy + vz * vz, wx * wx + wy * wy + wz * wz))
+    tol = rel_tol * L
+    px, py, pz = x[0] - pa[0], x[1] - pa[1], x[2] - pa[2]
+    if abs((px * nx + py * ny + pz * nz) / math.sqrt(nn)) > tol:
+        return False
+    # x - a = beta u + gamma v  =>  beta = (p x v).n / |n|^2, gamma = (u x p).n / |n|^2
+    beta = ((py * vz - pz * vy) * nx + (pz * vx - px * vz) * ny + (px * vy - py * vx) * nz) / nn
+    gamma = ((uy * pz - uz * py) * nx + (uz * px - ux * pz) * ny + (ux * py - uy * px) * nz) / nn
+    if 1.0 - beta - gamma < -rel_tol or beta < -rel_tol or gamma < -rel_tol:
+        return False
+    for q in (pa, pb, pc):
+        dx, dy, dz = x[0] - q[0], x[1] - q[1], x[2] - q[2]
+        if dx * dx + dy * dy + dz * dz <= tol * tol:
+            return False
+    return True
