@@ -97,9 +97,21 @@ def test_igtl_transforms_in_polydata_out_with_the_cut(model):
     view = IGTLPolyDataView(endpoint=endpoint, max_rate_hz=30.0)
     client = pyigtl.OpenIGTLinkClient("127.0.0.1", endpoint.port)
     traj = _incision()
-    got, done = {}, threading.Event()
+    got, done, stop = {}, threading.Event(), threading.Event()
+    taken = []  # the poses the session took from the source
+    poll = source.poll
 
-    def tool():  # the tracked tool: TRANSFORMs along the incision at 100 Hz, then the last one held
+    def counting_poll():
+        pose = poll()
+        if pose is not None:
+            taken.append(pose)
+        return pose
+
+    source.poll = counting_poll
+
+    def tool():
+        """The tracked tool: each TRANSFORM along the incision once the session took the one before
+        (in step with the session however loaded the machine is, never on a clock); then the end."""
         t_end = time.monotonic() + 30.0
         while not endpoint.connected and time.monotonic() < t_end:
             time.sleep(0.01)
@@ -107,10 +119,14 @@ def test_igtl_transforms_in_polydata_out_with_the_cut(model):
             m = np.eye(4)
             m[:3, 0], m[:3, 2], m[:3, 3] = traj.n[i], -traj.a[i], traj.tip[i]
             m[:3, 1] = np.cross(m[:3, 2], m[:3, 0])
+            n = len(taken)
             client.send_message(pyigtl.TransformMessage(RAS_TO_LPS @ m, device_name="ScalpelToReference"),
                                 wait=True)
-            time.sleep(0.01)
+            t_end = time.monotonic() + 30.0
+            while len(taken) == n and time.monotonic() < t_end:
+                time.sleep(0.002)
         done.set()
+        stop.set()
 
     def collect(frame):
         for msg in client.get_latest_messages():
@@ -119,8 +135,8 @@ def test_igtl_transforms_in_polydata_out_with_the_cut(model):
     sender = threading.Thread(target=tool, daemon=True)
     try:
         sender.start()
-        s = run_live(model, source, [view], Path(__import__("tempfile").mkdtemp()), max_seconds=60,
-                     until_idle_s=1.0, on_frame=collect)
+        s = run_live(model, source, [view], Path(__import__("tempfile").mkdtemp()), max_seconds=300, stop=stop,
+                     on_frame=collect)
         sender.join(timeout=10)
         t_end = time.monotonic() + 30.0  # the last messages on their way: wait for them, not a fixed time
         while not ("CutkitCutSurface" in got and "CutkitTissue" in got) and time.monotonic() < t_end:
@@ -131,7 +147,8 @@ def test_igtl_transforms_in_polydata_out_with_the_cut(model):
         source.close()
         view.close()
         endpoint.close()
-    assert done.is_set() and s["cut_tets"] > 0
+    assert done.is_set() and len(taken) == len(traj)  # every pose reached the session
+    assert s["cut_tets"] > 0
     assert "CutkitCutSurface" in got and "CutkitTissue" in got
     pts, tris = decode_polydata(got["CutkitCutSurface"])
     assert len(tris) > 0
