@@ -153,7 +153,9 @@ def test_a_first_run_is_told_that_kernels_compile(tmp_path, monkeypatch):
         (cache / (rel.rsplit("/", 1)[1][:-3] + ".kernel-12.py311.nbi")).write_text("")
     assert kernels_compiled(tmp_path) is False  # one kernel module still to compile
     rel = CACHE_WITNESSES[-1]
-    (tmp_path / rel.rsplit("/", 1)[0] / "__pycache__" / (rel.rsplit("/", 1)[1][:-3] + ".k-1.py311.nbi")).write_text("")
+    cache = tmp_path / rel.rsplit("/", 1)[0] / "__pycache__"
+    cache.mkdir(exist_ok=True)
+    (cache / (rel.rsplit("/", 1)[1][:-3] + ".k-1.py311.nbi")).write_text("")
     assert kernels_compiled(tmp_path) is True
     monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))
     assert kernels_compiled(tmp_path) is None  # the cache lives elsewhere: unknown
