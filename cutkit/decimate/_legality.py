@@ -627,15 +627,7 @@ def conforming_after(u, v, points, tets, labels, adj_start, adj_len, pool, vert_
             for cj in range(i0[1], i1[1] + 1):
                 for ck in range(i0[2], i1[2] + 1):
                     key = (ci * dims[1] + cj) * dims[2] + ck
-                    lo = 0
-                    hi = bnd_keys.shape[0]
-                    while lo < hi:
-                        mid = (lo + hi) // 2
-                        if bnd_keys[mid] < key:
-                            lo = mid + 1
-                        else:
-                            hi = mid
-                    s = lo
+                    s = np.searchsorted(bnd_keys, key)  # the first node of the cell
                     while s < bnd_keys.shape[0] and bnd_keys[s] == key:
                         x = bnd_nodes[s]
                         s += 1

@@ -13,19 +13,6 @@ from numba import njit, prange
 from cutkit.mesh.geometry import point_on_triangle
 
 
-@njit(cache=True)
-def _lower_bound(a, x):
-    lo = 0
-    hi = a.shape[0]
-    while lo < hi:
-        mid = (lo + hi) // 2
-        if a[mid] < x:
-            lo = mid + 1
-        else:
-            hi = mid
-    return lo
-
-
 @njit(cache=True, parallel=True)
 def hanging_nodes(points, tri, cand, cell_keys, cell_order, lo, h, dims, rel_tol):
     """For each node, a triangle it lies on without being one of its corners.
@@ -74,7 +61,7 @@ def hanging_nodes(points, tri, cand, cell_keys, cell_order, lo, h, dims, rel_tol
             for cj in range(i0[1], i1[1] + 1):
                 for ck in range(i0[2], i1[2] + 1):
                     key = (ci * dims[1] + cj) * dims[2] + ck
-                    s = _lower_bound(cell_keys, key)
+                    s = np.searchsorted(cell_keys, key)  # the first candidate of the cell
                     while s < cell_keys.shape[0] and cell_keys[s] == key:
                         x = cand[cell_order[s]]
                         s += 1
