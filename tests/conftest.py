@@ -1,9 +1,47 @@
-"""Test-wide settings."""
+"""Test-wide settings.
 
+The suite runs on every core (``-n auto --dist loadgroup`` in pyproject.toml):
+a test file with module-scoped fixtures is one group, so they are built once,
+the files that share the session's demo knee are one group, so it is built
+once, and every other test goes to whichever worker is free.
+Each worker gives numba an equal share of the cores (at least one thread);
+the tests that compare thread counts set them explicitly.
+"""
+
+import os
 import signal
 import threading
 
 import pytest
+
+#: Test files that use the session's demo knee (conftest.demo_knee): run on one worker.
+KNEE_GROUP = "demo-knee"
+
+
+def pytest_configure(config):
+    if "PYTEST_XDIST_WORKER" in os.environ:
+        # a worker's environment says COLUMNS=80; the commands' output is piped in the tests,
+        # where tables are printed whole (cutkit.cli._ui), as in a run without workers
+        os.environ.pop("COLUMNS", None)
+    workers = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1"))
+    if workers > 1:
+        import numba
+
+        numba.set_num_threads(max(1, min(numba.config.NUMBA_NUM_THREADS, (os.cpu_count() or 1) // workers)))
+
+
+def pytest_collection_modifyitems(config, items):
+    """xdist groups: one for all the files that use the demo knee, one per file with module fixtures."""
+    knee_files = {item.path for item in items if "demo_knee" in getattr(item, "fixturenames", ())}
+    module_fixtures = {}
+    for item in items:
+        if item.path in knee_files:
+            item.add_marker(pytest.mark.xdist_group(KNEE_GROUP))
+            continue
+        if item.path not in module_fixtures:
+            module_fixtures[item.path] = 'scope="module"' in item.path.read_text()
+        if module_fixtures[item.path]:
+            item.add_marker(pytest.mark.xdist_group(item.path.name))
 
 
 @pytest.fixture(autouse=True)

@@ -151,3 +151,30 @@ def test_a_hand_that_holds_still_is_titled_at_rest(tmp_path):
     assert "cutting" in _title(f, 0.2) and "at rest" not in _title(f, 0.2)
     assert "cutting" in _title(f, 0.3 + 0.5 * REST_WINDOW_S)  # stopped, but not for the whole window yet
     assert "blade at rest" in _title(f, 0.3 + 2 * REST_WINDOW_S)
+
+
+def test_the_close_up_of_a_small_model_shows_its_outline(tmp_path):
+    """A short cut on a small model: the cut view stands back far enough that the picture spans
+    most of the model (its smallest side), not a patch of its surface."""
+    from cutkit.render.scene import CLOSE_UP_MIN
+
+    out = tmp_path / "run"
+    points, tets = box_mesh((5, 5, 5), spacing=(2.0, 2.0, 2.0))  # a 10 mm cube
+    quad = np.array([[4.0, 4.0, 10.0], [5.0, 4.0, 10.0], [5.0, 6.0, 10.0], [4.0, 6.0, 10.0]])  # a 1 mm cut on top
+    n = len(points)
+    with SeriesWriter(out, "cut") as series:
+        surface = SurfaceSeries(out)
+        series.write(0.0, points, tets, point_data={"displacement": np.zeros_like(points)},
+                     cell_data={"label": np.ones(len(tets), np.int32)})
+        surface.write(0.0, np.vstack([points, quad]), np.array([[n, n + 1, n + 2], [n, n + 2, n + 3]]))
+        surface.close()
+    log = ForceLog(100)
+    for j in range(5):
+        tip = np.array([4.0 + 0.25 * j, 5.0, 9.0])
+        log.add(0.01 * j, 2, np.zeros(3), 0.0, 0.0, 0.0, tip, tip)
+    log.write(out / "forces.csv")
+    (out / "summary.json").write_text(json.dumps({"cut_tets": 1, "options": {"fps": 10.0}, "pictures": []}))
+    cam = camera_for(read_folder(out), "cut")
+    assert cam.distance >= CLOSE_UP_MIN * 10.0 - 1e-9
+    high = 2.0 * cam.distance * np.tan(np.radians(15.0))  # the picture's height at the focal plane (30 degrees)
+    assert high >= 0.55 * 10.0

@@ -21,6 +21,10 @@ TISSUE_COLOUR = (0.87, 0.66, 0.58)
 TITLE_BAND = 0.08
 #: Camera distance of the whole-tissue views over the bounding box's diagonal (30 degree view angle).
 WHOLE = 1.7
+#: The close-up ("cut" view) stands at least this many times the model's smallest bounding-box side
+#: away: the view then spans about 0.6 (high) by 0.8 (wide) of that side, so a small model's outline
+#: shows around a short cut and the model stays recognisable.
+CLOSE_UP_MIN = 1.1
 
 
 @dataclass
@@ -97,7 +101,8 @@ def camera_for(folder, view: str = "cut") -> Camera:
             inward = -inward
         extent = float(np.ptp(c @ along)) if len(c) else 10.0
         if view == "cut":
-            return Camera(focal, inward + 0.45 * normal, normal, max(2.6 * extent, 0.25 * diag))
+            return Camera(focal, inward + 0.45 * normal, normal,
+                          max(2.6 * extent, 0.25 * diag, CLOSE_UP_MIN * float(np.min(hi - lo))))
         return Camera(centre, inward + 0.3 * normal, normal, WHOLE * diag)
     if view in ("cut", "overview", "front"):
         return Camera(centre, np.array([0.0, 1.0, -0.25]), np.array([0.0, 0.0, 1.0]), WHOLE * diag)
@@ -189,10 +194,12 @@ def render_frame(frame_path, surface_path=None, path_done=None, path_all=None, c
         cut = _read(surface_path)
         if cut.n_cells:
             actor = pl.add_mesh(cut, color=CUT_COLOUR, smooth_shading=False, ambient=0.25, specular=0.05)
-            # the cut faces are also faces of the tissue surface: draw them in front
+            # the cut faces are also faces of the tissue surface: drawn just in front of their
+            # coincident tissue faces (a small offset), so the red shows where the wound's walls
+            # are in sight, not through the skin around it
             mapper = actor.GetMapper()
             mapper.SetResolveCoincidentTopologyToPolygonOffset()
-            mapper.SetRelativeCoincidentTopologyPolygonOffsetParameters(-2.0, -20.0)
+            mapper.SetRelativeCoincidentTopologyPolygonOffsetParameters(-1.0, -2.0)
             rim = cut.extract_feature_edges(boundary_edges=True, feature_edges=False, manifold_edges=False,
                                             non_manifold_edges=False)
             legend.append(["cut surface", CUT_COLOUR])
