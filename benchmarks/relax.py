@@ -126,7 +126,7 @@ def knee_simulate(model, paths: int = KNEE_PATHS) -> dict:
 
     from cutkit.cutting.trajectory import read_trajectory
     from cutkit.simulate import SimulateOptions, simulate
-    from cutkit.simulate.demo import demo_inputs
+    from cutkit.demo import demo_inputs
 
     traj = read_trajectory(demo_inputs()[1])
 
@@ -167,7 +167,7 @@ def knee_solvers(model, solvers=("newton", "vbd"), hold_s: float = 1.0, rtol: fl
     from cutkit.relax.newton import NewtonSolver, newton_static
     from cutkit.relax.vbd import elastic_forces, iterate, _node_terms
     from cutkit.simulate import SimulateOptions, simulate
-    from cutkit.simulate.demo import demo_inputs
+    from cutkit.demo import demo_inputs
 
     traj = trajectory if trajectory is not None else read_trajectory(demo_inputs()[1])
     out, cut = {}, None

@@ -54,7 +54,7 @@ def slab_incision(shape):
 def knee():
     from cutkit.cutting.trajectory import read_trajectory
     from cutkit.io.model_h5 import read_model
-    from cutkit.simulate.demo import build_or_reuse, demo_inputs
+    from cutkit.demo import build_or_reuse, demo_inputs
 
     out = os.path.join(tempfile.gettempdir(), "cutkit-bench-knee")
     path, _, _ = build_or_reuse(out)
@@ -103,7 +103,7 @@ def main(argv=None):
             if args.knee:
                 from cutkit.cutting.trajectory import read_trajectory
                 from cutkit.io.model_h5 import read_model
-                from cutkit.simulate.demo import demo_inputs
+                from cutkit.demo import demo_inputs
                 model, traj = read_model(args.knee), read_trajectory(demo_inputs()[1])
             else:
                 model, traj = knee()

@@ -29,9 +29,9 @@ def command(out_dir, fps, overwrite, no_png, movie, material_model, solver):
     from cutkit.cli._ui import folder_guard
     from cutkit.cli.simulate import _check_flags
     from cutkit.io.atomic import clear_outputs
-    from cutkit.simulate.demo import demo_inputs, demo_outputs
+    from cutkit.demo import demo_inputs, demo_outputs
     from cutkit.cli._ui import note
-    from cutkit.simulate.warmup import kernels_compiled, start_background
+    from cutkit.demo.warmup import kernels_compiled, start_background
 
     t0 = time.perf_counter()
     _check_flags(fps=fps)
@@ -61,7 +61,7 @@ def _run(out_dir, fps, no_png, movie, trajectory, warm, t0, material_model=None,
     from cutkit.cutting.trajectory import read_trajectory
     from cutkit.io.model_h5 import read_model
     from cutkit.simulate import SimulateOptions
-    from cutkit.simulate.demo import build_or_reuse
+    from cutkit.demo import build_or_reuse
 
     with progress() as bar:
         task = bar.add_task("build-model", total=len(STAGES))

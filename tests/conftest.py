@@ -76,7 +76,7 @@ def demo_knee(tmp_path_factory):
     The tests that only read it share it (a build takes about a minute on two
     cores); the test of the build's reuse copies the folder.
     """
-    from cutkit.simulate.demo import build_or_reuse
+    from cutkit.demo import build_or_reuse
 
     folder = tmp_path_factory.mktemp("demo-knee")
     path, _, report = build_or_reuse(folder)

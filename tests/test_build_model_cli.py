@@ -42,7 +42,7 @@ def test_empty_threshold_is_one_line_error(tmp_path, capsys):
 def test_demo_build_is_reused_while_inputs_are_unchanged(tmp_path, demo_knee, monkeypatch):
     import shutil
 
-    from cutkit.simulate.demo import build_or_reuse
+    from cutkit.demo import build_or_reuse
 
     folder, _, report = demo_knee  # built once for the run, into an empty folder
     assert report

@@ -7,7 +7,7 @@ import pytest
 
 from cutkit.cli.main import main
 from cutkit.mesh.quality import signed_volumes
-from cutkit.simulate.demo import demo_inputs
+from cutkit.demo import demo_inputs
 
 pytestmark = pytest.mark.slow
 

@@ -123,7 +123,7 @@ def test_sweep_offers_resume_and_overwrite(d):
 
 
 def test_demo_folder_is_reused_and_a_foreign_one_refused(tmp_path):
-    from cutkit.simulate.demo import demo_outputs
+    from cutkit.demo import demo_outputs
 
     out = tmp_path / "demo"
     out.mkdir()
@@ -586,8 +586,8 @@ def test_decimation_leaves_no_hanging_node(monkeypatch):
 def test_demo_twice_into_its_folder(tmp_path, monkeypatch):
     """`cutkit demo -o X` twice: the second run reuses the build and replaces the first run's outputs;
     a folder with other files in it is refused (a small recipe stands in for the knee)."""
-    import cutkit.simulate.demo as demo_module
-    import cutkit.simulate.warmup as warmup
+    import cutkit.demo as demo_module
+    import cutkit.demo.warmup as warmup
 
     (tmp_path / "r.toml").write_text(
         f"[recipe]\nvolume = '{BLOCK}'\n\n[segment]\nlabels = true\n\n[[materials]]\nlabel = 1\nname = 'fat'\n\n"

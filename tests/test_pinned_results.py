@@ -56,7 +56,7 @@ def _slab_incision():
 def _knee(tmp):
     from cutkit.cutting.trajectory import read_trajectory
     from cutkit.io.model_h5 import read_model
-    from cutkit.simulate.demo import build_or_reuse, demo_inputs
+    from cutkit.demo import build_or_reuse, demo_inputs
 
     path, _, _ = build_or_reuse(tmp / "knee")
     return read_model(path), read_trajectory(demo_inputs()[1])

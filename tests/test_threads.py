@@ -140,7 +140,7 @@ def test_simulate_is_identical_with_one_and_two_threads(tmp_path, monkeypatch, m
 def test_a_first_run_is_told_that_kernels_compile(tmp_path, monkeypatch):
     """`cutkit demo` says "compiling the numba kernels (first run only ...)" when numba's cache
     next to the kernel sources is missing (kernels_compiled is False), not when it is there."""
-    from cutkit.simulate.warmup import CACHE_WITNESSES, kernels_compiled
+    from cutkit.demo.warmup import CACHE_WITNESSES, kernels_compiled
 
     monkeypatch.delenv("NUMBA_CACHE_DIR", raising=False)
     for rel in CACHE_WITNESSES:
