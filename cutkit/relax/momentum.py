@@ -23,10 +23,18 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import weakref
+
 import numpy as np
 
 from cutkit.relax._graph_kernels import graph_components
 from cutkit.relax.model import SpringModel, SpringState
+
+
+#: The components of each live spring model's graph, by ``id(model)``: ``(weak reference to the model,
+#: topology key, n_pieces, labels)``, dropped when the model is.  Kept here, not on the model, so that
+#: only the model's own code writes its fields.
+_PIECES: dict = {}
 
 
 def spring_pieces(model: SpringModel) -> tuple[int, np.ndarray]:
@@ -39,11 +47,13 @@ def spring_pieces(model: SpringModel) -> tuple[int, np.ndarray]:
         The piece of each node.
     """
     key = (model.topology_version, model.n_nodes)
-    cached = getattr(model, "_pieces", None)
-    if cached is not None and cached[0] == key:
-        return cached[1], cached[2]
+    cached = _PIECES.get(id(model))
+    if cached is not None and cached[0]() is model and cached[1] == key:
+        return cached[2], cached[3]
     n_pieces, labels = graph_components(model.adj_offsets, model.adj_nodes)
-    model._pieces = (key, int(n_pieces), labels)
+    ident = id(model)
+    ref = weakref.ref(model, lambda _: _PIECES.pop(ident, None))
+    _PIECES[ident] = (ref, key, int(n_pieces), labels)
     return int(n_pieces), labels
 
 
