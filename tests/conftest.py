@@ -2,8 +2,9 @@
 
 The suite runs on every core (``-n auto --dist loadgroup`` in pyproject.toml):
 a test file with module-scoped fixtures is one group, so they are built once,
-the files that share the session's demo knee are one group, so it is built
-once, and every other test goes to whichever worker is free.
+and every other test goes to whichever worker is free.  The session's demo
+knee is built once for all workers: the first to need it builds it under a
+file lock in the run's shared temporary folder, the others read it there.
 Each worker gives numba an equal share of the cores (at least one thread);
 the tests that compare thread counts set them explicitly.
 """
@@ -13,10 +14,6 @@ import signal
 import threading
 
 import pytest
-
-#: Test files that use the session's demo knee (conftest.demo_knee): run on one worker.
-KNEE_GROUP = "demo-knee"
-
 
 def pytest_configure(config):
     if "PYTEST_XDIST_WORKER" in os.environ:
@@ -31,13 +28,9 @@ def pytest_configure(config):
 
 
 def pytest_collection_modifyitems(config, items):
-    """xdist groups: one for all the files that use the demo knee, one per file with module fixtures."""
-    knee_files = {item.path for item in items if "demo_knee" in getattr(item, "fixturenames", ())}
+    """xdist groups: one per test file with module fixtures."""
     module_fixtures = {}
     for item in items:
-        if item.path in knee_files:
-            item.add_marker(pytest.mark.xdist_group(KNEE_GROUP))
-            continue
         if item.path not in module_fixtures:
             module_fixtures[item.path] = 'scope="module"' in item.path.read_text()
         if module_fixtures[item.path]:
@@ -74,10 +67,25 @@ def demo_knee(tmp_path_factory):
     """The demo knee built once for the whole run: ``(folder, knee.h5, the build's report)``.
 
     The tests that only read it share it (a build takes about a minute on two
-    cores); the test of the build's reuse copies the folder.
+    cores); the test of the build's reuse copies the folder.  With several
+    workers the first one builds it under a lock in the run's shared folder
+    and leaves the build's report beside it for the others.
     """
+    import fcntl
+    import os
+    import pickle
+
     from cutkit.demo import build_or_reuse
 
-    folder = tmp_path_factory.mktemp("demo-knee")
-    path, _, report = build_or_reuse(folder)
+    shared = tmp_path_factory.getbasetemp()
+    if "PYTEST_XDIST_WORKER" in os.environ:
+        shared = shared.parent  # the folder all workers' temporary folders are in
+    folder = shared / "demo-knee"
+    with open(shared / "demo-knee.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        path, reused, report = build_or_reuse(folder)
+        if reused:
+            report = pickle.loads((shared / "demo-knee.report").read_bytes())
+        else:
+            (shared / "demo-knee.report").write_bytes(pickle.dumps(report))
     return folder, path, report
