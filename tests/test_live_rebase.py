@@ -113,3 +113,22 @@ def test_the_recorded_two_stroke_session_replays_offline_to_the_same_cut(model, 
     replay = simulate(model, traj, tmp_path / "replay", SimulateOptions(frames=False, hold_s=0.3))
     assert abs(replay["cut_tets"] - summary["cut_tets"]) <= 0.1 * summary["cut_tets"], (replay["cut_tets"],
                                                                                         summary["cut_tets"])
+
+
+def test_twins_are_the_rows_whose_nodes_have_the_same_representatives():
+    """find_twins' grouping (cutkit.cutting.rebase._twins) against all pairs compared one by one."""
+    from cutkit.cutting.rebase import _twins
+
+    rng = np.random.default_rng(7)
+    for w in (2, 3):
+        for _ in range(10):
+            n = int(rng.integers(4, 40))
+            rep = rng.integers(0, max(2, n // 3), n)  # several nodes share a representative
+            rows = rng.integers(0, n, (int(rng.integers(1, 120)), w))
+            key = [tuple(sorted(rep[r].tolist())) for r in rows]
+            expected = {}
+            for i in range(len(rows)):
+                others = [j for j in range(len(rows)) if j != i and key[j] == key[i]]
+                if others:
+                    expected[i] = others
+            assert _twins(rows, rep) == expected

@@ -122,6 +122,7 @@ class LiveLoop:
         self.held: collections.deque = collections.deque()  # in-process ticks: poses not yet ticked
         self.catch_up = 0  # service: queued device poses from a rebase's time, each cut (none skipped)
         self.newest = None  # the newest pose (tip, a, n): the drawn blade
+        self.tets_at_rebases: list[int] = []  # tets cut when each stroke ended
         self.frame_period = 1.0 / float(fps)
         self.geo_period = 1.0 / self.opt.geometry_rate_hz
         self.pose = None  # newest (tip, a, n, arrival)
@@ -246,6 +247,7 @@ class LiveLoop:
         s = self.session
         points = np.array(s.tis.positions, np.float64)
         self.still = StillPicture(points, self.colours.get(points.shape[0]), s.tets_cut)
+        self.tets_at_rebases.append(s.tets_cut)
         self.rebaser.start()
 
     def _rebased(self) -> None:
@@ -419,6 +421,8 @@ class LiveLoop:
                  "frame_gap_max_ms": float(f.max() * 1e3) if f.size else None,
                  "rebases": len(rebase_s),
                  "rebase_s_max": float(max(rebase_s)) if rebase_s else None,
+                 "rebase_windows_s": [[a - self.t0, b - self.t0] for a, b in self.rebaser.windows],
+                 "tets_cut_at_rebases": list(self.tets_at_rebases),
                  "relax_passes_per_s": self.session.counts["relax_passes"] / wall,
                  "relax_steps_per_s": self.relax.steps / wall,
                  "relax_step_ms_p50_p95_max": ([float(np.percentile(self.relax.step_s, q)) * 1e3 for q in (50, 95, 100)]

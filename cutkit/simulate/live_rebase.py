@@ -62,6 +62,8 @@ class BackgroundRebase:
         A rebase started and not yet collected by :meth:`done`.
     wall_s : list of float
         Wall seconds of each rebase, waiting for the lock included.
+    windows : list of (float, float)
+        ``time.perf_counter()`` at the start and the end of each rebase.
     error : BaseException or None
         What the last rebase raised (raised again by :meth:`done`).
     """
@@ -71,6 +73,7 @@ class BackgroundRebase:
         self.thread: threading.Thread | None = None
         self.error: BaseException | None = None
         self.wall_s: list[float] = []
+        self.windows: list[tuple[float, float]] = []
 
     @property
     def busy(self) -> bool:
@@ -91,7 +94,9 @@ class BackgroundRebase:
                 s.rebase()
         except BaseException as err:  # handed to the main loop by done()
             self.error = err
-        self.wall_s.append(time.perf_counter() - t0)
+        t1 = time.perf_counter()
+        self.wall_s.append(t1 - t0)
+        self.windows.append((t0, t1))
 
     def done(self) -> bool:
         """True once a started rebase has finished (then no longer :attr:`busy`); raises its error."""
