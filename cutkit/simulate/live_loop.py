@@ -17,6 +17,10 @@ from cutkit.simulate.run import HAPTIC_DT, RATE_WARN_FRACTION, SimulateOptions
 #: The loop's pause when it has nothing to do, s: poses come at 1 kHz and each pass takes
 #: all that arrived, so a pose waits at most this long before its tick.
 LOOP_IDLE_S = 0.0005
+#: Behind the poses (a backlog after a rebase, or slow cut steps), a due pose gets its own cut only
+#: once the blade has moved this far since the last cut, mm: the cut of the newest then sweeps at most
+#: about this far (one sweep from a held stroke's first pose to one 8 mm deep went through uncut).
+MAX_SKIPPED_SWEEP_MM = 1.0
 
 
 class OuterBoundary:
@@ -120,7 +124,7 @@ class LiveLoop:
         s.rebase_runner = self._start_rebase
         self.still: StillPicture | None = None  # the tissue drawn while a rebase runs
         self.held: collections.deque = collections.deque()  # in-process ticks: poses not yet ticked
-        self.catch_up = 0  # service: queued device poses from a rebase's time, each cut (none skipped)
+        self.cut_tip = None  # the blade's tip at the last geometry update
         self.newest = None  # the newest pose (tip, a, n): the drawn blade
         self.tets_at_rebases: list[int] = []  # tets cut when each stroke ended
         self.frame_period = 1.0 / float(fps)
@@ -224,7 +228,7 @@ class LiveLoop:
             idle = (until_idle_s is not None and self.pose is not None
                     and self.session.tis.time - self.pose[3] > until_idle_s
                     and not (self.meter is not None and self.meter.queue))
-            behind = self.rebaser.busy or self.held or self.catch_up
+            behind = self.rebaser.busy or self.held
             if (self.source.finished or idle) and not behind:
                 finished_at = now if finished_at is None else finished_at
                 if now - finished_at >= idle_end_s:
@@ -251,10 +255,18 @@ class LiveLoop:
         self.rebaser.start()
 
     def _rebased(self) -> None:
-        """The rebase is done: the poses that came meanwhile are cut next, none skipped."""
+        """The rebase is done: the poses that came meanwhile are ticked and cut next."""
         self.still = None
-        if self.service:
-            self.catch_up = len(self.meter.queue)
+
+    def _due_cut(self, behind: bool, tip) -> bool:
+        """Whether a due pose gets its own cut: always in step with the poses; behind them, once the
+        blade has gone :data:`MAX_SKIPPED_SWEEP_MM` since the last cut (else counted skipped)."""
+        if not behind or self.cut_tip is None:
+            return True
+        if float(np.linalg.norm(np.asarray(tip) - self.cut_tip)) >= MAX_SKIPPED_SWEEP_MM:
+            return True
+        self.geometry_skipped += 1
+        return False
 
     def _catch_up(self, now: float, next_tick: float, next_geo: float) -> tuple[float, float]:
         """In-process ticks over the held poses, each tick with the newest pose that had come by then,
@@ -271,8 +283,10 @@ class LiveLoop:
                 self.forces.add(next_tick, s.code, out, tip, s.scalpel.proxy)
             next_tick += HAPTIC_DT
             if next_tick >= next_geo:
-                self._geometry()
                 next_geo += self.geo_period
+                behind = bool(self.held) and self.held[-1][3] - next_tick > self.geo_period
+                if self.pose is not None and self._due_cut(behind, self.pose[0]):
+                    self._geometry()
         if next_tick > now and self.held and self.held[-1][3] <= now:
             self.pose = self.held[-1]  # every held pose came before the ticks so far
             self.held.clear()
@@ -291,19 +305,16 @@ class LiveLoop:
         s, queue = self.session, self.meter.queue
         t_end = time.perf_counter() + CATCH_UP_BUDGET_S
         while queue and not self.rebaser.busy:
-            if self.catch_up and time.perf_counter() > t_end:
-                break  # poses from a rebase's time: a frame now, the rest in the next passes
+            if time.perf_counter() > t_end:
+                break  # a backlog (after a rebase): a frame now, the rest in the next passes
             t, tip, a, n, arrival = queue.popleft()
             out = s.haptic_tick(tip, a, n)
             self.forces.add(t, s.code, out, tip, s.scalpel.proxy)
-            if self.ticks % self.geo_every == 0:
-                if self.catch_up or len(queue) < self.geo_every:
-                    self.pose = (tip, a, n, arrival - self.t0)
-                    self._geometry()
-                else:  # a newer due pose already waits behind this one: the cut acts on the newest
-                    self.geometry_skipped += 1
+            # a newer due pose already waiting behind this one: the cut may act on the newest
+            if self.ticks % self.geo_every == 0 and self._due_cut(len(queue) >= self.geo_every, tip):
+                self.pose = (tip, a, n, arrival - self.t0)
+                self._geometry()
             self.ticks += 1
-            self.catch_up = max(0, self.catch_up - 1)
 
     def _ticks(self, now: float, next_tick: float) -> float:
         """In-process force model: one tick per elapsed millisecond with the newest pose."""
@@ -320,6 +331,8 @@ class LiveLoop:
     def _geometry(self) -> None:
         s = self.session
         before = s.tets_cut, s.tis.n_nodes
+        if self.pose is not None:
+            self.cut_tip = np.array(self.pose[0], np.float64)
         self.relax.f_ext = s.geometry_update()
         if self.rebaser.busy:
             return  # the stroke ended: the cut mesh is the rebase's now

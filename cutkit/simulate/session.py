@@ -220,6 +220,8 @@ class Session:
         self.tis.rebase(old_of_new, old_orig[old_of_new])
         self.contact.rebase()
         surface_bvh(cm)
+        if cm.cut_faces_before:  # and the earlier strokes' cut surface's, which the next cut's first step walks
+            surface_bvh(cm, crack=True)
         for hook in self.on_rebase:
             hook(old_of_new)
         return old_of_new
