@@ -29,8 +29,8 @@ CAMERA_MODES = ("follow", "model", "fixed")
 #: ``follow`` frames a sphere of this many blade lengths around the blade's tip (and the whole wound).
 FOLLOW_BLADES = 0.6
 #: ``follow``'s view direction, camera from the focus, in the blade's frame: weights of the handle's
-#: side (``-a``), across the blade plane (``n x a``) and back along the cut (``-n``).  About 35
-#: degrees across and 20 back: the wound's wall on one side faces the camera.
+#: side (``-a``), across the blade plane (``n x a``) and back along the cut (``-n``).  About 37
+#: degrees across and 15 back: the wound's wall on one side faces the camera.
 FOLLOW_TILT = (1.0, 0.8, 0.35)
 #: Fraction of the way to the target view the camera moves at each frame.
 FOLLOW_EASE = 0.25

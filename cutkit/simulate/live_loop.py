@@ -131,6 +131,7 @@ class LiveLoop:
         self.geo_period = 1.0 / self.opt.geometry_rate_hz
         self.pose = None  # newest (tip, a, n, arrival)
         self.latency: list[float] = []
+        self.latency_arrival: list[float] = []  # the pose's arrival of each latency, session s
         self.pending_cut: list[float] = []  # arrival times of poses whose cut is not drawn yet
         self.frames = 0
         self.frame_s: list[float] = []
@@ -371,6 +372,7 @@ class LiveLoop:
         self.view_closed = any(getattr(v, "closed", False) for v in self.views)
         drawn = self.now()
         self.latency.extend(drawn - t for t in self.pending_cut)
+        self.latency_arrival.extend(self.pending_cut)
         self.pending_cut.clear()
         self.frames += 1
         self.frame_s.append(drawn)
@@ -422,6 +424,19 @@ class LiveLoop:
         write_json(out_dir / "summary.json", out)
         return out
 
+    def _latency_outside_rebase(self) -> dict | None:
+        """Pose-to-picture latency of the poses that did not come during a rebase (those wait for it; the
+        ones just after it may still wait for its backlog), ms: p50, p95, n, and how many came during one."""
+        arrival = np.array(self.latency_arrival)
+        held = np.zeros(arrival.shape, bool)
+        for a, b in self.rebaser.windows:
+            held |= (arrival >= a - self.t0) & (arrival <= b - self.t0)
+        lat = np.array(self.latency)[~held] * 1e3
+        if not lat.size:
+            return None
+        return {"p50": float(np.percentile(lat, 50)), "p95": float(np.percentile(lat, 95)), "n": int(lat.size),
+                "held": int(held.sum())}
+
     def _live_stats(self, recorded: bool) -> dict:
         wall = max(self.loop_wall, 1e-9)
         lat = np.array(self.latency) * 1e3
@@ -441,6 +456,7 @@ class LiveLoop:
                  "relax_step_ms_p50_p95_max": ([float(np.percentile(self.relax.step_s, q)) * 1e3 for q in (50, 95, 100)]
                                                if self.relax.step_s else None),
                  "tissue_time_s": self.session.tis.time,
+                 "latency_outside_rebase_ms": self._latency_outside_rebase(),
                  "latency_ms": ({"p50": float(np.percentile(lat, 50)), "p95": float(np.percentile(lat, 95)),
                                  "n": int(lat.size)} if lat.size else None)}
         if self.meter is not None:

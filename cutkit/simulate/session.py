@@ -68,6 +68,10 @@ class Session:
     counts, task_s : dict
         Counters and seconds per task (``setup``, ``settle``, ``haptics``,
         ``collision_and_cut``, ``relaxation``, ``output``).
+    rebase_runner : callable or None
+        None (offline): :meth:`rebase_if_left` rebases at once.  A live
+        loop sets a callable that starts :meth:`rebase` off its own thread
+        (:class:`~cutkit.simulate.live_rebase.BackgroundRebase`).
     """
 
     def __init__(self, model, opt, blade_length: float, blade_breadth: float, scalpel=None):
