@@ -271,8 +271,8 @@ class LiveLoop:
 
     def _catch_up(self, now: float, next_tick: float, next_geo: float) -> tuple[float, float]:
         """In-process ticks over the held poses, each tick with the newest pose that had come by then,
-        and the cut every geometry period of tick time, as they would have run without the rebase;
-        for at most :data:`CATCH_UP_BUDGET_S` (then a frame)."""
+        and the cut every geometry period of tick time, as they would have run without the rebase
+        (while behind, only as :meth:`_due_cut` says); for at most :data:`CATCH_UP_BUDGET_S`, then a frame."""
         s = self.session
         t_end = time.perf_counter() + CATCH_UP_BUDGET_S
         while next_tick <= now and not self.rebaser.busy and time.perf_counter() < t_end:
@@ -298,10 +298,15 @@ class LiveLoop:
 
         Every pose gets its force tick (the 1 kHz loop never skips one), but a
         geometry update falls behind the device when a cut takes longer than
-        ``geo_every`` ticks: a due pose with a newer due pose already queued
-        behind it gets no geometry update of its own, and the newer one's sweeps
-        the blade from the last pose cut to it (the paper's Fig. 1: geometry at
-        the rate it can, on the current pose; counted in ``geometry_updates_skipped``).
+        ``geo_every`` ticks, and after a rebase (its poses queued meanwhile): a
+        due pose with a newer due pose already queued behind it gets a geometry
+        update of its own only once the blade has moved
+        :data:`MAX_SKIPPED_SWEEP_MM` since the last cut (:meth:`_due_cut`), else
+        a later one's sweeps the blade from the last pose cut to it (the paper's
+        Fig. 1: geometry at the rate it can, on the current pose; counted in
+        ``geometry_updates_skipped``).  A backlog is worked off
+        :data:`~cutkit.simulate.live_rebase.CATCH_UP_BUDGET_S` at a time, frames
+        in between.
         """
         s, queue = self.session, self.meter.queue
         t_end = time.perf_counter() + CATCH_UP_BUDGET_S
