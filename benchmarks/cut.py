@@ -8,7 +8,9 @@ model size (all work is local to the blade).
 
 ``--model`` also cuts a model file (e.g. the demo's ``knee.h5``) along the
 shipped incision (``sample_volumes/incision.csv``) and reports its step
-times and whether the written mesh passes ``cutkit check``.
+times, whether the written mesh passes ``cutkit check``, and the end of the
+stroke: the rebase of the cut mesh (``rebase_s``) and, within it, finding
+the copies of edges and faces along the cut (``find_twins_s``).
 
 ``--simulate`` runs ``cutkit simulate`` on a model file with the shipped
 incision (no frames, the default element model; a first run loads the
@@ -50,6 +52,7 @@ def bench(shape, steps):
 
 def bench_model(path, trajectory):
     from cutkit.cutting import CutMesh, cut_step, to_model
+    from cutkit.cutting.rebase import find_twins, rebase
     from cutkit.cutting.trajectory import read_trajectory
     from cutkit.io.model_h5 import read_model
     from cutkit.mesh.check import check_mesh
@@ -65,9 +68,17 @@ def bench_model(path, trajectory):
         times.append(time.perf_counter() - t1)
     w = to_model(cm, m)
     new = w.tets[w.cell_data["new_tet"] == 1]
+    n_cut = len(cm.subtets)
+    t1 = time.perf_counter()
+    rebase(cm)
+    rebase_s = time.perf_counter() - t1
+    t1 = time.perf_counter()
+    find_twins(cm)
+    twins_s = time.perf_counter() - t1
     return {"tets": int(m.tets.shape[0]), "median_step_ms": 1e3 * float(np.median(times[5:])),
+            "rebase_s": rebase_s, "find_twins_s": twins_s,
             "p90_step_ms": 1e3 * float(np.percentile(times[5:], 90)), "steps": len(times),
-            "cut_tets": len(cm.subtets), "new_tets_per_cut_tet": len(new) / max(len(cm.subtets), 1),
+            "cut_tets": n_cut, "new_tets_per_cut_tet": len(new) / max(n_cut, 1),
             "worst_new_dihedral_deg": float(min_dihedral_angles(w.points, new).min()) if len(new) else None,
             "check_passed": bool(check_mesh(w.points, w.tets, w.labels).passed)}
 

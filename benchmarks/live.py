@@ -1,6 +1,7 @@
 """Benchmark of the live-session periphery: the window's drawing rate and the reference device's rate.
 
     .venv/bin/python benchmarks/live.py --json [--triangles 80000] [--frames 120] [--seconds 5]
+    .venv/bin/python benchmarks/live.py --json --session cutkit-demo/knee.h5 [--strokes two|one|second]
 
 * window: an off-screen ``WindowView`` draws a textured sphere of about
   ``--triangles`` boundary triangles with a cut surface, moving every frame
@@ -12,11 +13,20 @@
   while a ``HapticsPoseSource`` in this process takes the forwarded poses
   and answers with SIM_UPDATEs for ``--seconds``; reports the device's
   achieved rate, its p50/p99 period and the poses forwarded per second.
-* session (``--session MODEL``): the device streams the shipped incision
+* session (``--session MODEL``): the device streams the incisions of
+  ``--strokes`` (:func:`strokes`; default ``two``: the shipped incision,
+  the blade lifted out, at once a parallel one 15 mm lower, then a pause)
   through the service into a live session (:func:`cutkit.simulate.live.run_live`)
-  on MODEL, drawn by an off-screen window: the haptic loop's rate and p99
-  period (server ticks), frames per second, relaxation passes per second
-  and the latency from a pose arriving to the drawn frame showing its cut.
+  on MODEL, drawn by an off-screen window (default camera) and sent as
+  OpenIGTLink POLYDATA at ``--igtl-rate`` to a client in this process that
+  stamps every message's arrival: the haptic loop's rate and p99 period
+  (server ticks), frames per second, relaxation passes per second, the
+  latency from a pose arriving to the drawn frame showing its cut, the
+  longest gaps between frames and between OpenIGTLink messages (over the
+  session, and from half a second before the first stroke's end to two
+  seconds after its rebase), the rebases' wall time, and the tets each
+  stroke cut; with ``two`` the second stroke is then run alone in a fresh
+  session (``second_alone_cut_tets``).
 """
 
 from __future__ import annotations
@@ -98,19 +108,94 @@ def play_rate(seconds: float, priority: str) -> dict:
             "forwarded_per_s": forwarded / seconds, "session_polls_with_a_pose": polled}
 
 
-def session_rate(model_path: str, priority: str, window: bool) -> dict:
-    """`cutkit haptics play` streams the shipped incision through the service into a live session on ``model_path``."""
-    import subprocess
-    import sys
+def _lifted(traj, out_mm: float = 13.0, lift_s: float = 0.1):
+    """``traj`` with one more row: the blade drawn back ``out_mm`` along its axis in ``lift_s``."""
+    from cutkit.cutting.trajectory import Trajectory
 
-    from cutkit.haptics.client import spawned_server
-    from cutkit.io.model_h5 import read_model
-    from cutkit.live import HapticsPoseSource
-    from cutkit.simulate.live import run_live
+    tip = traj.tip[-1] - out_mm * traj.a[-1]
+    return Trajectory(np.append(traj.t, traj.t[-1] + lift_s), np.vstack([traj.tip, tip]),
+                      np.vstack([traj.a, traj.a[-1]]), np.vstack([traj.n, traj.n[-1]]))
 
-    incision = ROOT / "sample_volumes" / "incision.csv"
-    model = read_model(model_path)
-    views = []
+
+def _then(first, second, gap: float):
+    """``second`` begun ``gap`` s after ``first`` ends."""
+    from cutkit.cutting.trajectory import Trajectory
+
+    t2 = second.t - second.t[0] + first.t[-1] + gap
+    return Trajectory(np.concatenate([first.t, t2]), np.vstack([first.tip, second.tip]),
+                      np.vstack([first.a, second.a]), np.vstack([first.n, second.n]))
+
+
+def strokes(which: str = "two", gap_s: float = 0.05, pause_s: float = 1.0):
+    """The incisions of a session: ``one`` (the shipped incision, sample_volumes/incision.csv, lifted
+    out), ``second`` (the same 15 mm lower, at z = 60 mm) or ``two`` (one, then second ``gap_s`` after
+    the lift); the blade then rests outside for ``pause_s``."""
+    from cutkit.cutting.trajectory import Trajectory, straight_incision
+
+    def incision(z):  # as sample_volumes/incision.csv says it was made
+        return _lifted(straight_incision(start=[25.0, 6.0, z], end=[55.0, 6.0, z], inward=[0, 1, 0], depth=8,
+                                         approach=5, press_time=0.4, cut_time=1.5, rate=100))
+
+    traj = {"one": lambda: incision(75.0), "second": lambda: incision(60.0),
+            "two": lambda: _then(incision(75.0), incision(60.0), gap_s)}[which]()
+    rest = Trajectory(np.array([0.0]), traj.tip[-1:], traj.a[-1:], traj.n[-1:])
+    return _then(traj, rest, pause_s)
+
+
+class MessageClock:
+    """An OpenIGTLink client that reads every message (header, then body) and stamps its arrival."""
+
+    HEADER = 58  # version, type, device name, time stamp, body size, CRC (protocol v1/v2 header)
+
+    def __init__(self, port: int):
+        import socket
+        import threading
+
+        self.sock = socket.create_connection(("127.0.0.1", port), timeout=30.0)
+        self.arrivals: list[tuple[float, str]] = []
+        self.stop = threading.Event()
+        self.thread = threading.Thread(target=self._read, daemon=True)
+        self.thread.start()
+
+    def _exactly(self, n: int) -> bytes:
+        buf = bytearray()
+        while len(buf) < n:
+            chunk = self.sock.recv(n - len(buf))
+            if not chunk:
+                raise ConnectionError("closed")
+            buf += chunk
+        return bytes(buf)
+
+    def _read(self) -> None:
+        import struct
+
+        try:
+            while not self.stop.is_set():
+                head = self._exactly(self.HEADER)
+                kind = head[2:14].rstrip(b"\0").decode("ascii", "replace")
+                size = struct.unpack(">Q", head[42:50])[0]
+                self._exactly(size)
+                self.arrivals.append((time.perf_counter(), kind))
+        except (OSError, ConnectionError):
+            pass
+
+    def close(self) -> None:
+        self.stop.set()
+        self.sock.close()
+
+
+def _gaps_ms(times, lo=-np.inf, hi=np.inf):
+    """Longest gap between consecutive times (s) that overlaps [lo, hi], ms."""
+    t = np.asarray(sorted(times), np.float64)
+    if t.size < 2:
+        return None
+    starts, ends = t[:-1], t[1:]
+    over = (ends >= lo) & (starts <= hi)
+    return float((ends - starts)[over].max() * 1e3) if over.any() else None
+
+
+def _session_views(window: bool, igtl_rate: float):
+    views, closers, clock = [], [], None
     if window:
         import pyvista as pv
 
@@ -118,33 +203,92 @@ def session_rate(model_path: str, priority: str, window: bool) -> dict:
 
         pv.OFF_SCREEN = True
         views.append(WindowView(off_screen=True, window_size=(1024, 768)))
-    out = Path(__import__("tempfile").mkdtemp(prefix="cutkit-live-bench-"))
+    if igtl_rate > 0:
+        from cutkit.live.igtl import IGTLEndpoint, IGTLPolyDataView
+
+        endpoint = IGTLEndpoint(0)
+        views.append(IGTLPolyDataView(endpoint=endpoint, max_rate_hz=igtl_rate))
+        clock = MessageClock(endpoint.port)
+        closers += [clock, endpoint]
+    return views, closers, clock
+
+
+def run_session(model, trajectory_path: str, priority: str, window: bool, igtl_rate: float) -> dict:
+    """`cutkit haptics play` streams ``trajectory_path`` through the service into a live session on ``model``."""
+    import subprocess
+    import sys
+    import tempfile
+
+    from cutkit.haptics.client import spawned_server
+    from cutkit.live import HapticsPoseSource
+    from cutkit.simulate.live import run_live
+
+    views, closers, clock = _session_views(window, igtl_rate)
+    out = Path(tempfile.mkdtemp(prefix="cutkit-live-bench-"))
+    frames = []  # (perf_counter, session time) of each frame
     with spawned_server("--priority", priority) as (host, port, _):
         source = HapticsPoseSource(host, port)
         plays = []
 
         def start_device():
-            cmd = [sys.executable, "-m", "cutkit.cli.main", "haptics", "play", str(incision), "--host", host,
+            cmd = [sys.executable, "-m", "cutkit.cli.main", "haptics", "play", trajectory_path, "--host", host,
                    "--port", str(port), "--json", "--priority", priority]
             plays.append(subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True))
 
         try:
-            s = run_live(model, source, views, out, max_seconds=120, until_idle_s=2.0, on_start=start_device)
+            s = run_live(model, source, views, out, max_seconds=300, until_idle_s=2.0, on_start=start_device,
+                         on_frame=lambda f: frames.append((time.perf_counter(), f.t)))
         finally:
             source.close()
-            for v in views:
+            for v in views + closers:
                 v.close()
         device = json.loads(plays[0].communicate(timeout=60)[0]) if plays else {}
-    live = s["live"]
+    return {"summary": s, "frames": frames, "messages": [] if clock is None else clock.arrivals,
+            "device": device, "recording": str(out)}
+
+
+def session_rate(model_path: str, priority: str, window: bool, which: str = "two", igtl_rate: float = 30.0) -> dict:
+    """A live session on ``model_path`` with the strokes ``which`` (:func:`strokes`): rates, gaps, tets cut."""
+    import tempfile
+
+    from cutkit.cutting.trajectory import write_trajectory
+    from cutkit.io.model_h5 import read_model
+
+    model = read_model(model_path)
+    path = Path(tempfile.mkdtemp(prefix="cutkit-live-strokes-")) / f"{which}.csv"
+    write_trajectory(path, strokes(which))
+    run = run_session(model, str(path), priority, window, igtl_rate)
+    s, live = run["summary"], run["summary"]["live"]
     lat = live.get("latency_ms") or {}
-    return {"model": str(model_path), "tets": s["tets_initial"], "cut_tets": s["cut_tets"],
-            "opening_mean_mm": s["cut_opening_mm"]["final_mean"], "haptic_hz": live["haptic_hz"],
-            "haptic_period_p99_ms": live.get("period_p99_ms"), "haptic_periods_over_2ms": live.get("periods_over_2ms"),
-            "fps": live["fps"], "relax_passes_per_s": live["relax_passes_per_s"],
-            "relax_steps_per_s": live["relax_steps_per_s"], "latency_p50_ms": lat.get("p50"),
-            "latency_p95_ms": lat.get("p95"), "geometry_updates_skipped": live.get("geometry_updates_skipped"),
-            "device_rate_hz": device.get("rate_hz"), "window": window,
-            "recording": str(out)}
+    frames = np.array(run["frames"]) if run["frames"] else np.zeros((0, 2))
+    t0 = float(np.median(frames[:, 0] - frames[:, 1])) if len(frames) else 0.0  # perf_counter at session time 0
+    # the messages while the session's loop ran (before it, the client waits for the settle)
+    span = (frames[0, 1], frames[-1, 1]) if len(frames) else (0.0, 0.0)
+    messages = [t - t0 for t, _ in run["messages"] if span[0] <= t - t0 <= span[1]]
+    windows = live.get("rebase_windows_s") or []
+    lo, hi = (windows[0][0] - 0.5, windows[0][1] + 2.0) if windows else (np.inf, -np.inf)
+    result = {"model": str(model_path), "strokes": which, "tets": s["tets_initial"], "cut_tets": s["cut_tets"],
+              "tets_cut_at_rebases": live.get("tets_cut_at_rebases"), "rebase_s": [b - a for a, b in windows],
+              "opening_mean_mm": s["cut_opening_mm"]["final_mean"], "haptic_hz": live["haptic_hz"],
+              "haptic_period_p99_ms": live.get("period_p99_ms"),
+              "haptic_periods_over_2ms": live.get("periods_over_2ms"), "fps": live["fps"],
+              "frame_gap_max_ms": _gaps_ms(frames[:, 1]), "frame_gap_max_ms_at_stroke_end": _gaps_ms(frames[:, 1], lo, hi),
+              "igtl_rate_hz": igtl_rate, "igtl_messages": len(messages),
+              "igtl_gap_max_ms": _gaps_ms(messages),
+              "igtl_gap_max_ms_at_stroke_end": _gaps_ms(messages, lo, hi),
+              "relax_passes_per_s": live["relax_passes_per_s"], "relax_steps_per_s": live["relax_steps_per_s"],
+              "latency_p50_ms": lat.get("p50"), "latency_p95_ms": lat.get("p95"),
+              "latency_outside_rebase_ms": live.get("latency_outside_rebase_ms"),
+              "geometry_updates_skipped": live.get("geometry_updates_skipped"),
+              "device_rate_hz": run["device"].get("rate_hz"), "window": window, "recording": run["recording"]}
+    at = live.get("tets_cut_at_rebases") or []
+    if which == "two" and at:
+        result["second_stroke_cut_tets"] = s["cut_tets"] - at[0]
+        alone = session_rate(model_path, priority, window, "second", igtl_rate)
+        result["second_alone_cut_tets"] = alone["cut_tets"]
+        result["second_vs_alone"] = result["second_stroke_cut_tets"] / max(alone["cut_tets"], 1)
+        result["alone"] = alone
+    return result
 
 
 def main() -> None:
@@ -156,17 +300,28 @@ def main() -> None:
     ap.add_argument("--session", metavar="MODEL", help="Also a live session on this model (the demo knee: "
                     "cutkit-demo/knee.h5) driven by `cutkit haptics play`, drawn off screen.")
     ap.add_argument("--no-window", action="store_true", help="The session without the window.")
+    ap.add_argument("--strokes", choices=["two", "one", "second"], default="two",
+                    help="The session's incisions (see strokes()); two also runs the second alone.")
+    ap.add_argument("--igtl-rate", type=float, default=30.0,
+                    help="OpenIGTLink surfaces per second to the stamping client (0: no OpenIGTLink view).")
+    ap.add_argument("--skip-periphery", action="store_true", help="Only the session (no window or play benchmark).")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args()
     result = {"machine": platform.machine(), "python": platform.python_version(),
-              "window": window_rate(args.triangles, args.frames), "play": play_rate(args.seconds, args.priority)}
+              "load_1min": __import__("os").getloadavg()[0]}
+    if not args.skip_periphery:
+        result["window"] = window_rate(args.triangles, args.frames)
+        result["play"] = play_rate(args.seconds, args.priority)
     if args.session:
-        result["session"] = session_rate(args.session, args.priority, not args.no_window)
+        result["session"] = session_rate(args.session, args.priority, not args.no_window, args.strokes,
+                                         args.igtl_rate)
     if args.json:
         print(json.dumps(result))
     else:
         for part in [p for p in ("window", "play", "session") if p in result]:
             for k, v in result[part].items():
+                if isinstance(v, dict):
+                    continue
                 print(f"{part + '.' + k:32s} {v:.4g}" if isinstance(v, float) else f"{part + '.' + k:32s} {v}")
 
 

@@ -28,6 +28,9 @@ from cutkit.cli._ui import overwrite_option
 @click.option("--igtl-driver", default=None,
               help="Which client drives the blade when several send the tool: first (holds it until it "
                    "disconnects) or latest [default: first].")
+@click.option("--camera", type=click.Choice(["follow", "model", "fixed"]), default="follow", show_default=True,
+              help="The window's camera: follow the blade and the wound, the whole model, or fixed (moved "
+                   "only with the mouse).")
 @click.option("--no-window", is_flag=True, help="No window (needs no display); without a pose option the mouse needs one.")
 @click.option("--fps", default=30.0, show_default=True, type=click.FloatRange(min=1.0), help="Frames per second to the views.")
 @click.option("--seconds", type=click.FloatRange(min=0.0), default=None, help="End after this many seconds.")
@@ -41,8 +44,8 @@ from cutkit.cli._ui import overwrite_option
 @click.option("--solver", type=click.Choice(["newton", "vbd"]), default=None,
               help="How the element model's relaxation steps are solved: projected Newton or vertex block "
                    "descent [default: vbd].")
-def command(model, out_dir, overwrite, haptics, trajectory, speed, igtl_port, igtl_device, no_window, fps, seconds,
-            until_idle, geometry_rate_hz, blade_length, material_model, solver, **igtl_opts):
+def command(model, out_dir, overwrite, haptics, trajectory, speed, igtl_port, igtl_device, camera, no_window, fps,
+            seconds, until_idle, geometry_rate_hz, blade_length, material_model, solver, **igtl_opts):
     """Cut MODEL live; Ctrl-C (or closing the window) ends the session, its recording stays valid."""
     from cutkit.cli._ui import console
     from cutkit.errors import InputError
@@ -65,7 +68,7 @@ def command(model, out_dir, overwrite, haptics, trajectory, speed, igtl_port, ig
     tet_model = read_model(model)
     preflight(tet_model, str(model))
     clear_outputs(earlier)
-    source, views, closers = _open(haptics, trajectory, speed, igtl_port, igtl_device, no_window, igtl)
+    source, views, closers = _open(haptics, trajectory, speed, igtl_port, igtl_device, no_window, igtl, camera)
     try:
         with folder_guard(out_dir):
             summary = run_live(tet_model, source, views, out_dir, opt, max_seconds=seconds, fps=fps,
@@ -135,7 +138,7 @@ def _show_igtl_log() -> None:
         log.setLevel(logging.INFO)
 
 
-def _open(haptics, trajectory, speed, igtl_port, igtl_device, no_window, igtl):
+def _open(haptics, trajectory, speed, igtl_port, igtl_device, no_window, igtl, camera="follow"):
     """The pose source, the views and what else to close."""
     views, closers = [], []
     mouse = None
@@ -165,7 +168,7 @@ def _open(haptics, trajectory, speed, igtl_port, igtl_device, no_window, igtl):
     if not no_window:
         from cutkit.live.window import WindowView
 
-        views.insert(0, WindowView(pose_source=mouse))
+        views.insert(0, WindowView(pose_source=mouse, camera=camera))
     return source, views, closers
 
 

@@ -220,32 +220,56 @@ def _live_session(spawned_server, knee, incision, out) -> dict:
     return json.loads((out / "summary.json").read_text())
 
 
-def test_a_backlog_of_device_poses_cuts_on_the_newest_due_pose():
-    """Every queued pose is ticked; of the due poses in a backlog, only the newest is cut on."""
+def _tick_loop(step_mm: float):
+    """The device tick loop alone (a stand-in session and meter): poses i along x, ``step_mm`` apart."""
     from collections import deque
     from types import SimpleNamespace
 
     from cutkit.simulate.live_loop import LiveLoop
 
     ticked, cut_on = [], []
-    loop = LiveLoop.__new__(LiveLoop)  # the tick loop alone: a stand-in session and meter
-    loop.session = SimpleNamespace(haptic_tick=lambda tip, a, n: ticked.append(tip[0]) or np.zeros(3),
+    loop = LiveLoop.__new__(LiveLoop)
+    loop.session = SimpleNamespace(haptic_tick=lambda tip, a, n: ticked.append(round(tip[0] / step_mm)) or np.zeros(3),
                                    code=0, scalpel=SimpleNamespace(proxy=None))
     loop.forces = SimpleNamespace(add=lambda *args: None)
-    loop.geo_every, loop.ticks, loop.geometry_skipped, loop.t0 = 20, 0, 0, 0.0
-    loop._geometry = lambda: cut_on.append(loop.pose[0][0])
+    loop.rebaser = SimpleNamespace(busy=False)
+    loop.geo_every, loop.ticks, loop.geometry_skipped, loop.t0, loop.cut_tip = 20, 0, 0, 0.0, None
+
+    def geometry():
+        cut_on.append(round(loop.pose[0][0] / step_mm))
+        loop.cut_tip = loop.pose[0]
+
+    loop._geometry = geometry
 
     def queue_poses(first, count):
         loop.meter = SimpleNamespace(queue=deque(
-            (i * 1e-3, np.array([float(i), 0.0, 0.0]), np.zeros(3), np.zeros(3), 0.0)
+            (i * 1e-3, np.array([i * step_mm, 0.0, 0.0]), np.zeros(3), np.zeros(3), 0.0)
             for i in range(first, first + count)))
+        loop._device_ticks()
 
+    return loop, queue_poses, ticked, cut_on
+
+
+def test_a_backlog_of_device_poses_cuts_on_the_newest_due_pose():
+    """Every queued pose is ticked; of the due poses in a backlog, only the newest is cut on while the
+    blade moves less than MAX_SKIPPED_SWEEP_MM between them."""
+    loop, queue_poses, ticked, cut_on = _tick_loop(0.01)  # 0.2 mm between due poses
     queue_poses(0, 15)  # no backlog: the due pose 0 is cut on
-    loop._device_ticks()
     queue_poses(15, 50)  # a backlog holding due poses 20, 40 and 60: 60 alone is cut on
-    loop._device_ticks()
     queue_poses(65, 20)  # in step again: 80
-    loop._device_ticks()
     assert ticked == list(range(85))
-    assert cut_on == [0.0, 60.0, 80.0]
+    assert cut_on == [0, 60, 80]
     assert loop.geometry_skipped == 2
+
+
+def test_a_backlog_of_a_fast_blade_cuts_every_millimetre():
+    """Behind the poses, a due pose is cut on once the blade has moved MAX_SKIPPED_SWEEP_MM since the last cut."""
+    from cutkit.simulate.live_loop import MAX_SKIPPED_SWEEP_MM
+
+    step = 0.4 * MAX_SKIPPED_SWEEP_MM / 20  # 0.4 of the bound between due poses
+    loop, queue_poses, ticked, cut_on = _tick_loop(step)
+    queue_poses(0, 1)
+    queue_poses(1, 200)  # a backlog: due poses 20, 40, ..., 200
+    assert ticked == list(range(201))
+    # the bound is reached at every third due pose (1.2 x the bound), and the last comes in step
+    assert cut_on == [0, 60, 120, 180, 200]

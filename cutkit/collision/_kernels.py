@@ -15,7 +15,7 @@ from numba import njit
 from cutkit.mesh.geometry import segment_box, segment_triangle_hit
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def pair_level(box_min, box_max, nodes, adj_off, adj_idx):
     """Greedy pairing of one level of boxes (Fig. 5b).
 
@@ -98,7 +98,7 @@ def pair_level(box_min, box_max, nodes, adj_off, adj_idx):
     return first[:g], second[:g]
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, nogil=True, inline="always")
 def _refit_leaf(f, faces, face_leaf, tol_min, tol_max, box_min, box_max, child, parent, counters):
     """Leaf box of face f from its corners' tolerance boxes, then its ancestors."""
     a = faces[f, 0]
@@ -127,7 +127,7 @@ def _refit_leaf(f, faces, face_leaf, tol_min, tol_max, box_min, box_max, child, 
         node = parent[node]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def refit(points, faces, face_alive, face_leaf, node_face_off, node_face_idx, n_indexed_faces,
           s_tol, tol_min, tol_max, box_min, box_max, child, parent, counters):
     """Tolerance-box test of every node and local bottom-up refit (4.1).
@@ -203,7 +203,7 @@ def refit(points, faces, face_alive, face_leaf, node_face_off, node_face_idx, n_
             _refit_leaf(f, faces, face_leaf, tol_min, tol_max, box_min, box_max, child, parent, counters)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def query_segment(points, faces, face_alive, box_min, box_max, child, leaf_face,
                   root, p0, p1, hit_face, hit_kind, hit_param):
     """Top-down traversal: every live face the segment p0-p1 meets.
@@ -274,7 +274,7 @@ def query_segment(points, faces, face_alive, box_min, box_max, child, leaf_face,
     return count, n_box
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def brute_segment(points, faces, face_alive, p0, p1, hit_face, hit_kind, hit_param):
     """Every live face the segment meets, testing all faces (no hierarchy).
 
@@ -299,7 +299,7 @@ def brute_segment(points, faces, face_alive, p0, p1, hit_face, hit_kind, hit_par
     return count
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def adjacency_csr(pairs, n):
     """Symmetric, de-duplicated adjacency (CSR) from undirected pairs.
 

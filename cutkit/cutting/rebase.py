@@ -203,12 +203,24 @@ def _node_reps(cm):
 def _twins(rows, rep):
     """Dict: row -> the other rows (k, c) int64 of ``rows`` whose nodes' representatives are the same."""
     keys = np.sort(rep[rows], axis=1)
-    _, inv, cnt = np.unique(keys, axis=0, return_inverse=True, return_counts=True)
+    n = int(rep.max(initial=0)) + 1
+    if keys.shape[0] and float(n) ** keys.shape[1] < 2.0 ** 62:
+        # each row as one int64 in the rows' lexicographic order: a plain sort, which numpy runs
+        # without the GIL (a live session's main loop goes on beside it) and faster than rows
+        flat = np.zeros(keys.shape[0], np.int64)
+        for col in range(keys.shape[1]):
+            flat = flat * n + keys[:, col]
+        _, inv, cnt = np.unique(flat, return_inverse=True, return_counts=True)
+    else:
+        _, inv, cnt = np.unique(keys, axis=0, return_inverse=True, return_counts=True)
     inv = inv.ravel()
-    order = np.argsort(inv, kind="stable")
-    groups = np.split(order, np.cumsum(cnt)[:-1])
+    # only the rows of groups of several (the copies along earlier cuts, a few thousand of some
+    # hundred thousand rows): splitting every group into its own array cost a second on the knee
+    shared = np.flatnonzero(cnt[inv] > 1)
+    order = shared[np.argsort(inv[shared], kind="stable")]  # by group, rows ascending within one
+    cuts = np.flatnonzero(np.diff(inv[order])) + 1
     out = {}
-    for members in (g.tolist() for g in groups if g.size > 1):
+    for members in (g.tolist() for g in np.split(order, cuts) if g.size > 1):
         for r in members:
             out[r] = [q for q in members if q != r]
     return out

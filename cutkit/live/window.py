@@ -24,6 +24,7 @@ import time
 
 import numpy as np
 
+from cutkit.live.camera import CameraRig
 from cutkit.live.views import LiveFrame, blade_quad
 
 log = logging.getLogger("cutkit.live")
@@ -128,11 +129,22 @@ class WindowView:
     max_fps : float, optional
         Draw at most this many frames a second: a ``show`` sooner than that
         after the last drawn frame returns at once (None: draw every frame).
+    camera : {"follow", "model", "fixed"}
+        ``follow``: the camera follows the blade and the wound
+        (:mod:`cutkit.live.camera`); ``model``: every frame shows the whole
+        tissue; ``fixed``: the camera stays where it was put
+        (``camera_position``, else the whole tissue at the start) and moves
+        only with the mouse.
+    camera_position : [position, focal point, up], optional
+        The camera at the start (pyvista's ``camera_position``; 3 floats each).
     """
 
     def __init__(self, off_screen: bool = False, window_size=(1024, 768), title: str = "cutkit live",
                  pose_source=None, cut_rgb=CUT_RGB, tissue_rgb=TISSUE_RGB, force_scale: float = 10.0,
-                 background="white", max_fps: float | None = None):
+                 background="white", max_fps: float | None = None, camera: str = "follow",
+                 camera_position=None):
+        self._rig = CameraRig(camera)
+        self.camera_position = camera_position
         self.off_screen = bool(off_screen)
         self.window_size = tuple(int(v) for v in window_size)
         self.title = title
@@ -185,6 +197,8 @@ class WindowView:
         self._arrow_actor = pl.add_mesh(arrow, color=ARROW_RGB, name="force")
         self._text = pl.add_text("", position="upper_left", font_size=10, color="black")
         pl.reset_camera()
+        if self.camera_position is not None:
+            pl.camera_position = self.camera_position
         self._picker = vtk.vtkCellPicker()
         self._picker.SetTolerance(1e-4)
         self._picker.PickFromListOn()
@@ -276,8 +290,27 @@ class WindowView:
             u = np.cross(d, np.eye(3)[int(np.argmin(np.abs(d)))])
             u /= np.linalg.norm(u)
             rot = np.column_stack([d, u, np.cross(d, u)])
-            self._arrow.points[:] = (self._arrow_base * length) @ rot.T + np.asarray(frame.tip, np.float64)
+            # drawn from the handle's end, where the hand holds the blade (the tip is in the tissue)
+            handle = np.asarray(frame.tip, np.float64) - frame.blade_length * np.asarray(frame.a, np.float64)
+            self._arrow.points[:] = (self._arrow_base * length) @ rot.T + handle
             self._arrow.Modified()
+
+    def _aim(self, frame: LiveFrame) -> None:
+        """Point the camera as its mode says (:class:`~cutkit.live.camera.CameraRig`)."""
+        if self._pressed:
+            return  # a mouse stroke steers the blade by what is under the pointer: the picture holds still
+        pose = self._rig.update(frame)
+        if pose is None:
+            return
+        if isinstance(pose, str):  # "fit": the whole tissue (not the blade, which may be far off)
+            self._pl.reset_camera(render=False, bounds=self._tissue.bounds)
+        else:
+            self._pl.camera_position = pose.as_list()
+        self._pl.renderer.ResetCameraClippingRange()
+
+    @property
+    def camera_mode(self) -> str:
+        return self._rig.mode
 
     def _status(self, frame: LiveFrame) -> str:
         r = frame.rates
@@ -300,6 +333,7 @@ class WindowView:
         else:
             self._upload(frame)
         self._update_tools(frame)
+        self._aim(frame)
         self._text.SetText(2, self._status(frame))  # corner 2: upper left
         if self.off_screen or not self.interactive:
             self._pl.render()

@@ -9,7 +9,7 @@ import numpy as np
 from numba import njit, prange
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, nogil=True, parallel=True)
 def sorted_tuples(tets, local):
     """(len(local) * m, w) int64: for each tet t and local tuple i (row ``k*t + i``),
     the node ids ``tets[t, local[i]]`` in ascending order."""
@@ -30,7 +30,7 @@ def sorted_tuples(tets, local):
     return out
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, nogil=True, parallel=True)
 def unique_rows(rows, n):
     """Unique rows of a (k, w) array of ascending rows with entries in [0, n), w in {2, 3}.
 
@@ -96,7 +96,7 @@ def unique_rows(rows, n):
     return unique, inverse
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def face_tets_from_inverse(inverse, n_faces):
     """(f, 2) int64 tets on each side of each face (-1 = none) and a (f,) count of users.
 
@@ -114,7 +114,7 @@ def face_tets_from_inverse(inverse, n_faces):
     return face_tets, count
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, nogil=True, parallel=True)
 def neighbors_from_faces(tet_faces, face_tets):
     """(m, 4) int64 neighbour across face i (-1 on the boundary)."""
     m = tet_faces.shape[0]
@@ -128,7 +128,7 @@ def neighbors_from_faces(tet_faces, face_tets):
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def csr_counts(tets, n_points):
     """Offsets (n+1,) int64 and indices of the node -> tet incidence (tets ascending per node)."""
     m = tets.shape[0]

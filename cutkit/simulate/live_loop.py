@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import collections
 import threading
 import time
 from pathlib import Path
@@ -10,11 +11,16 @@ import numpy as np
 
 from cutkit.scalpel import FREE
 from cutkit.simulate.live import MAX_CATCH_UP_TICKS, MirroredForceModel, RelaxThread, TickMeter
+from cutkit.simulate.live_rebase import CATCH_UP_BUDGET_S, BackgroundRebase, StillPicture
 from cutkit.simulate.run import HAPTIC_DT, RATE_WARN_FRACTION, SimulateOptions
 
 #: The loop's pause when it has nothing to do, s: poses come at 1 kHz and each pass takes
 #: all that arrived, so a pose waits at most this long before its tick.
 LOOP_IDLE_S = 0.0005
+#: Behind the poses (a backlog after a rebase, or slow cut steps), a due pose gets its own cut only
+#: once the blade has moved this far since the last cut, mm: the cut of the newest then sweeps at most
+#: about this far (one sweep from a held stroke's first pose to one 8 mm deep went through uncut).
+MAX_SKIPPED_SWEEP_MM = 1.0
 
 
 class OuterBoundary:
@@ -113,10 +119,19 @@ class LiveLoop:
         self.colours = NodeColours(model, s.tis.cm)
         self.boundary = OuterBoundary(s.tis.cm, s.contact.faces, s.contact.face_tet)
         s.on_rebase.append(self.boundary.rebase)
+        # a stroke's rebase runs off this thread; the poses meanwhile are held, then ticked and cut
+        self.rebaser = BackgroundRebase(s)
+        s.rebase_runner = self._start_rebase
+        self.still: StillPicture | None = None  # the tissue drawn while a rebase runs
+        self.held: collections.deque = collections.deque()  # in-process ticks: poses not yet ticked
+        self.cut_tip = None  # the blade's tip at the last geometry update
+        self.newest = None  # the newest pose (tip, a, n): the drawn blade
+        self.tets_at_rebases: list[int] = []  # tets cut when each stroke ended
         self.frame_period = 1.0 / float(fps)
         self.geo_period = 1.0 / self.opt.geometry_rate_hz
         self.pose = None  # newest (tip, a, n, arrival)
         self.latency: list[float] = []
+        self.latency_arrival: list[float] = []  # the pose's arrival of each latency, session s
         self.pending_cut: list[float] = []  # arrival times of poses whose cut is not drawn yet
         self.frames = 0
         self.frame_s: list[float] = []
@@ -151,14 +166,26 @@ class LiveLoop:
             self.interrupted = True
             stopped_by = exc
         finally:
+            rebase_error = self._finish_rebase()
             self.relax.halt()
             self.loop_wall = self.now()
             summary = self._record()
+        if rebase_error is not None:
+            raise rebase_error
         if self.relax.error is not None:
             raise self.relax.error
         if self.interrupted:
             raise stopped_by
         return summary
+
+    def _finish_rebase(self):
+        """Wait for a rebase in flight (the recording needs its cut mesh); returns its error or None."""
+        try:
+            self.rebaser.wait()
+        except BaseException as err:
+            return err
+        self.still = None
+        return None
 
     def now(self) -> float:
         return time.perf_counter() - self.t0
@@ -175,12 +202,19 @@ class LiveLoop:
             pose = self.source.poll()
             if pose is not None:
                 self._on_pose(pose)
-            if self.service:
+            if self.rebaser.busy and self.rebaser.done():
+                self._rebased()
+            if self.rebaser.busy:
+                pass  # the session's state is the rebase's: poses wait (held, or in the service's queue)
+            elif self.service:
                 self._device_ticks()
-                self.session.scalpel.keep_alive()
+            elif self.held:
+                next_tick, next_geo = self._catch_up(now, next_tick, next_geo)
             elif self.pose is not None:
                 next_tick = self._ticks(now, next_tick)
-            if not self.service and now >= next_geo:
+            if self.service:
+                self.session.scalpel.keep_alive()
+            elif not (self.rebaser.busy or self.held) and now >= next_geo:
                 self._geometry()
                 next_geo = max(next_geo + self.geo_period, now)
             # a cut is drawn at once (a frame costs a few ms; waiting for the frame clock would
@@ -195,7 +229,8 @@ class LiveLoop:
             idle = (until_idle_s is not None and self.pose is not None
                     and self.session.tis.time - self.pose[3] > until_idle_s
                     and not (self.meter is not None and self.meter.queue))
-            if self.source.finished or idle:
+            behind = self.rebaser.busy or self.held
+            if (self.source.finished or idle) and not behind:
                 finished_at = now if finished_at is None else finished_at
                 if now - finished_at >= idle_end_s:
                     break
@@ -203,31 +238,88 @@ class LiveLoop:
 
     def _on_pose(self, pose) -> None:
         arrival = self.now()
-        self.pose = (pose.tip, pose.a, pose.n, arrival)
+        self.newest = (pose.tip, pose.a, pose.n)
         if not self.service:  # the service's poses are recorded and ticked as they come (TickMeter)
             self.poses.add(arrival, pose.tip, pose.a, pose.n)
+            if self.rebaser.busy or self.held:
+                self.held.append((pose.tip, pose.a, pose.n, arrival))
+                return
+        self.pose = (pose.tip, pose.a, pose.n, arrival)
+
+    def _start_rebase(self) -> None:
+        """The session's :attr:`~cutkit.simulate.session.Session.rebase_runner`: the picture stays
+        as the stroke left it, and the rebase starts in its own thread."""
+        s = self.session
+        points = np.array(s.tis.positions, np.float64)
+        self.still = StillPicture(points, self.colours.get(points.shape[0]), s.tets_cut)
+        self.tets_at_rebases.append(s.tets_cut)
+        self.rebaser.start()
+
+    def _rebased(self) -> None:
+        """The rebase is done: the poses that came meanwhile are ticked and cut next."""
+        self.still = None
+
+    def _due_cut(self, behind: bool, tip) -> bool:
+        """Whether a due pose gets its own cut: always in step with the poses; behind them, once the
+        blade has gone :data:`MAX_SKIPPED_SWEEP_MM` since the last cut (else counted skipped)."""
+        if not behind or self.cut_tip is None:
+            return True
+        if float(np.linalg.norm(np.asarray(tip) - self.cut_tip)) >= MAX_SKIPPED_SWEEP_MM:
+            return True
+        self.geometry_skipped += 1
+        return False
+
+    def _catch_up(self, now: float, next_tick: float, next_geo: float) -> tuple[float, float]:
+        """In-process ticks over the held poses, each tick with the newest pose that had come by then,
+        and the cut every geometry period of tick time, as they would have run without the rebase
+        (while behind, only as :meth:`_due_cut` says); for at most :data:`CATCH_UP_BUDGET_S`, then a frame."""
+        s = self.session
+        t_end = time.perf_counter() + CATCH_UP_BUDGET_S
+        while next_tick <= now and not self.rebaser.busy and time.perf_counter() < t_end:
+            while self.held and self.held[0][3] <= next_tick:
+                self.pose = self.held.popleft()
+            if self.pose is not None:
+                tip = self.pose[0]
+                out = s.haptic_tick(tip, self.pose[1], self.pose[2])
+                self.forces.add(next_tick, s.code, out, tip, s.scalpel.proxy)
+            next_tick += HAPTIC_DT
+            if next_tick >= next_geo:
+                next_geo += self.geo_period
+                behind = bool(self.held) and self.held[-1][3] - next_tick > self.geo_period
+                if self.pose is not None and self._due_cut(behind, self.pose[0]):
+                    self._geometry()
+        if next_tick > now and self.held and self.held[-1][3] <= now:
+            self.pose = self.held[-1]  # every held pose came before the ticks so far
+            self.held.clear()
+        return next_tick, next_geo
 
     def _device_ticks(self) -> None:
         """Every device pose the service forwarded, in order: one tick each; the cut every ``geo_every``.
 
         Every pose gets its force tick (the 1 kHz loop never skips one), but a
         geometry update falls behind the device when a cut takes longer than
-        ``geo_every`` ticks: a due pose with a newer due pose already queued
-        behind it gets no geometry update of its own, and the newer one's sweeps
-        the blade from the last pose cut to it (the paper's Fig. 1: geometry at
-        the rate it can, on the current pose; counted in ``geometry_updates_skipped``).
+        ``geo_every`` ticks, and after a rebase (its poses queued meanwhile): a
+        due pose with a newer due pose already queued behind it gets a geometry
+        update of its own only once the blade has moved
+        :data:`MAX_SKIPPED_SWEEP_MM` since the last cut (:meth:`_due_cut`), else
+        a later one's sweeps the blade from the last pose cut to it (the paper's
+        Fig. 1: geometry at the rate it can, on the current pose; counted in
+        ``geometry_updates_skipped``).  A backlog is worked off
+        :data:`~cutkit.simulate.live_rebase.CATCH_UP_BUDGET_S` at a time, frames
+        in between.
         """
         s, queue = self.session, self.meter.queue
-        while queue:
+        t_end = time.perf_counter() + CATCH_UP_BUDGET_S
+        while queue and not self.rebaser.busy:
+            if time.perf_counter() > t_end:
+                break  # a backlog (after a rebase): a frame now, the rest in the next passes
             t, tip, a, n, arrival = queue.popleft()
             out = s.haptic_tick(tip, a, n)
             self.forces.add(t, s.code, out, tip, s.scalpel.proxy)
-            if self.ticks % self.geo_every == 0:
-                if len(queue) < self.geo_every:
-                    self.pose = (tip, a, n, arrival - self.t0)
-                    self._geometry()
-                else:  # a newer due pose already waits behind this one: the cut acts on the newest
-                    self.geometry_skipped += 1
+            # a newer due pose already waiting behind this one: the cut may act on the newest
+            if self.ticks % self.geo_every == 0 and self._due_cut(len(queue) >= self.geo_every, tip):
+                self.pose = (tip, a, n, arrival - self.t0)
+                self._geometry()
             self.ticks += 1
 
     def _ticks(self, now: float, next_tick: float) -> float:
@@ -245,7 +337,11 @@ class LiveLoop:
     def _geometry(self) -> None:
         s = self.session
         before = s.tets_cut, s.tis.n_nodes
+        if self.pose is not None:
+            self.cut_tip = np.array(self.pose[0], np.float64)
         self.relax.f_ext = s.geometry_update()
+        if self.rebaser.busy:
+            return  # the stroke ended: the cut mesh is the rebase's now
         if (s.tets_cut, s.tis.n_nodes) != before and self.pose is not None:
             self.pending_cut.append(self.pose[3])
         if s.scalpel.code == FREE:  # the hierarchy serves the entry test: refit to the relaxed surface
@@ -260,24 +356,28 @@ class LiveLoop:
         # topology changes only in this thread, and each cut reaches the tissue in the step that
         # makes it; the relaxation thread moves positions in place, and a frame may show them
         # half a sweep old
-        cm = s.tis.cm
-        points = np.array(s.tis.positions, np.float64)
-        version = (cm.n_rebases, cm.n_tets_total)
-        if version != self.faces_version:
-            self.faces = cut_surface_faces(cm), self.boundary.get(version)
-            self.faces_version = version
+        if self.still is not None:  # a rebase runs: the tissue as the stroke left it, the blade moves on
+            points, rgb, tets_cut = self.still.points, self.still.rgb, self.still.tets_cut
+        else:
+            cm = s.tis.cm
+            points = np.array(s.tis.positions, np.float64)
+            version = (cm.n_rebases, cm.n_tets_total)
+            if version != self.faces_version:
+                self.faces = cut_surface_faces(cm), self.boundary.get(version)
+                self.faces_version = version
+            rgb, tets_cut = self.colours.get(points.shape[0]), s.tets_cut
         cut_faces, outer = self.faces
-        rgb = self.colours.get(points.shape[0])
-        tip, a, n = self.pose[:3] if self.pose is not None else (None, None, None)
+        tip, a, n = self.newest if self.newest is not None else (None, None, None)
         frame = LiveFrame(points=points, boundary_faces=outer, cut_faces=cut_faces, rgb=rgb, tip=tip, a=a, n=n,
                           blade_length=s.blade_length, blade_breadth=s.blade_breadth,
                           force=self._hand_force(), rates=self.rates(),
-                          tets_cut=s.tets_cut, t=self.now())
+                          tets_cut=tets_cut, t=self.now())
         for view in self.views:
             view.show(frame)
         self.view_closed = any(getattr(v, "closed", False) for v in self.views)
         drawn = self.now()
         self.latency.extend(drawn - t for t in self.pending_cut)
+        self.latency_arrival.extend(self.pending_cut)
         self.pending_cut.clear()
         self.frames += 1
         self.frame_s.append(drawn)
@@ -329,19 +429,39 @@ class LiveLoop:
         write_json(out_dir / "summary.json", out)
         return out
 
+    def _latency_outside_rebase(self) -> dict | None:
+        """Pose-to-picture latency of the poses that did not come during a rebase (those wait for it; the
+        ones just after it may still wait for its backlog), ms: p50, p95, n, and how many came during one."""
+        arrival = np.array(self.latency_arrival)
+        held = np.zeros(arrival.shape, bool)
+        for a, b in self.rebaser.windows:
+            held |= (arrival >= a - self.t0) & (arrival <= b - self.t0)
+        lat = np.array(self.latency)[~held] * 1e3
+        if not lat.size:
+            return None
+        return {"p50": float(np.percentile(lat, 50)), "p95": float(np.percentile(lat, 95)), "n": int(lat.size),
+                "held": int(held.sum())}
+
     def _live_stats(self, recorded: bool) -> dict:
         wall = max(self.loop_wall, 1e-9)
         lat = np.array(self.latency) * 1e3
         f = np.diff(np.array(self.frame_s))
+        rebase_s = self.rebaser.wall_s
         stats = {"source": type(self.source).__name__, "wall_s": self.loop_wall, "poses": len(self.poses.rows),
                  "trajectory_recorded": recorded, "frames": self.frames,
                  "geometry_updates_skipped": self.geometry_skipped,
                  "fps": float(1.0 / f.mean()) if f.size else 0.0,
+                 "frame_gap_max_ms": float(f.max() * 1e3) if f.size else None,
+                 "rebases": len(rebase_s),
+                 "rebase_s_max": float(max(rebase_s)) if rebase_s else None,
+                 "rebase_windows_s": [[a - self.t0, b - self.t0] for a, b in self.rebaser.windows],
+                 "tets_cut_at_rebases": list(self.tets_at_rebases),
                  "relax_passes_per_s": self.session.counts["relax_passes"] / wall,
                  "relax_steps_per_s": self.relax.steps / wall,
                  "relax_step_ms_p50_p95_max": ([float(np.percentile(self.relax.step_s, q)) * 1e3 for q in (50, 95, 100)]
                                                if self.relax.step_s else None),
                  "tissue_time_s": self.session.tis.time,
+                 "latency_outside_rebase_ms": self._latency_outside_rebase(),
                  "latency_ms": ({"p50": float(np.percentile(lat, 50)), "p95": float(np.percentile(lat, 95)),
                                  "n": int(lat.size)} if lat.size else None)}
         if self.meter is not None:

@@ -68,6 +68,10 @@ class Session:
     counts, task_s : dict
         Counters and seconds per task (``setup``, ``settle``, ``haptics``,
         ``collision_and_cut``, ``relaxation``, ``output``).
+    rebase_runner : callable or None
+        None (offline): :meth:`rebase_if_left` rebases at once.  A live
+        loop sets a callable that starts :meth:`rebase` off its own thread
+        (:class:`~cutkit.simulate.live_rebase.BackgroundRebase`).
     """
 
     def __init__(self, model, opt, blade_length: float, blade_breadth: float, scalpel=None):
@@ -86,6 +90,9 @@ class Session:
         self.cut_before = {"cut_tets": 0, "new_tets": 0, "rebases": 0}
         self.pairs_before = np.zeros((0, 2), np.int64)
         self.on_rebase: list = []
+        # None: a stroke's rebase runs in the geometry update that sees the blade out (offline);
+        # a live loop sets a callable that starts it off its thread (cutkit.simulate.live_rebase)
+        self.rebase_runner = None
         self.material_model = opt.material_model or model.materials.material_model
         self.tis = make_tissue(model, self.material_model, opt, blade_length)
         if not self.tis.fixed.any():
@@ -172,7 +179,8 @@ class Session:
         """Rebase once the blade has left the tissue after a stroke that cut; True when done.
 
         A blade back in the tissue before the next geometry update keeps the
-        stroke going (the rebase comes at the next leaving).
+        stroke going (the rebase comes at the next leaving).  With a
+        :attr:`rebase_runner` the rebase is handed to it (started, not done).
         """
         if not self.rebase_due or self.scalpel.code != FREE:
             return False
@@ -180,6 +188,10 @@ class Session:
         if not cm.subtets and cm.n_points == cm.n_orig_points:
             self.rebase_due = False  # the stroke cut nothing: nothing to rebase
             return False
+        if self.rebase_runner is not None:
+            self.rebase_due = False
+            self.rebase_runner()
+            return True
         with self.lock.urgent():
             self.rebase()
         self.rebase_due = False
@@ -212,6 +224,8 @@ class Session:
         self.tis.rebase(old_of_new, old_orig[old_of_new])
         self.contact.rebase()
         surface_bvh(cm)
+        if cm.cut_faces_before:  # and the earlier strokes' cut surface's, which the next cut's first step walks
+            surface_bvh(cm, crack=True)
         for hook in self.on_rebase:
             hook(old_of_new)
         return old_of_new
