@@ -77,6 +77,7 @@ def test_the_window_draws_the_session_and_shows_the_cut(model, tmp_path):
                      idle_end_s=1.0, on_frame=lambda f: drawn.append(f.tets_cut))
         # look into the wound: from outside the cut face (-y), the blade's way in
         window._pl.camera_position = [(16.0, -60.0, 8.3), (16.0, 0.0, 8.3), (0.0, 0.0, 1.0)]
+        window._pl.renderer.ResetCameraClippingRange()  # the follow camera's near/far planes were for its close-up
         window._pl.render()
         image = window.screenshot(tmp_path / "live.png")
     finally:
