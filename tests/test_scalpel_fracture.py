@@ -180,3 +180,22 @@ def test_fracture_kernel_matches_numpy_twin(seed):
         assert s.crack[0] == pytest.approx(ref[2], abs=1e-9)
         np.testing.assert_allclose(out, ref[3], rtol=1e-9, atol=1e-9)
     assert seen >= {FREE, STATIC, CUTTING, WITHDRAWING}
+
+
+def test_unknown_scalpel_model_is_refused_in_one_line(tmp_path):
+    from click.testing import CliRunner
+
+    from cutkit.cli.main import cli
+    from cutkit.simulate import SimulateOptions
+
+    with pytest.raises(InputError, match="^scalpel must be one of paper, fracture, not 'blunt'$"):
+        SimulateOptions(scalpel="blunt").check()
+    SimulateOptions(scalpel="fracture").check()
+    (tmp_path / "t.csv").write_text("0,0,0,0,1,0,0,0,0,1\n")
+    for args in (["simulate", str(tmp_path / "m.h5"), "--trajectory", str(tmp_path / "t.csv"), "-o",
+                  str(tmp_path / "out"), "--scalpel", "blunt"], ["haptics", "serve", "--scalpel", "blunt"]):
+        result = CliRunner().invoke(cli, args)
+        assert result.exit_code == 2
+        errors = [line for line in result.output.splitlines() if line.startswith("Error:")]
+        assert errors == ["Error: Invalid value for '--scalpel': 'blunt' is not one of 'paper', 'fracture'."]
+    assert not (tmp_path / "out").exists()
