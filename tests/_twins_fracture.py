@@ -19,7 +19,8 @@ def twin_fracture_step(p, proxy, code, crack, entry, normal, tip, a_in, n_in, f_
     t_a, t_n, dist = r @ a, r @ n, r @ b
     depth = float(np.clip(t_n, 0.0, p[K.P_BLADE_BREADTH]))
     k_s = p[K.P_K_SPRING]
-    k_c = p[K.P_C_SHAPE] * p[K.P_ETA] * 1e-6 * depth  # Pa -> N/mm^2, times the depth
+    # Pa -> N/mm^2; the edge's face (thickness x depth) strained over the edge radius
+    k_c = p[K.P_C_SHAPE] * p[K.P_ETA] * 1e-6 * p[K.P_BLADE_DEPTH] * depth / p[K.P_EDGE_RADIUS]
     j = p[K.P_J_C] * 1e-3  # J/m^2 -> N/mm
     da = p[K.P_CRACK_STEP]
     c = crack

@@ -101,7 +101,7 @@ def test_blade_work_equals_fracture_work_plus_stored_energy():
     force, crack, _ = cut_slab(J_c, E, depth=depth, speed=3.0, seconds=8.0)
     travel = 3.0 * np.arange(force.size) * 1e-3
     work_in = np.sum(0.5 * (force[1:] + force[:-1]) * np.diff(travel))  # N mm
-    k_c = E * 1e-6 * depth
+    k_c = E * 1e-6 * p.blade_depth * depth / p.edge_radius
     k = 1.0 / (1.0 / p.k_spring + 1.0 / k_c)
     stored = force[-1] ** 2 / (2.0 * k)
     fracture = J_c * 1e-3 * depth * crack[-1]
@@ -124,7 +124,7 @@ def test_withdrawing_costs_nothing_and_the_crack_stays():
     assert length > 0.0
     last = np.inf
     for i in range(2000):
-        t_a = 9.0 - 3e-3 * i
+        t_a = 3e-3 * (2998 - i)  # from one step behind the last forward pose
         c.set((t_a, 5.0, 0.0), A, (0.0, 1.0, 0.0))
         step(p, s, c, np.zeros(3), out)
         load = -out[O_FORCE:O_FORCE + 3] @ A
@@ -150,7 +150,7 @@ def test_fracture_kernel_matches_numpy_twin(seed):
     rng = np.random.default_rng(seed)
     p = ScalpelParams(model="fracture", J_c=rng.uniform(50, 3000), eta=rng.uniform(5e3, 2e5),
                       k_spring=rng.uniform(0.5, 20.0), crack_step=rng.uniform(0.05, 0.5),
-                      alpha_dynamic=rng.uniform(0, 0.5))
+                      alpha_dynamic=rng.uniform(0, 0.5), edge_radius=rng.uniform(0.005, 0.5))
     pa = p.array()
     s, c, out = ScalpelState(), Control(), np.zeros(N_OUT)
     entry, normal = rng.normal(size=3), rng.normal(size=3)

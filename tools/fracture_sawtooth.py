@@ -27,7 +27,7 @@ DEPTH_MM = 5.0
 SPEED_MM_S = 3.0
 SECONDS = 60.0
 K_SPRING = 5.0  # N/mm, the device coupling
-CRACK_STEP_MM = 0.5
+CRACK_STEP_MM = 0.1
 
 
 def run_case(J_c: float, E: float) -> dict:

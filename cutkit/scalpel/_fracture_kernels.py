@@ -35,7 +35,9 @@ from cutkit.scalpel._kernels import (
     P_BLADE_BREADTH,
     P_C_SHAPE,
     P_CRACK_STEP,
+    P_BLADE_DEPTH,
     P_DT,
+    P_EDGE_RADIUS,
     P_ETA,
     P_J_C,
     P_K_PLANE,
@@ -77,17 +79,29 @@ def blade_frame(normal, a_in, n_in):
 
 
 @njit(cache=True)
+def contact_stiffness(depth, params):
+    """Stiffness k_c of the contact zone ahead of the edge, N/mm (docs/scalpel-model.md, eq. F0).
+
+    The edge indents the tissue over its face, blade thickness w by the depth
+    d; the strain concentrates in a zone of the edge's radius r, so
+    k_c = c_shape * E * w * d / r.
+    """
+    return (params[P_C_SHAPE] * params[P_ETA] * N_PER_MM2_PER_PA * params[P_BLADE_DEPTH] * depth
+            / params[P_EDGE_RADIUS])
+
+
+@njit(cache=True)
 def crack_advance(t_a, crack, depth, params):
     """New crack length for the edge driven to ``t_a`` (mm along a from the entry).
 
-    The device spring k_s and the contact zone k_c = c_shape * E * depth act
+    The device spring k_s and the contact zone k_c (:func:`contact_stiffness`) act
     in series, k = k_s k_c / (k_s + k_c), so the stored energy is
     U = k (t_a - c)^2 / 2.  One increment da releases
     k da (t_a - c - da/2) at fixed t_a; it is taken while that is at least
     J_c * depth * da (eq. F2 of docs/scalpel-model.md).
     """
     k_s = params[P_K_SPRING]
-    k_c = params[P_C_SHAPE] * params[P_ETA] * N_PER_MM2_PER_PA * depth
+    k_c = contact_stiffness(depth, params)
     if k_c <= 0.0:
         return crack  # no depth of cut: no contact zone, nothing to break
     k = k_s * k_c / (k_s + k_c)
@@ -140,7 +154,7 @@ def fracture_step(params, proxy, velocity, code, crack, entry, normal, control, 
     c = crack_advance(t_a, crack[0], depth, params)
     # the edge where device spring and contact zone balance (eq. F1)
     k_s = params[P_K_SPRING]
-    k_c = params[P_C_SHAPE] * params[P_ETA] * N_PER_MM2_PER_PA * depth
+    k_c = contact_stiffness(depth, params)
     s = t_a
     if t_a > c and k_c > 0.0:
         s = (k_s * t_a + k_c * c) / (k_s + k_c)

@@ -43,7 +43,8 @@ P_BLADE_BREADTH = 15  # widest breadth of the blade, mm
 P_MODEL = 16  # PAPER or FRACTURE: which force model step() runs
 P_J_C = 17  # fracture toughness J_c, J/m^2 = N/m (fracture model)
 P_CRACK_STEP = 18  # crack increment da of the fracture model, mm
-N_PARAMS = 19
+P_EDGE_RADIUS = 19  # radius of the blade's sharp edge, mm: the size of the fracture model's contact zone
+N_PARAMS = 20
 
 # -- force models (params[P_MODEL]) -------------------------------------------
 PAPER = 0  # the paper's section 6: F_enter and cut friction (eqs. 12-18)

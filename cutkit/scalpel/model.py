@@ -68,6 +68,9 @@ class ScalpelParams:
         Fracture toughness of the tissue at the entry point, J/m^2 (fracture model).
     crack_step : float
         Crack increment da of the fracture model, mm.
+    edge_radius : float
+        Radius of the blade's sharp edge, mm: the fracture model's contact
+        zone stiffness is c_shape * E * blade_depth * depth / edge_radius.
     model : str
         ``"paper"`` (section 6, eqs. 12-18) or ``"fracture"`` (docs/scalpel-model.md).
     """
@@ -90,6 +93,7 @@ class ScalpelParams:
     dt: float = HAPTIC_DT
     J_c: float = DEFAULT_MATERIAL["J_c"]
     crack_step: float = 0.1
+    edge_radius: float = 0.01
     model: str = "paper"
 
     def __post_init__(self):
@@ -102,7 +106,7 @@ class ScalpelParams:
             if not math.isfinite(v) or v < 0.0:
                 raise InputError(f"scalpel parameter {f.name} = {v!r} must be finite and >= 0")
             setattr(self, f.name, v)
-        for name in ("mass", "dt", "k_spring", "crack_step"):
+        for name in ("mass", "dt", "k_spring", "crack_step", "edge_radius"):
             if getattr(self, name) <= 0.0:
                 raise InputError(f"scalpel parameter {name} must be > 0")
         if self.model == "fracture":
@@ -151,6 +155,7 @@ class ScalpelParams:
         p[K.P_MODEL] = SCALPEL_MODELS.index(self.model)
         p[K.P_J_C] = self.J_c
         p[K.P_CRACK_STEP] = self.crack_step
+        p[K.P_EDGE_RADIUS] = self.edge_radius
         return p
 
 
