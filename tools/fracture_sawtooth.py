@@ -67,7 +67,7 @@ def plot(results: list[dict], path: str) -> None:
                      f"depth {DEPTH_MM:.0f} mm", fontsize=9)
     zoom = axes[2]
     for (label, _, _), r in list(zip(CASES, results))[:2]:
-        keep = (r["_travel"] >= 20.0) & (r["_travel"] <= 24.0)
+        keep = (r["_travel"] >= 20.0) & (r["_travel"] <= 20.6)
         zoom.plot(r["_travel"][keep], r["_force"][keep], lw=0.9, label=f"{label}, E = {r['E_Pa'] / 1e3:.0f} kPa")
     zoom.axhline(results[0]["J_c_N_per_mm"] * DEPTH_MM, color="k", ls="--", lw=0.8, label="J_c x depth")
     zoom.set_title("liver-like, steady state: load, then unload as the crack jumps", fontsize=9)
