@@ -18,8 +18,11 @@ def command():
               help="Material name (or label number) to take from --model.")
 @click.option("--priority", type=click.Choice(["normal", "high", "realtime"]), default="high", show_default=True,
               help="Scheduling priority of the loop (high = nice -10, realtime = SCHED_FIFO); falls back if refused.")
+@click.option("--scalpel", type=click.Choice(["paper", "fracture"]), default="paper", show_default=True,
+              help="Force model: the paper's (section 6) or fracture (J_c from --model's material; the "
+                   "simulation's material updates keep it; docs/scalpel-model.md).")
 @click.option("-v", "--verbose", is_flag=True, help="Log every connection, not only rejected frames.")
-def serve(host, port, model_path, material, priority, verbose):
+def serve(host, port, model_path, material, priority, scalpel, verbose):
     """Serve the scalpel force model at 1 kHz until Ctrl-C or SIGTERM."""
     import logging
 
@@ -29,9 +32,9 @@ def serve(host, port, model_path, material, priority, verbose):
 
     logging.basicConfig(level=logging.INFO if verbose else logging.WARNING,
                         format="cutkit haptics: %(levelname)s: %(message)s")
-    params = ScalpelParams()
+    params = ScalpelParams(model=scalpel)
     if model_path is not None:
-        params = ScalpelParams.from_material(material_from_model(model_path, material))
+        params = ScalpelParams.from_material(material_from_model(model_path, material), model=scalpel)
     server = HapticsServer(host, port, params)
     got = raise_priority(priority)
     h, p = server.address

@@ -35,8 +35,12 @@ from cutkit.cli._ui import overwrite_option
               help="Springs only: each tet resists a change of volume with bulk = this x E (0: springs only, "
                    "as in the paper; 0.3 leaves a tenth of the inverted tets on the demo knee, at about four "
                    "times the relaxation time).")
+@click.option("--scalpel", type=click.Choice(["paper", "fracture"]), default="paper", show_default=True,
+              help="Scalpel force model: the paper's (section 6: F_enter, cut friction) or fracture (the crack "
+                   "advances when the blade pays the tissue's J_c per crack area; docs/scalpel-model.md). "
+                   "With --haptics the service's own --scalpel decides.")
 def command(model, trajectory, out_dir, fps, overwrite, png, movie, realtime, haptics, hold_s, geometry_rate_hz,
-            blade_length, material_model, volume_stiffness, solver):
+            blade_length, material_model, volume_stiffness, solver, scalpel):
     """Cut MODEL along TRAJECTORY with the scalpel force model and relax it; write frames and logs."""
     from cutkit.cli._ui import console, folder_guard
     from cutkit.cutting.trajectory import read_trajectory
@@ -49,7 +53,8 @@ def command(model, trajectory, out_dir, fps, overwrite, png, movie, realtime, ha
                  volume_stiffness=volume_stiffness)
     opt = SimulateOptions(fps=fps, png=False, realtime=realtime, haptics=haptics, hold_s=hold_s,
                           geometry_rate_hz=geometry_rate_hz, blade_length=blade_length,
-                          volume_stiffness=volume_stiffness, material_model=material_model, solver=solver)
+                          volume_stiffness=volume_stiffness, material_model=material_model, solver=solver,
+                          scalpel=scalpel)
     opt.check()
     earlier = check_output_folder(out_dir, "simulate", overwrite, inputs=(model, trajectory))
     tet_model = read_model(model)

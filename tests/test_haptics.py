@@ -395,3 +395,32 @@ def test_port_in_use_is_a_one_line_error():
                              capture_output=True, text=True, timeout=60)
     assert res.returncode == 2
     assert res.stderr.strip() == f"cutkit: error: cannot listen on 127.0.0.1:{port}: Address already in use"
+
+
+def test_fracture_cut_through_the_service():
+    """``serve --scalpel fracture``: the device feels J_c x depth of cut while the crack advances (closed form of
+    docs/scalpel-model.md, eq. F2: within one sawtooth k da of it), and nothing once it pulls back behind the crack."""
+    p = ScalpelParams(model="fracture")  # the service's defaults: J_c and k_spring as here
+    depth = 5.0  # the tip 5 mm along n = b x a below the entry point
+    k_c = p.c_shape * p.eta * 1e-6 * p.blade_depth * depth / p.edge_radius
+    k = 1.0 / (1.0 / p.k_spring + 1.0 / k_c)
+    steady = p.J_c * 1e-3 * depth
+    with spawned_server("--scalpel", "fracture") as (host, port, proc), \
+            HapticsClient(host, port, "device") as dev, HapticsClient(host, port, "simulation") as sim:
+        f = _step(dev, sim, (0, depth, 0), material=p.material())
+        assert f.state == STATIC
+        seen = set()
+        far = steady / k + 1.0  # past the first crack advance
+        for i in range(40):
+            tip = (far + 0.05 * i, depth, 0)
+            f = _step(dev, sim, tip)
+            seen.add(f.state)
+        assert CUTTING in seen
+        # full gain once the simulation has been fresh for the watchdog's ramp
+        f = _feed_until(dev, sim, lambda fr: fr.gain == 1.0, tip)
+        assert abs(-f.force[0] - steady) <= k * p.crack_step + 1e-9
+        assert f.force[0] < 0.0  # the tissue pushes the blade back
+        _step(dev, sim, (0.0, depth, 0))
+        f = _until(dev, lambda fr: fr.state in (WITHDRAWING, STATIC) and abs(fr.force[0]) < 1e-12)
+        sim.send_sim((0, 0, 0), B, contact=False)
+        _until(dev, lambda fr: fr.state == FREE)

@@ -114,7 +114,7 @@ def _replace(name, data):
 @pytest.mark.parametrize(
     "edit, message",
     [
-        (lambda f: f["cutkit"].attrs.__setitem__("schema_version", 99), "schema version 99 is not supported (this cutkit reads versions 1, 2)"),
+        (lambda f: f["cutkit"].attrs.__setitem__("schema_version", 99), "schema version 99 is not supported (this cutkit reads versions 1, 2, 3)"),
         (lambda f: f.__delitem__("cutkit"), "not a cutkit model (no /cutkit group)"),
         (lambda f: f.__delitem__("VTKHDF/Points"), "VTKHDF/Points is missing"),
         (_replace("VTKHDF/Points", np.zeros((10, 2))), "VTKHDF/Points has shape (10, 2), expected (*, 3)"),
@@ -184,13 +184,30 @@ def test_version_1_file_reads_with_the_documented_poisson_ratio(model_file):
     with h5py.File(model_file, "r+") as f:
         f["cutkit"].attrs["schema_version"] = 1
         del f["cutkit/materials/poisson_ratio"]
+        del f["cutkit/materials/J_c"]
         del f["cutkit/materials"].attrs["material_model"]
     m = read_model(model_file)
     assert V1_POISSON_RATIO == 0.45
     np.testing.assert_array_equal(m.materials["poisson_ratio"], [0.45, 0.45])
     assert m.materials.material_model == "neohookean"
-    assert m.provenance["schema_upgrade"] == {"from_version": 1, "to_version": 2, "poisson_ratio": 0.45,
-                                              "material_model": "neohookean"}
+    assert m.provenance["schema_upgrade"] == {"from_version": 1, "to_version": 3, "poisson_ratio": 0.45,
+                                              "material_model": "neohookean", "J_c": 2000.0}
+
+
+def test_version_2_file_reads_with_the_documented_J_c(model_file):
+    """A version-2 file has no fracture toughness: reading gives every material V2_J_C and says so."""
+    import h5py
+
+    from cutkit.io.model_h5 import V2_J_C
+    from cutkit.assign.defaults import DEFAULT_MATERIALS
+
+    with h5py.File(model_file, "r+") as f:
+        f["cutkit"].attrs["schema_version"] = 2
+        del f["cutkit/materials/J_c"]
+    m = read_model(model_file)
+    assert V2_J_C == DEFAULT_MATERIALS["muscle"]["J_c"]
+    np.testing.assert_array_equal(m.materials["J_c"], [V2_J_C, V2_J_C])
+    assert m.provenance["schema_upgrade"] == {"from_version": 2, "to_version": 3, "J_c": V2_J_C}
 
 
 def test_material_model_round_trips_and_a_bad_one_is_named(model_file, tmp_path):

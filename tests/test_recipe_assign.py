@@ -33,6 +33,7 @@ def test_knee_recipe_loads_and_resolves_paths():
         ("[segment]\nthreshold = [1, 2, 3]\n", "[segment] threshold must be [low] or [low, high]"),
         ("[isovolume]\nlevel = 'x'\n", "[isovolume]: level must be a number, not 'x'"),
         ("[[materials]]\nlabel = 1\nname = 'skin'\nE = -5\n", "[[materials]] #1: E must be a positive number, got -5"),
+        ("[[materials]]\nlabel = 1\nname = 'skin'\nJ_c = -200\n", "[[materials]] #1: J_c must be a number >= 0, got -200"),
         ("[[materials]]\nlabel = 1\nname = 'a'\n[[materials]]\nlabel = 1\nname = 'b'\n", "[[materials]] #2 repeats label 1"),
         ("[[materials]]\nlabel = 1\nname = 'a'\nstiffness = 3\n", "unknown key 'stiffness'"),
         ("[[prestress]]\nlabel = 3\nfibre_direction = [0, 0]\nprestrain = 0.1\n", "fibre_direction must be a list of three numbers"),
@@ -66,6 +67,21 @@ def test_assign_materials_defaults_and_overrides():
     assert rows[3]["density"] == DEFAULT_MATERIALS["muscle"]["density"]
     assert rows[5]["name"] == "tissue_5"  # unnamed label: generic soft tissue
     assert set(rows[5]) == {"label", "name", *MATERIAL_FIELDS}
+
+
+def test_recipe_sets_J_c_and_every_default_has_a_source():
+    from cutkit.assign.defaults import DEFAULT_SOURCES
+
+    m = assign(_bar(), {"materials": [{"label": 3, "name": "muscle", "J_c": 200.0}]})
+    rows = {r["label"]: r for r in m.materials.rows()}
+    assert rows[3]["J_c"] == 200.0
+    assert rows[5]["J_c"] == DEFAULT_MATERIALS["muscle"]["J_c"]
+    for tissue, row in DEFAULT_MATERIALS.items():
+        assert set(DEFAULT_SOURCES[tissue]) == set(row)
+        assert all(isinstance(v, str) and v for v in DEFAULT_SOURCES[tissue].values())
+    # the published ranges the defaults sit in (J/m^2)
+    assert 17_100 <= DEFAULT_MATERIALS["skin"]["J_c"] <= 30_400
+    assert 550 <= DEFAULT_MATERIALS["muscle"]["J_c"] <= 8_000
 
 
 def test_assign_fixes_bone_and_leg_ends():

@@ -19,6 +19,7 @@ Everything else reads and writes models through :func:`read_model` and
         attrs schema_version=int, cutkit_version=str, provenance=JSON str
         materials/label (k,) int32, materials/name (k,) str, materials/<field> (k,) float64
             attrs material_model="neohookean" | "springs"            (schema version 2)
+        materials/J_c (k,) float64            fracture toughness, J/m^2  (schema version 3)
         boundary/fixed_nodes (f,) int64
         boundary/prescribed_nodes (p,) int64, boundary/prescribed_displacement (p, 3) float64
         prestress/label (q,) int32, prestress/fibre_direction (q, 3) float64, prestress/prestrain (q,) float64
@@ -54,14 +55,21 @@ from cutkit.model.tetmodel import (
 )
 
 #: Version of the layout above; bump on any incompatible change.
-#: Version 2 added materials/poisson_ratio and the materials' material_model.
-SCHEMA_VERSION = 2
-#: Older versions this module still reads (upgraded on reading, see :data:`V1_POISSON_RATIO`).
-READABLE_VERSIONS = (1, 2)
+#: Version 2 added materials/poisson_ratio and the materials' material_model;
+#: version 3 added materials/J_c.
+SCHEMA_VERSION = 3
+#: Older versions this module still reads (upgraded on reading, see
+#: :data:`V1_POISSON_RATIO` and :data:`V2_J_C`).
+READABLE_VERSIONS = (1, 2, 3)
 #: Poisson ratio given to every material of a version-1 file (which has none):
 #: soft tissue is nearly incompressible (docs/model-format.md).  Reading
 #: records it in the provenance under ``schema_upgrade``.
 V1_POISSON_RATIO = 0.45
+#: Fracture toughness J_c (J/m^2) given to every material of a version 1 or 2
+#: file (which has none): the "muscle" row of cutkit.assign.defaults, within
+#: the 550-8,000 J/m^2 published for muscle (docs/model-format.md).  Reading
+#: records it in the provenance under ``schema_upgrade``.
+V2_J_C = 2000.0
 
 #: VTKHDF version written under /VTKHDF (1.0 is read by every ParaView since 5.10).
 VTKHDF_VERSION = (1, 0)
@@ -386,8 +394,10 @@ class _Reader:
             self.fail("cutkit provenance attribute", "is not valid JSON")
         if self.version < SCHEMA_VERSION:
             provenance["schema_upgrade"] = {"from_version": self.version, "to_version": SCHEMA_VERSION,
-                                            "poisson_ratio": V1_POISSON_RATIO,
-                                            "material_model": DEFAULT_MATERIAL_MODEL}
+                                            "J_c": V2_J_C}
+            if self.version == 1:
+                provenance["schema_upgrade"].update(poisson_ratio=V1_POISSON_RATIO,
+                                                    material_model=DEFAULT_MATERIAL_MODEL)
 
         extra = {}
         if "cutkit/extra" in f:
@@ -420,6 +430,9 @@ class _Reader:
         for key in MATERIAL_FIELDS:
             if self.version == 1 and key == "poisson_ratio":
                 values[key] = np.full(k, V1_POISSON_RATIO)
+                continue
+            if self.version < 3 and key == "J_c":
+                values[key] = np.full(k, V2_J_C)
                 continue
             col = self.get(f"cutkit/materials/{key}", "f", (k,)).astype(np.float64)
             self._finite(f"cutkit/materials/{key}", col)

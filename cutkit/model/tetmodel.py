@@ -28,6 +28,7 @@ MATERIAL_FIELDS: dict[str, str] = {
     "alpha_dynamic": "1",  # eq. (18)
     "c_edge": "1",  # sharpness of the blade's edge (small = sharp)
     "c_shape": "1",  # shape of the blade
+    "J_c": "J/m^2",  # fracture toughness of the fracture scalpel model (schema version 3); J/m^2 = N/m
 }
 
 

@@ -1,17 +1,20 @@
-"""The haptic scalpel force model of the paper's section 6."""
+"""The haptic scalpel force model: the paper's section 6, or cutting as fracture."""
 
 from cutkit.scalpel._kernels import (
     CUTTING,
+    FRACTURE,
     FREE,
     N_OUT,
     N_PARAMS,
     O_A,
+    O_CRACK,
     O_CUT,
     O_D_A,
     O_D_N,
     O_FORCE,
     O_N,
     O_PERP,
+    PAPER,
     STATE_NAMES,
     STATIC,
     WITHDRAWING,
@@ -19,7 +22,9 @@ from cutkit.scalpel._kernels import (
 from cutkit.scalpel.model import (
     CUT_FIELDS,
     DEFAULT_MATERIAL,
+    FRACTURE_FIELDS,
     HAPTIC_DT,
+    SCALPEL_MODELS,
     Control,
     ScalpelParams,
     ScalpelState,
@@ -31,7 +36,7 @@ from cutkit.scalpel.model import (
 
 __all__ = [
     "FREE", "STATIC", "CUTTING", "WITHDRAWING", "STATE_NAMES", "N_OUT", "N_PARAMS",
-    "O_FORCE", "O_CUT", "O_PERP", "O_D_A", "O_D_N", "O_A", "O_N",
-    "CUT_FIELDS", "DEFAULT_MATERIAL", "HAPTIC_DT",
+    "O_FORCE", "O_CUT", "O_PERP", "O_D_A", "O_D_N", "O_A", "O_N", "O_CRACK", "PAPER", "FRACTURE",
+    "CUT_FIELDS", "FRACTURE_FIELDS", "SCALPEL_MODELS", "DEFAULT_MATERIAL", "HAPTIC_DT",
     "ScalpelParams", "ScalpelState", "Control", "blade_breadth", "enter", "leave", "step",
 ]

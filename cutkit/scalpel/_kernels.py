@@ -40,7 +40,16 @@ P_C_SHAPE = 12
 P_BLADE_DEPTH = 13  # d_d of eq. (17), mm
 P_BLADE_TAPER = 14  # d_n = min(taper * d_a, breadth), dimensionless
 P_BLADE_BREADTH = 15  # widest breadth of the blade, mm
-N_PARAMS = 16
+P_MODEL = 16  # PAPER or FRACTURE: which force model step() runs
+P_J_C = 17  # fracture toughness J_c, J/m^2 = N/m (fracture model)
+P_CRACK_STEP = 18  # crack increment da of the fracture model, mm
+P_EDGE_RADIUS = 19  # radius of the blade's sharp edge, mm: the size of the fracture model's contact zone
+N_PARAMS = 20
+
+# -- force models (params[P_MODEL]) -------------------------------------------
+PAPER = 0  # the paper's section 6: F_enter and cut friction (eqs. 12-18)
+FRACTURE = 1  # cutting as fracture: the crack advances when J_c * depth * da is paid
+MODEL_NAMES = ("paper", "fracture")
 
 # -- layout of the out vector ------------------------------------------------
 O_FORCE = 0  # (3) force to render on the device, N
@@ -50,7 +59,8 @@ O_D_A = 9  # penetration depth d_a, mm
 O_D_N = 10  # blade breadth d_n, mm
 O_A = 11  # (3) blade direction a used this step (in the blade plane)
 O_N = 14  # (3) in-plane direction n used this step
-N_OUT = 17
+O_CRACK = 17  # fracture model: crack length from the entry point along a, mm (0 in the paper's)
+N_OUT = 18
 
 #: Below this length a projected blade axis is treated as degenerate.
 AXIS_EPS = 1e-9
@@ -59,6 +69,10 @@ AXIS_EPS = 1e-9
 WITHDRAW_FORCE = 1e-3
 #: mm per m: converts F/m (m/s^2) into mm/s^2.
 MM_PER_M = 1000.0
+#: N/mm^2 per Pa: a modulus in Pa times this is a stiffness per mm of depth, N/mm^2.
+N_PER_MM2_PER_PA = 1e-6
+#: (N/mm) per (J/m^2): J_c in J/m^2 = N/m times this is a force per mm of cut depth.
+N_PER_MM_PER_J_PER_M2 = 1e-3
 
 
 @njit(cache=True)

@@ -17,6 +17,7 @@ from dataclasses import dataclass, field, fields
 import numpy as np
 
 from cutkit.errors import InputError
+from cutkit.scalpel import _fracture_kernels as FK
 from cutkit.scalpel import _kernels as K
 
 #: The fixed haptic time step, s (1 kHz), independent of the wall clock.
@@ -26,13 +27,18 @@ HAPTIC_DT = 1e-3
 #: (E = 30 kPa, F_enter = 0.8 N, ...); see docs/scalpel-model.md.
 DEFAULT_MATERIAL: dict[str, float] = dict(
     E=30e3, F_enter=0.8, mu_static=2.5e-6, mu_dynamic=1.0e-6, rho_dynamic=5.0e-8,
-    alpha_static=0.3, alpha_dynamic=0.15, c_edge=1.0, c_shape=1.0,
+    alpha_static=0.3, alpha_dynamic=0.15, c_edge=1.0, c_shape=1.0, J_c=2000.0,
 )
 
 #: Material columns (cutkit.model.MATERIAL_FIELDS) the scalpel reads, in the
 #: order of the haptics protocol's material block.
 CUT_FIELDS = ("E", "F_enter", "mu_static", "mu_dynamic", "rho_dynamic",
               "alpha_static", "alpha_dynamic", "c_edge", "c_shape")
+#: Material columns only the fracture model reads (not in the haptics
+#: protocol's material block: the service keeps the J_c it was started with).
+FRACTURE_FIELDS = ("J_c",)
+#: Force models :class:`ScalpelParams` can name (``--scalpel``).
+SCALPEL_MODELS = K.MODEL_NAMES
 
 
 @dataclass
@@ -58,6 +64,15 @@ class ScalpelParams:
         Widest breadth of the blade, mm.
     dt : float
         Time step, s.
+    J_c : float
+        Fracture toughness of the tissue at the entry point, J/m^2 (fracture model).
+    crack_step : float
+        Crack increment da of the fracture model, mm.
+    edge_radius : float
+        Radius of the blade's sharp edge, mm: the fracture model's contact
+        zone stiffness is c_shape * E * blade_depth * depth / edge_radius.
+    model : str
+        ``"paper"`` (section 6, eqs. 12-18) or ``"fracture"`` (docs/scalpel-model.md).
     """
 
     eta: float = DEFAULT_MATERIAL["E"]
@@ -76,16 +91,26 @@ class ScalpelParams:
     blade_taper: float = 0.6
     blade_breadth: float = 8.0
     dt: float = HAPTIC_DT
+    J_c: float = DEFAULT_MATERIAL["J_c"]
+    crack_step: float = 0.1
+    edge_radius: float = 0.01
+    model: str = "paper"
 
     def __post_init__(self):
+        if self.model not in SCALPEL_MODELS:
+            raise InputError(f"scalpel model {self.model!r} is not one of {', '.join(SCALPEL_MODELS)}")
         for f in fields(self):
+            if f.name == "model":
+                continue
             v = float(getattr(self, f.name))
             if not math.isfinite(v) or v < 0.0:
                 raise InputError(f"scalpel parameter {f.name} = {v!r} must be finite and >= 0")
             setattr(self, f.name, v)
-        for name in ("mass", "dt", "k_spring"):
+        for name in ("mass", "dt", "k_spring", "crack_step", "edge_radius"):
             if getattr(self, name) <= 0.0:
                 raise InputError(f"scalpel parameter {name} must be > 0")
+        if self.model == "fracture":
+            return  # the fracture model balances its springs exactly: no explicit integrator
         # explicit spring term of the proxy integrator: stable for omega * dt < 2
         omega_dt = math.sqrt(self.k_spring * K.MM_PER_M / self.mass) * self.dt
         if omega_dt >= 1.0:
@@ -100,6 +125,7 @@ class ScalpelParams:
         if missing:
             raise InputError(f"material lacks the cut parameters {', '.join(missing)}")
         kw = {("eta" if k == "E" else k): float(material[k]) for k in CUT_FIELDS}
+        kw.update({k: float(material[k]) for k in FRACTURE_FIELDS if k in material})
         kw.update(blade)
         return cls(**kw)
 
@@ -126,6 +152,10 @@ class ScalpelParams:
         p[K.P_BLADE_DEPTH] = self.blade_depth
         p[K.P_BLADE_TAPER] = self.blade_taper
         p[K.P_BLADE_BREADTH] = self.blade_breadth
+        p[K.P_MODEL] = SCALPEL_MODELS.index(self.model)
+        p[K.P_J_C] = self.J_c
+        p[K.P_CRACK_STEP] = self.crack_step
+        p[K.P_EDGE_RADIUS] = self.edge_radius
         return p
 
 
@@ -160,6 +190,8 @@ class ScalpelState:
         Entry point P_e, mm.
     normal : (3,) float64
         Unit normal of the blade plane through P_e.
+    crack : (1,) float64
+        Fracture model: crack length from P_e along a, mm.
     """
 
     proxy: np.ndarray = field(default_factory=lambda: np.zeros(3))
@@ -167,6 +199,7 @@ class ScalpelState:
     code: np.ndarray = field(default_factory=lambda: np.zeros(1, np.int64))
     entry: np.ndarray = field(default_factory=lambda: np.zeros(3))
     normal: np.ndarray = field(default_factory=lambda: np.array([0.0, 0.0, 1.0]))
+    crack: np.ndarray = field(default_factory=lambda: np.zeros(1))
 
     @property
     def name(self) -> str:
@@ -221,6 +254,7 @@ def enter(state: ScalpelState, entry, normal, tip) -> None:
     state.normal[:] = b
     state.proxy[:] = tip - np.dot(tip - entry, b) * b
     state.velocity[:] = 0.0
+    state.crack[0] = 0.0
     state.code[0] = K.STATIC
 
 
@@ -240,8 +274,14 @@ def step(params: np.ndarray, state: ScalpelState, control: Control, f_sim: np.nd
     f_sim : (3,) float64
         External force from the tissue simulation, N.
     out : (N_OUT,) float64
-        Receives the device force, the cut force, F_perp, d_a, d_n and the
-        blade frame (a, n); see the ``O_*`` indices of ``cutkit.scalpel._kernels``.
+        Receives the device force, the cut force, F_perp, d_a, d_n, the
+        blade frame (a, n) and the crack length; see the ``O_*`` indices of
+        ``cutkit.scalpel._kernels``.  ``params[P_MODEL]`` picks the paper's
+        model or the fracture model.
     """
+    if params[K.P_MODEL] == K.FRACTURE:
+        FK.fracture_step(params, state.proxy, state.velocity, state.code, state.crack, state.entry,
+                         state.normal, (control.tip, control.a, control.n), f_sim, out)
+        return
     K.scalpel_step(params, state.proxy, state.velocity, state.code, state.entry, state.normal,
                    control.tip, control.a, control.n, f_sim, out)

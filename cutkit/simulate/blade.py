@@ -29,8 +29,23 @@ from cutkit.scalpel import leave as scalpel_leave
 from cutkit.scalpel import step as scalpel_step
 
 
+#: Blade coupling of the fracture model in ``simulate``: the trajectory is a
+#: recorded, position-controlled motion, so the blade edge is held to it by a
+#: stiff spring (N/mm); the force the edge feels then follows from the tissue's
+#: contact zone and J_c alone (docs/scalpel-model.md, eq. F1), not from the
+#: hand-held device's 0.8 N/mm.
+FRACTURE_K_SPRING = 100.0
+
+
+def scalpel_blade(model: str) -> dict:
+    """Blade constants of the force model ``model`` ("paper" or "fracture") for :class:`InProcessScalpel`."""
+    if model == "fracture":
+        return {"model": "fracture", "k_spring": FRACTURE_K_SPRING}
+    return {}
+
+
 class InProcessScalpel:
-    """The section 6 force model stepped in this process at a fixed 1 ms.
+    """The scalpel force model (section 6, or fracture) stepped in this process at a fixed 1 ms.
 
     Parameters
     ----------

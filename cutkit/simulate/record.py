@@ -240,7 +240,8 @@ def closing_warnings(session, tips=None) -> None:
         where = f" ({extents_text(session.model.points, tips)})" if tips is not None and len(tips) else ""
         session.warnings.append(f"the trajectory never touches the tissue: no cut{where}")
     elif not session.tets_cut:
-        session.warnings.append("the blade touched the tissue but never cut it (F_enter not reached)")
+        reached = "J_c x depth of cut" if session.opt.scalpel == "fracture" else "F_enter"
+        session.warnings.append(f"the blade touched the tissue but never cut it ({reached} not reached)")
 
 
 def write_cut_model(session, out_dir, summary_: dict) -> None:

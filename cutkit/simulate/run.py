@@ -102,6 +102,11 @@ class SimulateOptions:
         How the element model's relaxation steps are solved: ``"newton"``
         (projected Newton) or ``"vbd"`` (vertex block descent); None:
         :data:`cutkit.simulate.elastic_tissue.DEFAULT_SOLVER`.  Ignored by the springs.
+    scalpel : str
+        Scalpel force model: ``"paper"`` (section 6, F_enter and cut
+        friction) or ``"fracture"`` (the crack advances when the blade pays
+        J_c per crack area; docs/scalpel-model.md).  With ``haptics`` the
+        service's own ``--scalpel`` decides.
     """
 
     fps: float = 30.0
@@ -123,6 +128,7 @@ class SimulateOptions:
     write_model: bool = True
     frames: bool = True
     solver: str | None = None
+    scalpel: str = "paper"
 
     def check(self) -> None:
         for name in ("fps", "geometry_rate_hz", "dt0", "tolerance_fraction"):
@@ -148,6 +154,10 @@ class SimulateOptions:
             raise InputError(f"volume-stiffness must be a number >= 0, got {self.volume_stiffness}")
         if self.solver is not None and self.solver not in ("newton", "vbd"):
             raise InputError(f"solver must be newton or vbd, not {self.solver!r}")
+        from cutkit.scalpel import SCALPEL_MODELS
+
+        if self.scalpel not in SCALPEL_MODELS:
+            raise InputError(f"scalpel must be one of {', '.join(SCALPEL_MODELS)}, not {self.scalpel!r}")
         if not 1 <= int(self.n_lists) <= 12:
             raise InputError(f"n-lists must lie in 1..12, got {self.n_lists}")
         if self.haptics is not None:
@@ -195,6 +205,9 @@ def simulate(model, trajectory, out_dir, options: SimulateOptions | None = None,
         from cutkit.simulate.blade import ServiceScalpel, parse_host_port
 
         session.scalpel = ServiceScalpel(*parse_host_port(opt.haptics), blade_breadth=session.blade_breadth)
+        if opt.scalpel != "paper":
+            session.warnings.append(f"--scalpel {opt.scalpel} is ignored with --haptics: the service's own "
+                                    "--scalpel decides the force model")
         session.out = session.scalpel.out
         realtime = True  # the service runs on its own clock
     replay = _Replay(session, trajectory, out_dir, opt, realtime)

@@ -75,7 +75,7 @@ class Session:
     """
 
     def __init__(self, model, opt, blade_length: float, blade_breadth: float, scalpel=None):
-        from cutkit.simulate.blade import InProcessScalpel
+        from cutkit.simulate.blade import InProcessScalpel, scalpel_blade
         from cutkit.simulate.run import make_tissue
 
         wall0 = time.perf_counter()
@@ -102,7 +102,8 @@ class Session:
         self.contact = ContactTask(self.tis, model, blade_length)
         self.cut = CutTask(self.tis, self.lock, self.counts)
         self.relax = RelaxTask(self.tis, self.lock, self.counts)
-        self.scalpel = scalpel if scalpel is not None else InProcessScalpel(blade_breadth=self.blade_breadth)
+        self.scalpel = scalpel if scalpel is not None else InProcessScalpel(blade_breadth=self.blade_breadth,
+                                                                                 **scalpel_blade(opt.scalpel))
         self.states_seen: list[str] = []
         self.out = self.scalpel.out
         self.task_s["setup"] = time.perf_counter() - wall0
