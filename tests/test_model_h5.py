@@ -236,3 +236,14 @@ def test_schema_version_constant_is_written(model_file):
     with h5py.File(model_file) as f:
         assert int(f["cutkit"].attrs["schema_version"]) == SCHEMA_VERSION
         assert f["VTKHDF"].attrs["Type"] == b"UnstructuredGrid" or f["VTKHDF"].attrs["Type"] == "UnstructuredGrid"
+
+
+def test_a_row_without_J_c_gets_the_same_default_as_an_older_file():
+    from cutkit.io.model_h5 import V2_J_C
+    from cutkit.model import MATERIAL_FIELDS, Materials
+
+    row = {k: 1.0 for k in MATERIAL_FIELDS if k != "J_c"}
+    m = Materials.from_rows([dict(label=1, name="m", **row)])
+    assert m["J_c"][0] == V2_J_C == 2000.0
+    with pytest.raises(KeyError):
+        Materials.from_rows([dict(label=1, name="m", **{k: 1.0 for k in row if k != "E"})])

@@ -45,6 +45,7 @@ from cutkit.errors import InputError, ModelFormatError
 from cutkit.io.atomic import atomic_output
 from cutkit.model.tetmodel import (
     DEFAULT_MATERIAL_MODEL,
+    MATERIAL_FIELD_DEFAULTS,
     MATERIAL_FIELDS,
     MATERIAL_MODELS,
     BoundaryConditions,
@@ -69,7 +70,7 @@ V1_POISSON_RATIO = 0.45
 #: file (which has none): the "muscle" row of cutkit.assign.defaults, within
 #: the 550-8,000 J/m^2 published for muscle (docs/model-format.md).  Reading
 #: records it in the provenance under ``schema_upgrade``.
-V2_J_C = 2000.0
+V2_J_C = MATERIAL_FIELD_DEFAULTS["J_c"]
 
 #: VTKHDF version written under /VTKHDF (1.0 is read by every ParaView since 5.10).
 VTKHDF_VERSION = (1, 0)

@@ -31,6 +31,11 @@ MATERIAL_FIELDS: dict[str, str] = {
     "J_c": "J/m^2",  # fracture toughness of the fracture scalpel model (schema version 3); J/m^2 = N/m
 }
 
+#: Fields a row may leave out, with the value it then gets: J_c (J/m^2), the "muscle" row of
+#: cutkit.assign.defaults, within the 550-8,000 J/m^2 published for muscle (a table written before
+#: the fracture model had none; the model file reader gives older files the same value).
+MATERIAL_FIELD_DEFAULTS: dict[str, float] = {"J_c": 2000.0}
+
 
 #: Constitutive models a model can name: the element model (stable
 #: neo-Hookean tetrahedra, docs/relaxation.md) and the paper's springs.
@@ -97,10 +102,14 @@ class Materials:
 
     @classmethod
     def from_rows(cls, rows: list[dict], material_model: str = DEFAULT_MATERIAL_MODEL) -> "Materials":
-        """Build the table from dicts with ``label``, ``name`` and every material field."""
+        """Build the table from dicts with ``label``, ``name`` and every material field.
+
+        A field of :data:`MATERIAL_FIELD_DEFAULTS` left out of a row gets its default there.
+        """
         label = np.array([int(r["label"]) for r in rows], np.int32)
         name = [str(r["name"]) for r in rows]
-        values = {k: np.array([float(r[k]) for r in rows], np.float64) for k in MATERIAL_FIELDS}
+        values = {k: np.array([float(r[k] if k in r or k not in MATERIAL_FIELD_DEFAULTS else MATERIAL_FIELD_DEFAULTS[k])
+                               for r in rows], np.float64) for k in MATERIAL_FIELDS}
         return cls(label=label, name=name, values=values, material_model=material_model)
 
     def rows(self) -> list[dict]:
