@@ -70,6 +70,10 @@ CG_MAX_ITERATIONS = 500
 #: (the matrix has drifted from the one it was built on): on the cut knee a setup costs about
 #: 5 s and a stale hierarchy 500 iterations, 100 s.
 AMG_REBUILD_ITERATIONS = 100
+#: Preconditioners of the CG path: ``"amg"`` (smoothed-aggregation multigrid, pyamg, kept across
+#: iterations, steps and cuts) or ``"block_jacobi"`` (the inverse of each node's 3 x 3 diagonal
+#: block, built from every matrix anew; docs/relaxation.md, "Linear solves", compares them).
+PRECONDITIONERS = ("amg", "block_jacobi")
 
 
 class NewtonSolver:
@@ -91,14 +95,20 @@ class NewtonSolver:
         only linearly (a cantilever: residual ratio 0.82 per iteration,
         against quadratic convergence with the exact Hessian); ``"auto"``
         takes the exact Hessian wherever it is positive definite.
+    preconditioner : str
+        One of :data:`PRECONDITIONERS`: what preconditions the CG solves.
     """
 
-    def __init__(self, em: ElementModel, *, linear: str = "auto", hessian: str = "auto"):
+    def __init__(self, em: ElementModel, *, linear: str = "auto", hessian: str = "auto",
+                 preconditioner: str = "amg"):
         if linear not in LINEAR_SOLVERS:
             raise InputError(f"linear solver must be one of {', '.join(LINEAR_SOLVERS)}, not {linear!r}")
         if hessian not in HESSIANS:
             raise InputError(f"hessian must be one of {', '.join(HESSIANS)}, not {hessian!r}")
+        if preconditioner not in PRECONDITIONERS:
+            raise InputError(f"preconditioner must be one of {', '.join(PRECONDITIONERS)}, not {preconditioner!r}")
         self.em = em
+        self.preconditioner = preconditioner
         self.linear = linear
         self.hessian = hessian
         self.counts = {"factorisations": 0, "indefinite": 0, "pattern_builds": 0, "cg_iterations": 0,
@@ -172,9 +182,13 @@ class NewtonSolver:
             d = np.zeros_like(r)
             L.solve(np.ascontiguousarray(r), d)
             return d
-        if self._amg is None or self._amg[1] > A.shape[0]:
-            self._build_amg(A)
-        d, its = _pcg(A, r, self._preconditioner(A), CG_RTOL, CG_MAX_ITERATIONS)
+        if self.preconditioner == "block_jacobi":
+            M = node_block_inverse(A, self.pattern())
+        else:
+            if self._amg is None or self._amg[1] > A.shape[0]:
+                self._build_amg(A)
+            M = self._preconditioner(A)
+        d, its = _pcg(A, r, M, CG_RTOL, CG_MAX_ITERATIONS)
         self.counts["cg_iterations"] += its
         if d is None:  # negative curvature: the exact Hessian is indefinite
             self.counts["indefinite"] += 1
@@ -268,6 +282,32 @@ class NewtonSolver:
                 d[~free] = 0.0
                 return d
         return None
+
+
+def node_block_inverse(A, pattern: KN.Pattern):
+    """The block-Jacobi preconditioner of a Newton matrix: each node's 3 x 3 diagonal block inverted.
+
+    Parameters
+    ----------
+    A : (3n, 3n) scipy CSR float64
+        A matrix of :meth:`NewtonSolver.matrix` (its ``data`` laid out by ``pattern``), positive
+        definite: every diagonal block is then invertible (a held dof's row is the identity's).
+    pattern : Pattern
+        The pattern A was assembled on.
+
+    Returns
+    -------
+    (3n, 3n) scipy CSR float64
+        Block-diagonal: ``M @ r`` applies the inverses node by node.
+    """
+    import scipy.sparse as sp
+
+    n = A.shape[0] // 3
+    # entry (3i + a, 3i + b) sits b - a after the diagonal entry of row 3i + a (_newton_kernels' layout)
+    offset = np.arange(3)[None, None, :] - np.arange(3)[None, :, None]
+    blocks = A.data[pattern.diagonal.reshape(n, 3)[:, :, None] + offset]
+    inverse = np.linalg.inv(blocks)
+    return sp.bsr_matrix((inverse, np.arange(n), np.arange(n + 1)), shape=A.shape).tocsr()
 
 
 @contextlib.contextmanager
