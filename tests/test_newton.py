@@ -288,6 +288,8 @@ def test_block_jacobi_inverts_each_nodes_diagonal_block(deformed):
         b = slice(3 * i, 3 * i + 3)
         expected[b, b] = np.linalg.inv(dense[b, b])
     assert np.allclose(M, expected, rtol=1e-10, atol=1e-14 * np.abs(expected).max())
+    A.data[solver.pattern().diagonal[3 * 5 + 1]] *= -1.0  # one indefinite block: no preconditioner
+    assert node_block_inverse(A, solver.pattern()) is None
 
 
 def test_an_unknown_preconditioner_is_refused(deformed):

@@ -187,6 +187,9 @@ class NewtonSolver:
             return d
         if self.preconditioner == "block_jacobi":
             M = node_block_inverse(A, self.pattern())
+            if M is None:  # a diagonal block is not positive definite, so neither is A
+                self.counts["indefinite"] += 1
+                return None
         else:
             if self._amg is None or self._amg[1] > A.shape[0]:
                 self._build_amg(A, x, free)
@@ -298,15 +301,16 @@ def node_block_inverse(A, pattern: KN.Pattern):
     Parameters
     ----------
     A : (3n, 3n) scipy CSR float64
-        A matrix of :meth:`NewtonSolver.matrix` (its ``data`` laid out by ``pattern``), positive
-        definite: every diagonal block is then invertible (a held dof's row is the identity's).
+        A matrix of :meth:`NewtonSolver.matrix` (its ``data`` laid out by ``pattern``).
     pattern : Pattern
         The pattern A was assembled on.
 
     Returns
     -------
-    (3n, 3n) scipy CSR float64
-        Block-diagonal: ``M @ r`` applies the inverses node by node.
+    (3n, 3n) scipy CSR float64, or None
+        Block-diagonal: ``M @ r`` applies the inverses node by node.  None where a block is not
+        positive definite (then neither is A: an exact Hessian's indefinite step, which the
+        caller takes projected).
     """
     import scipy.sparse as sp
 
@@ -314,6 +318,10 @@ def node_block_inverse(A, pattern: KN.Pattern):
     # entry (3i + a, 3i + b) sits b - a after the diagonal entry of row 3i + a (_newton_kernels' layout)
     offset = np.arange(3)[None, None, :] - np.arange(3)[None, :, None]
     blocks = A.data[pattern.diagonal.reshape(n, 3)[:, :, None] + offset]
+    try:
+        np.linalg.cholesky(blocks)
+    except np.linalg.LinAlgError:
+        return None
     inverse = np.linalg.inv(blocks)
     return sp.bsr_matrix((inverse, np.arange(n), np.arange(n + 1)), shape=A.shape).tocsr()
 
