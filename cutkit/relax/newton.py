@@ -74,7 +74,7 @@ AMG_REBUILD_ITERATIONS = 100
 #: Preconditioners of the CG path: ``"block_jacobi"`` (the inverse of each node's 3 x 3 diagonal
 #: block, built from every matrix anew) or ``"amg"`` (smoothed-aggregation multigrid, pyamg, kept
 #: across iterations, steps and cuts).  The first is the default: on the cut knee it reaches 10^-3 of
-#: the force scale 2.7x sooner (docs/relaxation.md, "Linear solves").
+#: the force scale 2.2-2.8x sooner (docs/relaxation.md, "Why block Jacobi").
 PRECONDITIONERS = ("block_jacobi", "amg")
 
 
