@@ -8,10 +8,11 @@ import _twins_newton as T
 from _fem_reference import kuhn_box
 from _twins_elastic import deformation_gradients
 from cutkit.cutting import cut_step
+from cutkit.errors import InputError
 from cutkit.model.tetmodel import Materials, Prestress, TetModel
 from cutkit.relax import _newton_kernels as KN
 from cutkit.relax.elastic import ElementState, build_element_model
-from cutkit.relax.newton import NewtonSolver, newton_static, newton_step
+from cutkit.relax.newton import PRECONDITIONERS, NewtonSolver, newton_static, newton_step, node_block_inverse
 from cutkit.relax.vbd import elastic_energy, elastic_forces
 from cutkit.simulate.elastic_tissue import ElasticTissue
 
@@ -258,13 +259,40 @@ def test_a_crushing_point_load_never_inverts_a_tet(hessian, monkeypatch):
     assert st.positions[top, 2] < 0.5 * p[top, 2]  # the load did squash the block
 
 
-def test_the_cg_solves_reach_the_same_static_answer():
-    """Multigrid-preconditioned CG (what models above CHOLESKY_MAX_DOFS use) against the factorisation."""
+@pytest.mark.parametrize("preconditioner", PRECONDITIONERS)
+def test_the_cg_solves_reach_the_same_static_answer(preconditioner):
+    """Preconditioned CG (what models above CHOLESKY_MAX_DOFS use) against the factorisation."""
     p, em, f, tip = cantilever()
     f = 0.25 * f
     x_chol, x_cg = p.copy(), p.copy()
     assert newton_static(em, x_chol, f_ext=f, rtol=1e-10, atol=0.0, solver=NewtonSolver(em, linear="cholesky")).converged
-    cg = NewtonSolver(em, linear="cg")
+    cg = NewtonSolver(em, linear="cg", preconditioner=preconditioner)
     info = newton_static(em, x_cg, f_ext=f, rtol=1e-10, atol=0.0, max_iterations=200, solver=cg)
     assert info.converged and cg.counts["cg_iterations"] > 0 and cg.counts["factorisations"] == 0
     assert np.abs(x_cg - x_chol).max() <= 1e-6 * np.abs(x_chol - p).max()
+
+
+def test_block_jacobi_inverts_each_nodes_diagonal_block(deformed):
+    """node_block_inverse against the 3 x 3 diagonal blocks of the dense matrix, inverted one by one."""
+    em, x = deformed
+    n = em.n_nodes
+    fixed = np.zeros((n, 3), bool)
+    fixed[:2] = True
+    fixed[7, 1] = True
+    solver = NewtonSolver(em)
+    A = solver.matrix(x, ~fixed, np.linspace(1.0, 2.0, n), 1)
+    M = node_block_inverse(A, solver.pattern()).toarray()
+    dense = A.toarray()
+    expected = np.zeros_like(dense)
+    for i in range(n):
+        b = slice(3 * i, 3 * i + 3)
+        expected[b, b] = np.linalg.inv(dense[b, b])
+    assert np.allclose(M, expected, rtol=1e-10, atol=1e-14 * np.abs(expected).max())
+    A.data[solver.pattern().diagonal[3 * 5 + 1]] *= -1.0  # one indefinite block: no preconditioner
+    assert node_block_inverse(A, solver.pattern()) is None
+
+
+def test_an_unknown_preconditioner_is_refused(deformed):
+    em, _ = deformed
+    with pytest.raises(InputError, match="preconditioner must be one of"):
+        NewtonSolver(em, preconditioner="ilu")

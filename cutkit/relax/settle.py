@@ -56,8 +56,9 @@ def linear_stiffness(em: ElementModel):
     return sp.csr_matrix((Ke.ravel(), (rows, cols)), shape=(3 * n, 3 * n))
 
 
-def _rigid_modes(x: np.ndarray) -> np.ndarray:
-    """(3n, 6) translations and rotations about the centroid of positions x."""
+def rigid_modes(x: np.ndarray) -> np.ndarray:
+    """(3n, 6) float64: translations and rotations about the centroid of positions x (n, 3)
+    (the near-null space of a linear elastic stiffness, for smoothed-aggregation multigrid)."""
     n = x.shape[0]
     c = x - x.mean(axis=0)
     B = np.zeros((n, 3, 6))
@@ -83,7 +84,7 @@ def settle_static(em: ElementModel, x: np.ndarray, f_ext=None, *, rtol: float = 
     saved = np.random.get_state()
     np.random.seed(AMG_SEED)
     try:
-        ml = pyamg.smoothed_aggregation_solver(K, B=_rigid_modes(x)[free], symmetry="symmetric", max_coarse=500)
+        ml = pyamg.smoothed_aggregation_solver(K, B=rigid_modes(x)[free], symmetry="symmetric", max_coarse=500)
     finally:
         np.random.set_state(saved)
     M = ml.aspreconditioner(cycle="V")
