@@ -20,7 +20,9 @@ def static_solve(em: ElementModel, positions, f_ext=None, gravity=None, *, solve
     (:func:`cutkit.relax.newton.newton_static`; ``iterations`` counts Newton
     iterations), which converges slender bodies in a few dozen iterations;
     ``"vbd"`` by the sweeps of :func:`cutkit.relax.vbd.iterate` (``chebyshev`` only there).
-    ``tolerances``: ``rtol``, ``atol``, ``max_iterations``.
+    ``tolerances``: ``rtol``, ``atol``, ``max_iterations``.  The element
+    (``em.element``, ``"nh"`` or ``"anp"``) is the model's; the average nodal
+    pressure tetrahedron is solved by Newton only.
     """
     if solver == "newton":
         if "chebyshev" in tolerances:
@@ -28,4 +30,6 @@ def static_solve(em: ElementModel, positions, f_ext=None, gravity=None, *, solve
         return newton_static(em, positions, f_ext, gravity, **tolerances)
     if solver != "vbd":
         raise InputError(f"solver must be newton or vbd, not {solver!r}")
+    if em.element != "nh":
+        raise InputError(f"element {em.element!r} is solved by solver='newton' only")
     return vbd_static(em, positions, f_ext, gravity, **tolerances)
