@@ -183,3 +183,33 @@ def test_element_choice_is_checked():
 
 def em_positions(em):
     return np.zeros((em.n_nodes, 3))
+
+
+def cut_slab(element, nu=0.45):
+    """A prestrained slab (10 % along y) cut along y = 1.37 by the newton steps of the tissue."""
+    from cutkit.cutting import cut_step
+    from cutkit.model.tetmodel import Materials, Prestress
+    from cutkit.simulate.elastic_tissue import ElasticTissue
+    from test_newton_tissue import ROW
+
+    p, t = kuhn_box(np.array([6.0, 3.0, 3.0]), (6, 3, 3))
+    ps = Prestress(label=np.array([1], np.int32), fibre_direction=np.array([[0.0, 1.0, 0.0]]),
+                   prestrain=np.array([0.1]))
+    model = TetModel.from_arrays(p, t, materials=Materials.from_rows([dict(ROW, poisson_ratio=nu)]), prestress=ps)
+    tis = ElasticTissue(model, blade_length=1.6, step_s=0.02, solver="newton", element=element)
+    tis.em.fixed[p[:, 2] == 0] = True
+    tis.bc_fixed = p[:, 2] == 0
+    tis.advance(np.zeros((tis.n_nodes, 3)), 0.1)
+    for xb in np.linspace(-0.5, 6.5, 8):
+        tis.apply_cut(cut_step(tis.cm, [xb, 1.37, 3.5], [0.0, 0.0, 1.0]))
+        tis.advance(np.zeros((tis.n_nodes, 3)), tis.time + 0.02)
+    tis.advance(np.zeros((tis.n_nodes, 3)), tis.time + 0.2)
+    return tis
+
+
+def test_the_tissue_cuts_with_anp_and_inverts_no_tet():
+    tis = cut_slab("anp")
+    rep = tis.relax_report()
+    assert rep["not_converged"] == 0 and rep["worst_relative_residual"] <= rep["rtol"]
+    assert tis.em.n_nodes > tis.cm.n_orig_points
+    assert signed_volumes(tis.positions, tis.cm.tets).min() > 0

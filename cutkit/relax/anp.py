@@ -152,3 +152,12 @@ def _positions(em, positions) -> np.ndarray:
     if x.shape != (em.n_nodes, 3):
         raise InputError(f"positions must have shape ({em.n_nodes}, 3), got {x.shape}")
     return x
+
+
+def element_forces(em, positions) -> np.ndarray:
+    """Elastic node forces -dW/dx of the model's element (``em.element``), N: (n, 3) float64."""
+    if em.element == "anp":
+        return anp_forces(em, positions)
+    from cutkit.relax.vbd import elastic_forces
+
+    return elastic_forces(em, positions)

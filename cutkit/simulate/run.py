@@ -102,6 +102,10 @@ class SimulateOptions:
         How the element model's relaxation steps are solved: ``"newton"``
         (projected Newton) or ``"vbd"`` (vertex block descent); None:
         :data:`cutkit.simulate.elastic_tissue.DEFAULT_SOLVER`.  Ignored by the springs.
+    element : str
+        The element model's tetrahedron: ``"nh"`` (stable neo-Hookean linear
+        tets) or ``"anp"`` (average nodal pressure, :mod:`cutkit.relax.anp`;
+        solved by ``"newton"``, which it selects where no solver is named).
     """
 
     fps: float = 30.0
@@ -123,6 +127,7 @@ class SimulateOptions:
     write_model: bool = True
     frames: bool = True
     solver: str | None = None
+    element: str = "nh"
 
     def check(self) -> None:
         for name in ("fps", "geometry_rate_hz", "dt0", "tolerance_fraction"):
@@ -148,6 +153,10 @@ class SimulateOptions:
             raise InputError(f"volume-stiffness must be a number >= 0, got {self.volume_stiffness}")
         if self.solver is not None and self.solver not in ("newton", "vbd"):
             raise InputError(f"solver must be newton or vbd, not {self.solver!r}")
+        if self.element not in ("nh", "anp"):
+            raise InputError(f"element must be nh or anp, not {self.element!r}")
+        if self.element == "anp" and self.solver == "vbd":
+            raise InputError("element anp is solved by the newton solver only, not vbd")
         if not 1 <= int(self.n_lists) <= 12:
             raise InputError(f"n-lists must lie in 1..12, got {self.n_lists}")
         if self.haptics is not None:
@@ -399,7 +408,9 @@ def make_tissue(model, material_model: str, opt: SimulateOptions, blade_length: 
     from cutkit.simulate.elastic_tissue import DEFAULT_SOLVER, ElasticTissue
 
     return ElasticTissue(model, blade_length=blade_length, step_s=1.0 / opt.geometry_rate_hz,
-                         centre_nodes=opt.centre_nodes, solver=opt.solver or DEFAULT_SOLVER)
+                         centre_nodes=opt.centre_nodes,
+                         solver=opt.solver or ("newton" if opt.element == "anp" else DEFAULT_SOLVER),
+                         element=opt.element)
 
 
 def relax_steps_warning(report: dict) -> str | None:
