@@ -176,13 +176,33 @@ def test_element_choice_is_checked():
     p, t = kuhn_box(np.ones(3), (1, 1, 1))
     with pytest.raises(InputError, match="element"):
         build_element_model(TetModel.from_arrays(p, t, materials=solid(0.3)), element="p2")
-    _, _, em = model()
+    p, _, em = model()
     with pytest.raises(InputError, match="newton"):
-        static_solve(em, em_positions(em), solver="vbd")
+        static_solve(em, p.copy(), solver="vbd")
+    _, _, nh = model(element="nh")
+    with pytest.raises(InputError, match="newton"):
+        static_solve(nh, p.copy(), solver="vbd", element="anp")
+    assert nh.element == "nh"  # a refused solve changes nothing
+    with pytest.raises(InputError, match="element"):
+        static_solve(nh, p.copy(), element="p2")
 
 
-def em_positions(em):
-    return np.zeros((em.n_nodes, 3))
+def test_static_solve_takes_the_element_per_run():
+    """The same model solved with element="anp" is the ANP model's equilibrium: a tip-loaded
+    beam at nu 0.49 bends more than with the locking P1 element."""
+    L = np.array([6.0, 1.0, 1.0])
+    p, t = kuhn_box(L, (6, 1, 1))
+    tips = []
+    for element in ("nh", "anp"):
+        em = build_element_model(TetModel.from_arrays(p, t, materials=solid(0.49)))
+        em.fixed[p[:, 0] < 1e-9] = True
+        f = np.zeros(p.shape)
+        f[p[:, 0] > L[0] - 1e-9, 2] = -1e-6
+        x = p.copy()
+        assert static_solve(em, x, f, element=element, rtol=1e-7, atol=1e-16, max_iterations=100).converged
+        assert em.element == element
+        tips.append(-(x - p)[p[:, 0] > L[0] - 1e-9, 2].mean())
+    assert tips[1] > 1.5 * tips[0]
 
 
 def cut_slab(element, nu=0.45):
