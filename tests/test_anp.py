@@ -265,3 +265,23 @@ def test_anp_locks_far_less_than_p1_against_a_p2_reference(kind):
         for q in range(2):
             err_nh, err_anp = abs(r["nh"][q] - 1.0), abs(r["anp"][q] - 1.0)
             assert err_anp <= (1.0 if nu == 0.3 else 0.7) * err_nh, (nu, q, r)
+
+
+def test_simulate_takes_the_element():
+    from click.testing import CliRunner
+
+    from cutkit.cli.main import cli
+    from cutkit.simulate import SimulateOptions
+    from cutkit.simulate.elastic_tissue import ElasticTissue
+
+    out = CliRunner().invoke(cli, ["simulate", "--help"])
+    assert out.exit_code == 0 and "--element" in out.output
+    SimulateOptions(element="anp").check()
+    with pytest.raises(InputError, match="newton"):
+        SimulateOptions(element="anp", solver="vbd").check()
+    with pytest.raises(InputError, match="element"):
+        SimulateOptions(element="p2").check()
+    p, t = kuhn_box(np.ones(3), (1, 1, 1))
+    with pytest.raises(InputError, match="newton"):
+        ElasticTissue(TetModel.from_arrays(p, t, materials=solid(0.45)), blade_length=1.0, step_s=0.02,
+                      solver="vbd", element="anp")
