@@ -285,3 +285,13 @@ def test_simulate_takes_the_element():
     with pytest.raises(InputError, match="newton"):
         ElasticTissue(TetModel.from_arrays(p, t, materials=solid(0.45)), blade_length=1.0, step_s=0.02,
                       solver="vbd", element="anp")
+
+
+def test_a_kept_newton_solver_follows_the_element():
+    from cutkit.relax.newton import NewtonSolver
+
+    _, _, em = model(element="nh")
+    solver = NewtonSolver(em)
+    one_ring = solver.pattern().node_idx.size
+    em.element = "anp"
+    assert solver.pattern().node_idx.size > one_ring

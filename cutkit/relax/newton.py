@@ -122,7 +122,7 @@ class NewtonSolver:
     def pattern(self) -> KN.Pattern:
         """The sparsity pattern of the model's Hessian (built on first use after :meth:`reset`)."""
         em = self.em
-        key = (em.n_nodes, em.n_elements)
+        key = (em.n_nodes, em.n_elements, em.element)  # the element sets the stencil
         if self._pattern is None or key != self._key:
             el = self._elements()
             if em.element == "anp":  # the nodal volume terms couple each node's patch
