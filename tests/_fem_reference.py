@@ -75,3 +75,66 @@ def linear_fem(points, tets, E, nu, fixed, prescribed, loads):
     D = np.concatenate([dofs[c][fixed[:, c]] for c in range(3)])
     u = skfem.solve(*skfem.condense(K, f, x=u, D=D))
     return np.stack([u[dofs[c]] for c in range(3)], axis=1)
+
+
+def _p2_problem(L, cells, E, nu):
+    """P2 vector basis on a structured tet mesh of the box [0, L] and its linear stiffness (scikit-fem)."""
+    import skfem
+    from skfem.models.elasticity import lame_parameters, linear_elasticity
+
+    axes = [np.linspace(0.0, L[c], int(cells[c]) + 1) for c in range(3)]
+    mesh = skfem.MeshTet.init_tensor(*axes)
+    basis = skfem.Basis(mesh, skfem.ElementVector(skfem.ElementTetP2()))
+    return mesh, basis, skfem.asm(linear_elasticity(*lame_parameters(E, nu)), basis)
+
+
+def _cholesky(A, b):
+    """x with A x = b for the symmetric positive definite sparse A (cholespy): the condensed P2
+    systems are too large for a general sparse LU on a few cores."""
+    import cholespy
+
+    A = A.tocsr()
+    solver = cholespy.CholeskySolverD(A.shape[0], A.indptr.astype(np.int32), A.indices.astype(np.int32),
+                                      A.data, cholespy.MatrixType.CSR)
+    x = np.zeros(A.shape[0])
+    solver.solve(np.ascontiguousarray(b, np.float64), x)
+    return x
+
+
+def p2_cantilever(L, cells, E, nu, traction):
+    """Quadratic-tet (P2) cantilever clamped at x = 0 under a uniform traction (0, 0, traction) on
+    x = L[0] (linear elasticity, scikit-fem): the load's work-conjugate deflection,
+    (1 / A) int_tip u_z dA, mm."""
+    import skfem
+
+    mesh, basis, K = _p2_problem(L, cells, E, nu)
+    tip = mesh.facets_satisfying(lambda x: np.isclose(x[0], L[0]))
+    fb = skfem.FacetBasis(mesh, basis.elem, facets=tip)
+
+    @skfem.LinearForm
+    def load(v, w):
+        return traction * v[2]
+
+    @skfem.Functional
+    def uz(w):
+        return w["u"][2]
+
+    f = skfem.asm(load, fb)
+    D = basis.get_dofs(lambda x: np.isclose(x[0], 0.0)).all()
+    u = skfem.solve(*skfem.condense(K, f, D=D), solver=_cholesky)
+    return float(uz.assemble(fb, u=fb.interpolate(u))) / (L[1] * L[2])
+
+
+def p2_block_reaction(L, cells, E, nu, strain):
+    """Quadratic-tet (P2) block bonded to z = 0 and to a plate at z = L[2] pressed down by
+    ``strain`` L[2] (linear elasticity, scikit-fem): the plate's force, N (positive: pushes back)."""
+    import skfem
+
+    mesh, basis, K = _p2_problem(L, cells, E, nu)
+    bottom = basis.get_dofs(lambda x: np.isclose(x[2], 0.0)).all()
+    top = basis.get_dofs(lambda x: np.isclose(x[2], L[2]))
+    top_all, top_z = top.all(), top.all(["u^3"])
+    u = np.zeros(basis.N)
+    u[top_z] = -strain * L[2]
+    u = skfem.solve(*skfem.condense(K, np.zeros(basis.N), x=u, D=np.concatenate([bottom, top_all])), solver=_cholesky)
+    return float(-(K @ u)[top_z].sum())

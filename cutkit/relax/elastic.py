@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from cutkit.errors import InputError
 from cutkit.relax import _adjacency_kernels as KA
 from cutkit.relax import _elastic_kernels as K
 from cutkit.relax import _shape_kernels as KS
@@ -120,6 +121,9 @@ class ElementModel:
         Pool slots handed out to rows.
     colour : (n,) int32
         No two nodes of one element share a colour: the parallel classes.
+    element : str
+        ``"nh"`` stable neo-Hookean linear tets, ``"anp"`` the average nodal
+        pressure tetrahedron (:mod:`cutkit.relax.anp`; projected Newton only).
     """
 
     tets: np.ndarray
@@ -141,6 +145,7 @@ class ElementModel:
     adj_terms: np.ndarray = field(default=None)
     adj_used: int = 0
     colour: np.ndarray = field(default=None)
+    element: str = "nh"
     _classes: tuple | None = None
     _tet_mark: np.ndarray | None = None  # scratch of remove_elements: a flag per element id
 
@@ -363,7 +368,7 @@ def _ranges(counts: np.ndarray) -> np.ndarray:
     return np.arange(int(counts.sum())) - np.repeat(np.cumsum(counts) - counts, counts)
 
 
-def build_element_model(model, *, poisson_ratio=None) -> ElementModel:
+def build_element_model(model, *, poisson_ratio=None, element: str = "nh") -> ElementModel:
     """The element model of a :class:`~cutkit.model.TetModel` in its rest configuration.
 
     Materials come from the model's table (``E`` Pa, ``poisson_ratio``,
@@ -375,7 +380,12 @@ def build_element_model(model, *, poisson_ratio=None) -> ElementModel:
     model : TetModel
     poisson_ratio : float, optional
         Override the table's Poisson ratio for every label.
+    element : str
+        ``"nh"`` (stable neo-Hookean linear tets) or ``"anp"`` (average nodal
+        pressure tetrahedron, :mod:`cutkit.relax.anp`).
     """
+    if element not in ("nh", "anp"):
+        raise InputError(f"element must be nh or anp, not {element!r}")
     mat = material_of_tets(model, model.labels, poisson_ratio=poisson_ratio)
     n = model.n_points
     em = ElementModel.empty(n, model.n_tets)
@@ -383,6 +393,7 @@ def build_element_model(model, *, poisson_ratio=None) -> ElementModel:
     em.add_elements(model.points, model.tets, mat["mu"], mat["lam"], mat["density"], prestrain, fibre)
     em.damping[:] = node_damping(n, model.tets, mat["damping"])
     em.fixed[:] = fixed_nodes_mask(model)[:, None]
+    em.element = element
     em.recolour()
     em.lay_out_rows()
     return em

@@ -35,6 +35,7 @@ import numpy as np
 from cutkit.errors import InputError
 from cutkit.relax import _elastic_kernels as KE
 from cutkit.relax import _newton_kernels as KN
+from cutkit.relax import anp
 from cutkit.relax.elastic import ElementModel, ElementState
 from cutkit.relax.settle import rigid_modes
 from cutkit.relax.vbd import DEFAULT_ATOL_N, SolveInfo, _node_terms, elastic_energy, elastic_forces
@@ -133,13 +134,16 @@ class NewtonSolver:
     def pattern(self) -> KN.Pattern:
         """The sparsity pattern of the model's Hessian (built on first use after :meth:`reset`)."""
         em = self.em
-        key = (em.n_nodes, em.n_elements)
+        key = (em.n_nodes, em.n_elements, em.element)  # the element sets the stencil
         if self._pattern is None or key != self._key:
             el = self._elements()
-            ptr, idx = KN.node_neighbours(el.tets, el.volume, em.n_nodes)
-            blocks = KN.element_blocks(el.tets, el.volume, ptr, idx)
-            indptr, indices, diagonal = KN.scalar_pattern(ptr, idx)
-            self._pattern = KN.Pattern(ptr, idx, blocks, indptr, indices, diagonal)
+            if em.element == "anp":  # the nodal volume terms couple each node's patch
+                self._pattern = anp.anp_pattern(em, el)
+            else:
+                ptr, idx = KN.node_neighbours(el.tets, el.volume, em.n_nodes)
+                blocks = KN.element_blocks(el.tets, el.volume, ptr, idx)
+                indptr, indices, diagonal = KN.scalar_pattern(ptr, idx)
+                self._pattern = KN.Pattern(ptr, idx, blocks, indptr, indices, diagonal)
             self._key = key
             self.counts["pattern_builds"] += 1
         return self._pattern
@@ -160,7 +164,10 @@ class NewtonSolver:
 
         pat = self.pattern()
         data = np.empty(pat.indices.shape[0])
-        KN.assemble_hessian(x, self._elements(), pat, int(project), data)
+        if self.em.element == "anp":
+            anp.assemble_anp_hessian(self.em, x, pat, int(project), data)
+        else:
+            KN.assemble_hessian(x, self._elements(), pat, int(project), data)
         add = np.repeat(np.asarray(diagonal_add, np.float64), 3)
         if not np.any(add > 0):
             add = STATIC_SHIFT * np.abs(data[pat.diagonal])
@@ -379,7 +386,8 @@ class _Potential:
     def residual(self, x: np.ndarray) -> np.ndarray:
         """(n, 3) float64 N."""
         t = self.t
-        r = (elastic_forces(self.em, x) + t.force - t.inertia[:, None] * (x - t.target)
+        forces = anp.anp_forces if self.em.element == "anp" else elastic_forces
+        r = (forces(self.em, x) + t.force - t.inertia[:, None] * (x - t.target)
              - t.damping[:, None] * (x - t.previous))
         r[~self.free] = 0.0
         return r
@@ -389,7 +397,8 @@ class _Potential:
         t, f = self.t, self.free
         kin = 0.5 * np.sum(t.inertia[:, None] * np.where(f, x - t.target, 0.0) ** 2)
         damp = 0.5 * np.sum(t.damping[:, None] * np.where(f, x - t.previous, 0.0) ** 2)
-        return float(elastic_energy(self.em, x) + kin + damp - np.sum(np.where(f, t.force * x, 0.0)))
+        stored = anp.anp_energy if self.em.element == "anp" else elastic_energy
+        return float(stored(self.em, x) + kin + damp - np.sum(np.where(f, t.force * x, 0.0)))
 
 
 def _line_search(problem: _Potential, x: np.ndarray, d: np.ndarray, r: np.ndarray, res: float):

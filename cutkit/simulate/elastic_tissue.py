@@ -90,6 +90,9 @@ class ElasticTissue(TissueBase):
         :data:`NEWTON_STEP_MAX_ITERATIONS` iterations.
     solver : str
         ``"newton"`` or ``"vbd"`` (:data:`SOLVERS`).
+    element : str
+        ``"nh"`` (stable neo-Hookean linear tets) or ``"anp"`` (average nodal
+        pressure tetrahedron, :mod:`cutkit.relax.anp`; newton only).
 
     Attributes
     ----------
@@ -100,11 +103,15 @@ class ElasticTissue(TissueBase):
 
     def __init__(self, model, *, blade_length: float, step_s: float, centre_nodes: bool = False,
                  poisson_ratio: float | None = None, step_rtol: float = STEP_RTOL,
-                 step_max_iterations: int = STEP_MAX_ITERATIONS, solver: str = DEFAULT_SOLVER):
+                 step_max_iterations: int = STEP_MAX_ITERATIONS, solver: str = DEFAULT_SOLVER,
+                 element: str = "nh"):
         from cutkit.errors import InputError
+        from cutkit.relax.anp import check_element
 
         if solver not in SOLVERS:
             raise InputError(f"solver must be one of {', '.join(SOLVERS)}, not {solver!r}")
+        if check_element(element) == "anp" and solver != "newton":
+            raise InputError("element anp is solved by the newton solver only")
         self.solver = solver
         self.model = model
         self.cm = cm = CutMesh.from_model(model, blade_length=blade_length, centre_nodes=centre_nodes)
@@ -124,6 +131,7 @@ class ElasticTissue(TissueBase):
         em.damping[:] = node_damping(n, cm.orig_tets, mat["damping"])
         self.bc_fixed = fixed_nodes_mask(model)
         em.fixed[:] = self.bc_fixed[:, None]
+        em.element = element
         em.recolour()
         em.lay_out_rows()
         self.state: ElementState = initial_element_state(model)
@@ -148,7 +156,7 @@ class ElasticTissue(TissueBase):
     def _force_scale(self) -> float:
         """N: the out-of-balance force of the model as built (prestress, prescribed
         displacements), or, without either, that of a 1 % strain of every tet."""
-        from cutkit.relax.vbd import elastic_forces
+        from cutkit.relax.anp import element_forces as elastic_forces
 
         free = ~self.em.fixed
         r = float(np.linalg.norm(elastic_forces(self.em, self.state.positions)[free]))
@@ -263,7 +271,7 @@ class ElasticTissue(TissueBase):
     def _true_residual(self, x0: np.ndarray, v0: np.ndarray, f_ext: np.ndarray) -> float:
         """N: the norm over all free dofs of the backward Euler residual of the step just made from
         (x0, v0) (vertex block descent's own residual keeps each sleeping node's last value)."""
-        from cutkit.relax.vbd import elastic_forces
+        from cutkit.relax.anp import element_forces as elastic_forces
 
         em, x, h = self.em, self.state.positions, self.step_s
         m = em.masses[:, None]

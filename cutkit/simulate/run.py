@@ -107,6 +107,10 @@ class SimulateOptions:
         friction) or ``"fracture"`` (the crack advances when the blade pays
         J_c per crack area; docs/scalpel-model.md).  With ``haptics`` the
         service's own ``--scalpel`` decides.
+    element : str
+        The element model's tetrahedron: ``"nh"`` (stable neo-Hookean linear
+        tets) or ``"anp"`` (average nodal pressure, :mod:`cutkit.relax.anp`;
+        solved by ``"newton"``, which it selects where no solver is named).
     """
 
     fps: float = 30.0
@@ -129,6 +133,7 @@ class SimulateOptions:
     frames: bool = True
     solver: str | None = None
     scalpel: str = "paper"
+    element: str = "nh"
 
     def check(self) -> None:
         for name in ("fps", "geometry_rate_hz", "dt0", "tolerance_fraction"):
@@ -158,6 +163,10 @@ class SimulateOptions:
 
         if self.scalpel not in SCALPEL_MODELS:
             raise InputError(f"scalpel must be one of {', '.join(SCALPEL_MODELS)}, not {self.scalpel!r}")
+        if self.element not in ("nh", "anp"):
+            raise InputError(f"element must be nh or anp, not {self.element!r}")
+        if self.element == "anp" and self.solver == "vbd":
+            raise InputError("element anp is solved by the newton solver only, not vbd")
         if not 1 <= int(self.n_lists) <= 12:
             raise InputError(f"n-lists must lie in 1..12, got {self.n_lists}")
         if self.haptics is not None:
@@ -412,7 +421,9 @@ def make_tissue(model, material_model: str, opt: SimulateOptions, blade_length: 
     from cutkit.simulate.elastic_tissue import DEFAULT_SOLVER, ElasticTissue
 
     return ElasticTissue(model, blade_length=blade_length, step_s=1.0 / opt.geometry_rate_hz,
-                         centre_nodes=opt.centre_nodes, solver=opt.solver or DEFAULT_SOLVER)
+                         centre_nodes=opt.centre_nodes,
+                         solver=opt.solver or ("newton" if opt.element == "anp" else DEFAULT_SOLVER),
+                         element=opt.element)
 
 
 def relax_steps_warning(report: dict) -> str | None:

@@ -1,0 +1,277 @@
+"""Numba kernels of the average nodal pressure (ANP) tetrahedron (:mod:`cutkit.relax.anp`).
+
+The stored energy is split into a part per element and a volumetric part per node
+(Bonet & Burton 1998; Bonet, Marriott & Hassan 2001; Joldes, Wittek & Miller 2009):
+
+    W = sum_e V_e (psi_dev(F_e) + b(J_e)) + sum_a kv_a / 2 (J_a - 1)^2
+    psi_dev = mu/2 (tr F^T F - 3) - mu (J - 1) + mu/6 (J - 1)^2
+
+with J_a = v_a / V_a the nodal volume ratio (v_a, V_a: a quarter of the current and
+natural volumes of the tets around node a summed), kv_a the sum over them of a quarter
+of V_e K_e (K = lam + 2 mu / 3, the bulk modulus) and b the element barrier of
+:mod:`cutkit.relax._elastic_kernels` (modulus lam + mu, as there).  psi_dev is the stable
+neo-Hookean energy (Smith et al. 2018) with lam replaced by -2 mu / 3: its rest-stability
+term -mu (J - 1) stays, and its small-strain limit is mu |dev eps|^2, so the sum has
+the small-strain limit mu |dev eps|^2 + K / 2 (tr eps)^2: linear elasticity with the
+material's E and nu, the volumetric part carried by the nodes.
+
+With the nodal pressure pi_a = dU_a / dv_a = kv_a (J_a - 1) / V_a and the element's
+average p_e = (1/4) sum_{a in e} pi_a (the "average nodal pressure"),
+
+    dW/dx = sum_e V_e [ mu F + (mu/3 (J - 1) - mu + b'(J) + p_e) cof F ] : dF/dx
+    d2W/dx2 = sum_e V_e dF^T [ mu I + (mu/3 + b'') cof (x) cof + (...) d2J/dF2 ] dF
+              + sum_a (kv_a / V_a^2) g_a g_a^T,   g_a = dv_a/dx = sum_{e ni a} V_e/4 cof(F_e) b_j
+
+The nodal terms couple every pair of nodes of a node's patch: the wider stencil.  The
+element term is projected (negative eigenvalues clamped) where asked; the nodal terms
+are positive semi-definite as they stand.  The kernels check nothing.
+"""
+
+from __future__ import annotations
+
+from collections import namedtuple
+
+import numpy as np
+from numba import njit
+
+from cutkit.relax._elastic_kernels import barrier
+from cutkit.relax._newton_kernels import _cofactor, _deformation, _levi
+
+#: Per node: natural volume V_a (n,), bulk weight kv_a (n,) (N mm: sum V_e K_e / 4),
+#: the tets around it ``node_ptr`` (n + 1,) int64 / ``node_tets`` (4m,) int64 with their corners
+#: ``node_corner`` (4m,) int64.
+NodalTerms = namedtuple("NodalTerms", ["volume", "bulk", "node_ptr", "node_tets", "node_corner"])
+
+
+@njit(cache=True, nogil=True)
+def volume_ratios(x, el, J):
+    """J (m,) = det F of every element (0 where inactive)."""
+    B = np.empty((4, 3))
+    F = np.empty((3, 3))
+    C = np.empty((3, 3))
+    for t in range(el.tets.shape[0]):
+        if el.volume[t] <= 0.0:
+            J[t] = 0.0
+            continue
+        _deformation(x, el, t, B, F)
+        J[t] = _cofactor(F, C)
+
+
+@njit(cache=True, nogil=True)
+def nodal_pressures(el, J, nodal, pi):
+    """Nodal volume ratios J_a and pressures pi_a = kv_a (J_a - 1) / V_a into pi (n,);
+    returns the nodal energy sum_a kv_a / 2 (J_a - 1)^2."""
+    n = nodal.volume.shape[0]
+    v = np.zeros(n)
+    for t in range(el.tets.shape[0]):
+        q = 0.25 * el.volume[t] * J[t]
+        for a in range(4):
+            v[el.tets[t, a]] += q
+    energy = 0.0
+    for a in range(n):
+        Va = nodal.volume[a]
+        if Va <= 0.0:
+            pi[a] = 0.0
+            continue
+        d = v[a] / Va - 1.0
+        pi[a] = nodal.bulk[a] * d / Va
+        energy += 0.5 * nodal.bulk[a] * d * d
+    return energy
+
+
+@njit(cache=True, nogil=True)
+def energy(x, el, nodal):
+    """W (N mm): the elements' deviatoric energy and barrier plus the nodal volumetric energy."""
+    m = el.tets.shape[0]
+    J = np.zeros(m)
+    B = np.empty((4, 3))
+    F = np.empty((3, 3))
+    C = np.empty((3, 3))
+    total = 0.0
+    for t in range(m):
+        V = el.volume[t]
+        if V <= 0.0:
+            continue
+        _deformation(x, el, t, B, F)
+        Jt = _cofactor(F, C)
+        J[t] = Jt
+        mu = el.mu[t]
+        ic = 0.0
+        for r in range(3):
+            for c in range(3):
+                ic += F[r, c] * F[r, c]
+        total += V * (0.5 * mu * (ic - 3.0) - mu * (Jt - 1.0) + mu / 6.0 * (Jt - 1.0) ** 2
+                      + barrier(Jt, el.lam[t] + mu)[0])
+    pi = np.empty(nodal.volume.shape[0])
+    return total + nodal_pressures(el, J, nodal, pi)
+
+
+@njit(cache=True, nogil=True)
+def _element_pressure(el, t, pi):
+    return 0.25 * (pi[el.tets[t, 0]] + pi[el.tets[t, 1]] + pi[el.tets[t, 2]] + pi[el.tets[t, 3]])
+
+
+@njit(cache=True, nogil=True)
+def forces(x, el, nodal, out):
+    """-dW/dx (N) into out (n, 3) (zeroed here)."""
+    m = el.tets.shape[0]
+    J = np.zeros(m)
+    volume_ratios(x, el, J)
+    pi = np.empty(nodal.volume.shape[0])
+    nodal_pressures(el, J, nodal, pi)
+    out[:] = 0.0
+    B = np.empty((4, 3))
+    F = np.empty((3, 3))
+    C = np.empty((3, 3))
+    for t in range(m):
+        V = el.volume[t]
+        if V <= 0.0:
+            continue
+        _deformation(x, el, t, B, F)
+        Jt = _cofactor(F, C)
+        mu = el.mu[t]
+        s = mu / 3.0 * (Jt - 1.0) - mu + barrier(Jt, el.lam[t] + mu)[1] + _element_pressure(el, t, pi)
+        for j in range(4):
+            i = el.tets[t, j]
+            for r in range(3):
+                acc = 0.0
+                for c in range(3):
+                    acc += (mu * F[r, c] + s * C[r, c]) * B[j, c]
+                out[i, r] -= V * acc
+
+
+@njit(cache=True, nogil=True)
+def _project(HF):
+    """Clamp the negative eigenvalues of the symmetric (9, 9) HF to zero, in place."""
+    w, Q = np.linalg.eigh(HF)
+    if w[0] >= 0.0:
+        return
+    for p in range(9):
+        for q in range(9):
+            acc = 0.0
+            for e in range(9):
+                acc += Q[p, e] * max(w[e], 0.0) * Q[q, e]
+            HF[p, q] = acc
+
+
+@njit(cache=True, nogil=True)
+def element_hessian(x, el, t, p_e, project, H):
+    """The element part of d2W/dx2 of element t (12, 12) (dof 3 j + s), its pressure p_e included."""
+    B = np.empty((4, 3))
+    F = np.empty((3, 3))
+    C = np.empty((3, 3))
+    HF = np.empty((9, 9))
+    _deformation(x, el, t, B, F)
+    J = _cofactor(F, C)
+    mu = el.mu[t]
+    _, db, ddb = barrier(J, el.lam[t] + mu)
+    s = mu / 3.0 * (J - 1.0) - mu + db + p_e
+    w = mu / 3.0 + ddb
+    for p in range(9):
+        for q in range(9):
+            HF[p, q] = w * C[p // 3, p % 3] * C[q // 3, q % 3]
+        HF[p, p] += mu
+    for i in range(3):  # s d2J/dF2 = s eps_ijk eps_abc F_kc
+        for j in range(3):
+            if i == j:
+                continue
+            for a in range(3):
+                for b in range(3):
+                    if a != b:
+                        HF[3 * i + a, 3 * j + b] += s * _levi(i, j) * _levi(a, b) * F[3 - i - j, 3 - a - b]
+    if project != 0:
+        _project(HF)
+    V = el.volume[t]
+    for j in range(4):
+        for s_ in range(3):
+            for k in range(4):
+                for t_ in range(3):
+                    acc = 0.0
+                    for c in range(3):
+                        for q in range(3):
+                            acc += B[j, c] * HF[3 * s_ + c, 3 * t_ + q] * B[k, q]
+                    H[3 * j + s_, 3 * k + t_] = V * acc
+
+
+@njit(cache=True, nogil=True)
+def _add_block(pattern, i, j, H, data):
+    """data += the 3x3 H into the block (i, j) of the pattern (which must hold it)."""
+    ptr = pattern.node_ptr
+    lo = ptr[i]
+    deg = ptr[i + 1] - lo
+    k = lo + np.searchsorted(pattern.node_idx[lo:ptr[i + 1]], j)
+    base = 9 * lo + 3 * (k - lo)
+    for r in range(3):
+        for c in range(3):
+            data[base + 3 * r * deg + c] += H[r, c]
+
+
+@njit(cache=True, nogil=True)
+def _nodal_gradients(x, el, nodal, a, local, patch, g):
+    """g_a = dv_a/dx over a's patch: fills patch (k,) and g (k, 3); returns k.
+    ``local`` (n,) is -1 on entry and on exit."""
+    B = np.empty((4, 3))
+    F = np.empty((3, 3))
+    C = np.empty((3, 3))
+    k = 0
+    for q in range(nodal.node_ptr[a], nodal.node_ptr[a + 1]):
+        t = nodal.node_tets[q]
+        _deformation(x, el, t, B, F)
+        _cofactor(F, C)
+        w = 0.25 * el.volume[t]
+        for j in range(4):
+            i = el.tets[t, j]
+            if local[i] < 0:
+                local[i] = k
+                patch[k] = i
+                g[k, :] = 0.0
+                k += 1
+            for r in range(3):
+                acc = 0.0
+                for c in range(3):
+                    acc += C[r, c] * B[j, c]
+                g[local[i], r] += w * acc
+    for q in range(k):
+        local[patch[q]] = -1
+    return k
+
+
+@njit(cache=True, nogil=True)
+def assemble_hessian(x, el, nodal, pattern, project, data):
+    """The ANP Hessian (element parts, projected where ``project``, and nodal rank-one parts)
+    into the CSR ``data`` (zeroed here) of a pattern that holds every patch pair."""
+    data[:] = 0.0
+    m = el.tets.shape[0]
+    n = nodal.volume.shape[0]
+    J = np.zeros(m)
+    volume_ratios(x, el, J)
+    pi = np.empty(n)
+    nodal_pressures(el, J, nodal, pi)
+    H = np.empty((12, 12))
+    Hb = np.empty((3, 3))
+    for t in range(m):
+        if el.volume[t] <= 0.0:
+            continue
+        element_hessian(x, el, t, _element_pressure(el, t, pi), project, H)
+        for a in range(4):
+            for b in range(4):
+                Hb[:, :] = H[3 * a:3 * a + 3, 3 * b:3 * b + 3]
+                _add_block(pattern, el.tets[t, a], el.tets[t, b], Hb, data)
+    most = 0
+    for a in range(n):
+        most = max(most, nodal.node_ptr[a + 1] - nodal.node_ptr[a])
+    local = np.full(n, -1, np.int64)
+    patch = np.empty(4 * most, np.int64)
+    g = np.empty((4 * most, 3))
+    for a in range(n):
+        Va = nodal.volume[a]
+        if Va <= 0.0:
+            continue
+        c = nodal.bulk[a] / (Va * Va)
+        k = _nodal_gradients(x, el, nodal, a, local, patch, g)
+        for p in range(k):
+            for q in range(k):
+                for r in range(3):
+                    for s in range(3):
+                        Hb[r, s] = c * g[p, r] * g[q, s]
+                _add_block(pattern, patch[p], patch[q], Hb, data)

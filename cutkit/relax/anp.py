@@ -1,0 +1,163 @@
+"""The average nodal pressure (ANP) tetrahedron: linear tets that do not lock near incompressibility.
+
+Linear tetrahedra with a volumetric energy per element lock as nu -> 1/2:
+each element must keep its own volume, and a mesh of them has too few
+motions that do (docs/relaxation.md, "Element choice").  The ANP tetrahedron
+(Bonet & Burton 1998; Bonet, Marriott & Hassan 2001; Joldes, Wittek & Miller
+2009) keeps the deviatoric energy per element and moves the volumetric
+energy to the nodes, where it depends on the nodal volume ratio
+
+    J_a = (sum of current tet volumes around a / 4) / (the same at rest),
+
+one constraint per node instead of one per element (about five times fewer).
+The energy, its split and its derivatives are in :mod:`cutkit.relax._anp_kernels`.
+
+Everything the nodes need is derived from the element list each time it is
+asked for (:func:`nodal_terms`), so after a cut the duplicated nodes have
+the nodal volumes of the tets that hold them, and the natural (prestrained)
+rest shapes of :func:`cutkit.relax.elastic.rest_shape` are the rest shapes.
+Only the projected Newton solver (:mod:`cutkit.relax.newton`) minimises it;
+vertex block descent's exact vertex quadratic does not hold for it.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from cutkit.errors import InputError
+from cutkit.relax import _anp_kernels as KP
+from cutkit.relax import _elastic_kernels as KE
+from cutkit.relax import _newton_kernels as KN
+
+#: The element choices of the element model: ``"nh"`` stable neo-Hookean linear tets (one
+#: volumetric energy per element), ``"anp"`` the average nodal pressure tetrahedron.
+ELEMENTS = ("nh", "anp")
+
+
+def check_element(element: str) -> str:
+    """``element`` if it is one of :data:`ELEMENTS`, else an :class:`InputError`."""
+    if element not in ELEMENTS:
+        raise InputError(f"element must be one of {', '.join(ELEMENTS)}, not {element!r}")
+    return element
+
+
+def active_elements(em) -> KE.Elements:
+    """The model's elements in use (``n_elements`` rows), contiguous."""
+    m = em.n_elements
+    return KE.Elements(*(np.ascontiguousarray(a[:m]) for a in (em.tets, em.Dminv, em.volume, em.mu, em.lam)))
+
+
+def nodal_terms(em, el: KE.Elements | None = None) -> KP.NodalTerms:
+    """Nodal volumes, bulk weights and the tets around each node, from the active elements.
+
+    Parameters
+    ----------
+    em : ElementModel
+    el : Elements, optional
+        Its active elements (default :func:`active_elements`).
+
+    Returns
+    -------
+    NodalTerms
+        ``volume`` (n,) mm^3 = sum V_e / 4, ``bulk`` (n,) N mm = sum V_e K_e / 4 with
+        K = lam + 2 mu / 3, and the node-to-tet lists of the active tets.
+    """
+    el = active_elements(em) if el is None else el
+    n = em.n_nodes
+    live = np.flatnonzero(el.volume > 0.0)
+    corners = el.tets[live].ravel()
+    quarter = np.repeat(0.25 * el.volume[live], 4)
+    bulk = np.repeat(el.lam[live] + 2.0 * el.mu[live] / 3.0, 4)
+    order = np.argsort(corners, kind="stable")
+    ptr = np.zeros(n + 1, np.int64)
+    ptr[1:] = np.cumsum(np.bincount(corners, minlength=n))
+    return KP.NodalTerms(np.bincount(corners, quarter, minlength=n), np.bincount(corners, quarter * bulk, minlength=n),
+                         ptr, np.ascontiguousarray(np.repeat(live, 4)[order]),
+                         np.ascontiguousarray(np.tile(np.arange(4), live.size)[order]))
+
+
+def anp_energy(em, positions) -> float:
+    """Total stored energy of the ANP model, N mm."""
+    el = active_elements(em)
+    return float(KP.energy(_positions(em, positions), el, nodal_terms(em, el)))
+
+
+def anp_forces(em, positions) -> np.ndarray:
+    """Elastic node forces -dW/dx of the ANP model, N: (n, 3) float64."""
+    el = active_elements(em)
+    out = np.zeros((em.n_nodes, 3))
+    KP.forces(_positions(em, positions), el, nodal_terms(em, el), out)
+    return out
+
+
+def patch_neighbours(tets, volume, n: int):
+    """Node rows of the ANP Hessian's pattern: every pair of nodes in one node's patch.
+
+    Parameters
+    ----------
+    tets : (m, 4) int64
+    volume : (m,) float64
+        0: inactive.
+    n : int
+
+    Returns
+    -------
+    node_ptr : (n + 1,) int64
+    node_idx : (nb,) int64
+        Sorted columns; every node has its diagonal block.
+    """
+    import scipy.sparse as sp
+
+    live = np.flatnonzero(np.asarray(volume) > 0.0)
+    corners = np.asarray(tets, np.int64)[live].ravel()
+    T = sp.csr_matrix((np.ones(corners.size), (corners, np.repeat(np.arange(live.size), 4))), shape=(n, live.size))
+    ring = (T @ T.T).tocsr()
+    wide = (ring @ ring + sp.identity(n, format="csr")).tocsr()
+    wide.sort_indices()
+    return wide.indptr.astype(np.int64), wide.indices.astype(np.int64)
+
+
+def anp_pattern(em, el: KE.Elements | None = None) -> KN.Pattern:
+    """The sparsity pattern of the ANP Hessian, in :mod:`cutkit.relax._newton_kernels`'s layout."""
+    el = active_elements(em) if el is None else el
+    ptr, idx = patch_neighbours(el.tets, el.volume, em.n_nodes)
+    blocks = KN.element_blocks(el.tets, el.volume, ptr, idx)
+    indptr, indices, diagonal = KN.scalar_pattern(ptr, idx)
+    return KN.Pattern(ptr, idx, blocks, indptr, indices, diagonal)
+
+
+def assemble_anp_hessian(em, positions, pattern: KN.Pattern, project: int, data: np.ndarray) -> None:
+    """The ANP Hessian into the CSR values ``data`` (9 nb,) float64 of ``pattern`` (:func:`anp_pattern`).
+
+    ``project`` 0: exact; 1: each element's 9x9 stress Hessian projected to positive
+    semi-definite (the nodal terms are as they stand, positive semi-definite).
+    """
+    el = active_elements(em)
+    KP.assemble_hessian(_positions(em, positions), el, nodal_terms(em, el), pattern, int(project), data)
+
+
+def anp_hessian(em, positions, project: int = 0):
+    """The ANP Hessian d2W/dx2 as a (3n, 3n) scipy CSR matrix (no constraints)."""
+    import scipy.sparse as sp
+
+    pat = anp_pattern(em)
+    data = np.empty(pat.indices.shape[0])
+    assemble_anp_hessian(em, positions, pat, project, data)
+    n3 = 3 * em.n_nodes
+    return sp.csr_matrix((data, pat.indices, pat.indptr), shape=(n3, n3))
+
+
+def _positions(em, positions) -> np.ndarray:
+    x = np.ascontiguousarray(positions, np.float64)
+    if x.shape != (em.n_nodes, 3):
+        raise InputError(f"positions must have shape ({em.n_nodes}, 3), got {x.shape}")
+    return x
+
+
+def element_forces(em, positions) -> np.ndarray:
+    """Elastic node forces -dW/dx of the model's element (``em.element``), N: (n, 3) float64."""
+    if em.element == "anp":
+        return anp_forces(em, positions)
+    from cutkit.relax.vbd import elastic_forces
+
+    return elastic_forces(em, positions)
