@@ -110,6 +110,19 @@ def print_uncut_note(uncut: int) -> None:
              "it ended, or a copy along an earlier cut cut elsewhere) and stay joined; see docs/cutting.md")
 
 
+def print_crumbs_note(cm) -> None:
+    """Tell the crumbs the cut removed and the larger pieces it set loose (``cutkit.cutting.crumbs``), if any."""
+    from cutkit.cutting.crumbs import CRUMB_VOLUME_FRACTION, crumb_volume, loose_pieces
+
+    if cm.crumb_count:
+        note(f"{cm.crumb_count} crumb{'s' * (cm.crumb_count != 1)} cut loose (each at most "
+             f"{CRUMB_VOLUME_FRACTION:g} of the model's volume) removed: {crumb_volume(cm):.4g} mm^3")
+    loose = loose_pieces(cm)[1:]
+    if loose.size:
+        note(f"{loose.size} piece{'s' * (loose.size != 1)} cut loose besides the largest: "
+             + ", ".join(f"{v:.4g}" for v in loose[:10]) + (" ..." if loose.size > 10 else "") + " mm^3")
+
+
 def missed_message(points, tips) -> str:
     """The warning of a blade that never cut: the model's extents and the trajectory's, in mm."""
     from cutkit.simulate.record import extents_text

@@ -112,6 +112,7 @@ def rebase(cm):
         Old tet id (CutMesh numbering before the call) of each new original
         tetrahedron ``i``; node ids are unchanged.
     """
+    from cutkit.cutting.crumbs import crumb_volume
     from cutkit.cutting.cutmesh import CutMesh
     from cutkit.cutting.export import cut_surface_faces
 
@@ -134,6 +135,9 @@ def rebase(cm):
     fresh.step_count = cm.step_count
     fresh.started_inside = cm.started_inside
     fresh.node_rep = _node_reps(cm)
+    fresh.model_volume = cm.model_volume  # crumbs are measured against the model as loaded
+    fresh.crumb_volume_before = crumb_volume(cm)
+    fresh.crumb_count = cm.crumb_count
     find_twins(fresh)
     # replace the whole state: caches keyed by the old numbering (surface BVH, sweep buffers) go too
     vars(cm).clear()
