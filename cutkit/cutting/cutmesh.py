@@ -296,6 +296,12 @@ class CutMesh:
         mine = self.refused_edges.union(self.pending_edges)
         return self.uncut_before + sum(1 for e in mine if not np.isfinite(self.edge_t[e]))
 
+    def uncut_edge_places(self):
+        """(k, 3) float64 rest midpoints, mm, of the edges :meth:`edges_left_uncut` counts (every stroke's)."""
+        mine = sorted(e for e in self.refused_edges.union(self.pending_edges) if not np.isfinite(self.edge_t[e]))
+        here = self._X[self.edges[mine]].mean(axis=1) if mine else np.zeros((0, 3))
+        return np.vstack([self.uncut_places_before, here])
+
     def _retry_pending(self, touched):
         """Cut the deferred edges of the tets in ``touched`` (list, extended in place) that are now allowed."""
         if not self.pending_edges:

@@ -49,6 +49,7 @@ def init_records(cm, n_model_points, n_model_tets):
     cm.cut_faces_before = set()
     cm.n_rebases = 0
     cm.uncut_before = 0
+    cm.uncut_places_before = np.zeros((0, 3))  # their rest midpoints, mm (CutMesh.uncut_edge_places)
     cm.node_rep = np.arange(n_model_points, dtype=np.int64)  # see _node_reps
     cm.edge_twins, cm.face_twins = {}, {}  # see find_twins
 
@@ -132,6 +133,7 @@ def rebase(cm):
     fresh.cut_faces_before = cut_faces
     fresh.n_rebases = cm.n_rebases + 1
     fresh.uncut_before = cm.edges_left_uncut()
+    fresh.uncut_places_before = cm.uncut_edge_places()
     fresh.step_count = cm.step_count
     fresh.started_inside = cm.started_inside
     fresh.node_rep = _node_reps(cm)

@@ -32,6 +32,7 @@ import numpy as np
 
 from cutkit.errors import InputError
 from cutkit.cutting import _kernels_step as KS
+from cutkit.cutting.contact import touches_only
 from cutkit.cutting.crumbs import remove_crumbs
 from cutkit.cutting.cutmesh import CutMesh
 
@@ -232,7 +233,7 @@ def cut_step(cm: CutMesh, tip, a) -> StepResult:
     cut_edges = []
     for (kind, i), val in zip(ev_id.tolist(), ev_val):
         if kind == KS.EV_EDGE:
-            ring = cm.try_cut_edge(i, val[0])
+            ring = not touches_only(cm, i, val[0], swept) and cm.try_cut_edge(i, val[0])
             if ring:
                 cut_edges.append(i)
                 cut_edges.extend(cm.retried_edges)  # deferred edges this cut let through

@@ -246,7 +246,7 @@ def extents_text(points, tips) -> str:
 
 
 def closing_warnings(session, tips=None) -> None:
-    """The warnings a finished session adds: no touch, or a touch without a cut.
+    """The warnings a finished session adds: no touch, or a touch without a cut; crossed edges left uncut.
 
     ``tips`` (the trajectory's blade tips, mm) adds the model's and the trajectory's extents."""
     if session.counts["entries"] == 0:
@@ -254,6 +254,11 @@ def closing_warnings(session, tips=None) -> None:
         session.warnings.append(f"the trajectory never touches the tissue: no cut{where}")
     elif not session.tets_cut:
         session.warnings.append("the blade touched the tissue but never cut it (F_enter not reached)")
+    from cutkit.cutting.contact import uncut_edges_line
+
+    line = uncut_edges_line(session.tis.cm)  # crossed edges left uncut, counted and named
+    if line:
+        session.warnings.append(line)
 
 
 def write_cut_model(session, out_dir, summary_: dict) -> None:
