@@ -71,13 +71,12 @@ def test_crumb_kernel_matches_twin():
     alive = cm._alive[:total].copy()
     live = np.flatnonzero(alive)
     rng = np.random.default_rng(0)
-    support = np.arange(cm.n_points)
-    support[cm.n_orig_points:] = cm._def_nodes[cm.n_orig_points:cm.n_points, 0]
-    inc = KC.Incidence(cm.node_tet_off, cm.node_tet_idx, support, cm.sub_start, cm.sub_count)
-    for limit in (1e-3, 0.05, 1.0, 5.0, 50.0):
+    inc = KC.Incidence(cm.node_tet_off, cm.node_tet_idx, cm._def_nodes, cm.n_orig_points, cm.sub_start,
+                       cm.sub_count)
+    mark = np.zeros(total, np.int64)
+    for i, limit in enumerate((1e-3, 0.05, 1.0, 5.0, 50.0)):
         seeds = rng.choice(live, 12)
-        state, out = np.zeros(total, np.int8), np.empty(total, np.int64)
-        n, k = KC.loose_small_pieces(cm._X, cm._tets[:total], alive, inc, seeds, limit, state, out)
+        got, k = KC.loose_small_pieces(cm._X, cm._tets[:total], alive, inc, seeds, limit, mark, 4 * (i + 1))
         ref, k_ref = loose_small_pieces_twin(cm._X, cm._tets[:total], alive, seeds, limit)
         assert k == k_ref
-        np.testing.assert_array_equal(np.sort(out[:n]), ref)
+        np.testing.assert_array_equal(np.sort(got), ref)

@@ -17,13 +17,14 @@ from numba import njit
 
 #: Live-tet incidence of a :class:`~cutkit.cutting.cutmesh.CutMesh` as flat arrays.
 #: ``node_tet_off`` (n0 + 1,), ``node_tet_idx`` (4 m0,) int64: original tets of each original
-#: node (CSR); ``support`` (n,) int64: an original node every tet holding node i also holds
-#: (i itself for an original node, its first defining node for a cut node);
-#: ``sub_start``, ``sub_count`` (m0,) int64: the contiguous range of sub-tet ids of each
-#: original tet (count 0: the original tet itself).
-Incidence = namedtuple("Incidence", "node_tet_off node_tet_idx support sub_start sub_count")
+#: node (CSR); ``def_nodes`` (n, 4) int64 and ``n_orig`` (int): a cut node i >= n_orig lies in
+#: original tets that all hold its first defining node ``def_nodes[i, 0]`` (an original node
+#: lies in its own); ``sub_start``, ``sub_count`` (m0,) int64: the contiguous range of sub-tet
+#: ids of each original tet (count 0: the original tet itself).
+Incidence = namedtuple("Incidence", "node_tet_off node_tet_idx def_nodes n_orig sub_start sub_count")
 
-_UNSEEN, _GROWING, _LARGE, _CRUMB = 0, 1, 2, 3
+#: States of a tet in one call, stored as ``mark[t] - base`` (below ``base``: not seen in this call).
+_GROWING, _LARGE, _CRUMB = 1, 2, 3
 
 
 @njit(cache=True, nogil=True)
@@ -37,11 +38,29 @@ def _rest_volume(X, tv):
 
 
 @njit(cache=True, nogil=True)
-def _grow(X, tets, alive, inc, s, limit, state, comp):
-    """Grow the piece of live tet ``s`` into ``comp``; returns (size, volume, large)."""
+def _state(mark, base, t):
+    """State of tet t in this call (0: not seen)."""
+    v = mark[t] - base
+    return v if v > 0 else 0
+
+
+@njit(cache=True, nogil=True)
+def _push(comp, n, c):
+    """comp with c at position n (grown by doubling when full)."""
+    if n == comp.shape[0]:
+        bigger = np.empty(2 * n, np.int64)
+        bigger[:n] = comp
+        comp = bigger
+    comp[n] = c
+    return comp
+
+
+@njit(cache=True, nogil=True)
+def _grow(X, tets, alive, inc, s, limit, mark, base, comp):
+    """Grow the piece of live tet ``s`` into ``comp``; returns (comp, size, large)."""
     n = 1
     comp[0] = s
-    state[s] = _GROWING
+    mark[s] = base + _GROWING
     head = 0
     vol = 0.0
     while head < n:
@@ -49,30 +68,30 @@ def _grow(X, tets, alive, inc, s, limit, state, comp):
         head += 1
         vol += _rest_volume(X, tets[t])
         if vol > limit:
-            return n, vol, True
+            return comp, n, True
         for j in range(4):
             v = tets[t, j]
-            sup = inc.support[v]
+            sup = v if v < inc.n_orig else inc.def_nodes[v, 0]
             for k in range(inc.node_tet_off[sup], inc.node_tet_off[sup + 1]):
                 o = inc.node_tet_idx[k]
                 lo, hi = o, o + 1
                 if inc.sub_count[o] > 0:
                     lo, hi = inc.sub_start[o], inc.sub_start[o] + inc.sub_count[o]
                 for c in range(lo, hi):
-                    if not alive[c] or state[c] == _GROWING:
+                    if not alive[c] or _state(mark, base, c) == _GROWING:
                         continue
                     if tets[c, 0] != v and tets[c, 1] != v and tets[c, 2] != v and tets[c, 3] != v:
                         continue
-                    if state[c] == _LARGE:
-                        return n, vol, True
-                    state[c] = _GROWING
-                    comp[n] = c
+                    if _state(mark, base, c) == _LARGE:
+                        return comp, n, True
+                    mark[c] = base + _GROWING
+                    comp = _push(comp, n, c)
                     n += 1
-    return n, vol, False
+    return comp, n, False
 
 
 @njit(cache=True, nogil=True)
-def loose_small_pieces(X, tets, alive, inc, seeds, limit, state, out):
+def loose_small_pieces(X, tets, alive, inc, seeds, limit, mark, base):
     """Live tets of the pieces through ``seeds`` whose rest volume is at most ``limit``.
 
     Parameters
@@ -83,27 +102,29 @@ def loose_small_pieces(X, tets, alive, inc, seeds, limit, state, out):
     inc : Incidence
     seeds : (s,) int64  live tet ids to start from
     limit : float  largest crumb volume, mm^3
-    state : (T,) int8  zeros on entry (scratch)
-    out : (T,) int64  receives the crumbs' tets, piece after piece
+    mark : (>= T,) int64  per-tet marks kept between calls, every entry below ``base`` (no reset)
+    base : int  this call's stamp; leaves marks below ``base + 4``
 
     Returns
     -------
-    n_out : int  tets written to ``out``
+    crumbs : (c,) int64  the crumbs' tets, piece after piece
     n_pieces : int  crumbs found
     """
-    comp = np.empty(tets.shape[0], np.int64)
+    comp = np.empty(64, np.int64)
+    out = np.empty(64, np.int64)
     n_out = 0
     n_pieces = 0
     for i in range(seeds.shape[0]):
         s = seeds[i]
-        if not alive[s] or state[s] != _UNSEEN:
+        if not alive[s] or _state(mark, base, s) != 0:
             continue
-        n, vol, large = _grow(X, tets, alive, inc, s, limit, state, comp)
-        mark = _LARGE if large else _CRUMB
+        comp, n, large = _grow(X, tets, alive, inc, s, limit, mark, base, comp)
+        flag = _LARGE if large else _CRUMB
         for q in range(n):
-            state[comp[q]] = mark
+            mark[comp[q]] = base + flag
         if not large:
-            out[n_out:n_out + n] = comp[:n]
-            n_out += n
+            for q in range(n):
+                out = _push(out, n_out, comp[q])
+                n_out += 1
             n_pieces += 1
-    return n_out, n_pieces
+    return out[:n_out].copy(), n_pieces

@@ -38,6 +38,8 @@ def init_crumbs(cm):
     cm.model_volume = float(np.linalg.det(d).sum() / 6.0)
     cm.crumb_tets = {}  # tet id -> rest volume, for crumb tets of this cut state
     cm.crumb_volume_before = 0.0  # crumbs removed before the last rebase, mm^3
+    cm.crumb_mark = np.zeros(m0, np.int64)  # per-tet marks of the crumb search (see loose_small_pieces)
+    cm.crumb_stamp = 0
     cm.crumb_count = 0  # crumbs removed (a crumb re-made by a later step and removed again counts again)
 
 
@@ -62,18 +64,18 @@ def remove_crumbs(cm, seeds) -> int:
     if not seeds.size:
         return 0
     total = cm.n_tets_total
-    support = np.arange(cm.n_points, dtype=np.int64)
-    made = support >= cm.n_orig_points
-    support[made] = cm._def_nodes[:cm.n_points][made, 0]
-    inc = KC.Incidence(cm.node_tet_off, cm.node_tet_idx, support, cm.sub_start, cm.sub_count)
-    state = np.zeros(total, np.int8)
-    out = np.empty(total, np.int64)
+    if cm.crumb_mark.shape[0] < total:
+        mark = np.zeros(max(total, 2 * cm.crumb_mark.shape[0]), np.int64)
+        mark[:cm.crumb_mark.shape[0]] = cm.crumb_mark
+        cm.crumb_mark = mark
+    cm.crumb_stamp += 4  # marks of earlier calls are below it: no per-step reset
+    inc = KC.Incidence(cm.node_tet_off, cm.node_tet_idx, cm._def_nodes, cm.n_orig_points, cm.sub_start,
+                       cm.sub_count)
     limit = CRUMB_VOLUME_FRACTION * cm.model_volume
-    n_out, n_pieces = KC.loose_small_pieces(cm._X, cm._tets[:total], cm._alive[:total], inc, seeds,
-                                            limit, state, out)
+    dead, n_pieces = KC.loose_small_pieces(cm._X, cm._tets, cm._alive, inc, seeds, limit, cm.crumb_mark,
+                                           cm.crumb_stamp)
     if not n_pieces:
         return 0
-    dead = out[:n_out]
     vols = _volumes(cm._X, cm._tets[dead])
     cm.remove_tets(dead)
     cm.crumb_tets.update(zip(dead.tolist(), vols.tolist()))
