@@ -20,8 +20,9 @@ from numba import njit
 #: node (CSR); ``def_nodes`` (n, 4) int64 and ``n_orig`` (int): a cut node i >= n_orig lies in
 #: original tets that all hold its first defining node ``def_nodes[i, 0]`` (an original node
 #: lies in its own); ``sub_start``, ``sub_count`` (m0,) int64: the contiguous range of sub-tet
-#: ids of each original tet (count 0: the original tet itself).
-Incidence = namedtuple("Incidence", "node_tet_off node_tet_idx def_nodes n_orig sub_start sub_count")
+#: ids of each original tet (count 0: the original tet itself); ``neighbors`` (m0, 4) int64: the
+#: original tets across each face (-1: boundary).
+Incidence = namedtuple("Incidence", "node_tet_off node_tet_idx def_nodes n_orig sub_start sub_count neighbors")
 
 #: States of a tet in one call, stored as ``mark[t] - base`` (below ``base``: not seen in this call).
 _GROWING, _LARGE, _CRUMB = 1, 2, 3
@@ -56,19 +57,69 @@ def _push(comp, n, c):
 
 
 @njit(cache=True, nogil=True)
-def _grow(X, tets, alive, inc, s, limit, mark, base, comp):
-    """Grow the piece of live tet ``s`` into ``comp``; returns (comp, size, large)."""
-    n = 1
-    comp[0] = s
+def _visit_uncut(inc, alive, mark, base, t, q):
+    """Face neighbours of uncut original tet t that are uncut too, onto ``q`` (queues) as growing.
+
+    Returns (q, state): state 1 if a cut tet is next to t (its nodes' tets must be scanned),
+    2 if a large piece was met, else 0.
+    """
+    near_cut = 0
+    for f in range(4):
+        nb = inc.neighbors[t, f]
+        if nb < 0 or not alive[nb] and inc.sub_count[nb] == 0:
+            continue
+        if inc.sub_count[nb] > 0:
+            near_cut = 1
+            continue
+        st = _state(mark, base, nb)
+        if st == _LARGE:
+            return q, 2
+        if st == 0:
+            mark[nb] = base + _GROWING
+            q = _enqueue(q, nb, True)
+    return q, near_cut
+
+
+@njit(cache=True, nogil=True)
+def _enqueue(q, c, cheap):
+    """Put tet c on queue ``q`` (row 0 its members so far, row 1 uncut tets to visit, row 2 cut ones;
+    column 0 of each row holds its length)."""
+    for r in (0, 1 if cheap else 2):
+        k = q[r, 0] + 1
+        if k == q.shape[1]:
+            bigger = np.zeros((3, 2 * q.shape[1]), np.int64)
+            bigger[:, :q.shape[1]] = q
+            q = bigger
+        q[r, k] = c
+        q[r, 0] = k
+    return q
+
+
+@njit(cache=True, nogil=True)
+def _grow(X, tets, alive, inc, s, limit, mark, base, q):
+    """Grow the piece of live tet ``s``; returns (q, large): its members are ``q[0, 1:q[0, 0] + 1]``.
+
+    Uncut original tets are visited first, across faces (cheap): a large
+    piece is usually found large before the cut's sub-tets are scanned.
+    """
+    m0 = inc.sub_count.shape[0]
+    q[:, 0] = 0
     mark[s] = base + _GROWING
-    head = 0
+    q = _enqueue(q, s, s < m0)
     vol = 0.0
-    while head < n:
-        t = comp[head]
-        head += 1
+    while q[1, 0] > 0 or q[2, 0] > 0:
+        r = 1 if q[1, 0] > 0 else 2
+        t = q[r, q[r, 0]]
+        q[r, 0] -= 1
         vol += _rest_volume(X, tets[t])
         if vol > limit:
-            return comp, n, True
+            return q, True
+        if t < m0:
+            q, st = _visit_uncut(inc, alive, mark, base, t, q)
+            if st == 2:
+                return q, True
+            if st == 0:
+                continue
         for j in range(4):
             v = tets[t, j]
             sup = v if v < inc.n_orig else inc.def_nodes[v, 0]
@@ -83,11 +134,10 @@ def _grow(X, tets, alive, inc, s, limit, mark, base, comp):
                     if tets[c, 0] != v and tets[c, 1] != v and tets[c, 2] != v and tets[c, 3] != v:
                         continue
                     if _state(mark, base, c) == _LARGE:
-                        return comp, n, True
+                        return q, True
                     mark[c] = base + _GROWING
-                    comp = _push(comp, n, c)
-                    n += 1
-    return comp, n, False
+                    q = _enqueue(q, c, c < m0)
+    return q, False
 
 
 @njit(cache=True, nogil=True)
@@ -110,7 +160,7 @@ def loose_small_pieces(X, tets, alive, inc, seeds, limit, mark, base):
     crumbs : (c,) int64  the crumbs' tets, piece after piece
     n_pieces : int  crumbs found
     """
-    comp = np.empty(64, np.int64)
+    q = np.zeros((3, 256), np.int64)
     out = np.empty(64, np.int64)
     n_out = 0
     n_pieces = 0
@@ -118,13 +168,14 @@ def loose_small_pieces(X, tets, alive, inc, seeds, limit, mark, base):
         s = seeds[i]
         if not alive[s] or _state(mark, base, s) != 0:
             continue
-        comp, n, large = _grow(X, tets, alive, inc, s, limit, mark, base, comp)
+        q, large = _grow(X, tets, alive, inc, s, limit, mark, base, q)
         flag = _LARGE if large else _CRUMB
-        for q in range(n):
-            mark[comp[q]] = base + flag
+        n = q[0, 0]
+        for j in range(1, n + 1):
+            mark[q[0, j]] = base + flag
         if not large:
-            for q in range(n):
-                out = _push(out, n_out, comp[q])
+            for j in range(1, n + 1):
+                out = _push(out, n_out, q[0, j])
                 n_out += 1
             n_pieces += 1
     return out[:n_out].copy(), n_pieces

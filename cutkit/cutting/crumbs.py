@@ -70,7 +70,7 @@ def remove_crumbs(cm, seeds) -> int:
         cm.crumb_mark = mark
     cm.crumb_stamp += 4  # marks of earlier calls are below it: no per-step reset
     inc = KC.Incidence(cm.node_tet_off, cm.node_tet_idx, cm._def_nodes, cm.n_orig_points, cm.sub_start,
-                       cm.sub_count)
+                       cm.sub_count, cm.neighbors)
     limit = CRUMB_VOLUME_FRACTION * cm.model_volume
     dead, n_pieces = KC.loose_small_pieces(cm._X, cm._tets, cm._alive, inc, seeds, limit, cm.crumb_mark,
                                            cm.crumb_stamp)
