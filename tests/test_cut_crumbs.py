@@ -37,7 +37,7 @@ def assert_sound(cm, v0):
 
 @pytest.mark.parametrize("level", [0.4, 0.6])
 def test_a_corner_cut_off_below_the_crumb_volume_is_removed(level):
-    p, t = box_mesh((5, 3, 3))
+    p, t = box_mesh((6, 4, 4))
     v0 = float(signed_volumes(p, t).sum())
     cm = CutMesh(p, t, blade_length=12.0)
     corner_cut(cm, level)
@@ -50,7 +50,7 @@ def test_a_corner_cut_off_below_the_crumb_volume_is_removed(level):
 
 
 def test_a_larger_piece_cut_loose_stays_and_is_reported():
-    p, t = box_mesh((5, 3, 3))
+    p, t = box_mesh((6, 4, 4))
     v0 = float(signed_volumes(p, t).sum())
     cm = CutMesh(p, t, blade_length=12.0)
     corner_cut(cm, 2.2)
@@ -62,7 +62,7 @@ def test_a_larger_piece_cut_loose_stays_and_is_reported():
 
 
 def test_crumb_kernel_matches_twin():
-    p, t = box_mesh((5, 3, 3))
+    p, t = box_mesh((6, 4, 4))
     cm = CutMesh(p, t, blade_length=12.0)
     cm.model_volume = 1e-9  # keep every piece while cutting, to have pieces to sort
     corner_cut(cm, 0.6)
@@ -72,7 +72,7 @@ def test_crumb_kernel_matches_twin():
     live = np.flatnonzero(alive)
     rng = np.random.default_rng(0)
     inc = KC.Incidence(cm.node_tet_off, cm.node_tet_idx, cm._def_nodes, cm.n_orig_points, cm.sub_start,
-                       cm.sub_count)
+                       cm.sub_count, cm.neighbors)
     mark = np.zeros(total, np.int64)
     for i, limit in enumerate((1e-3, 0.05, 1.0, 5.0, 50.0)):
         seeds = rng.choice(live, 12)
@@ -80,3 +80,34 @@ def test_crumb_kernel_matches_twin():
         ref, k_ref = loose_small_pieces_twin(cm._X, cm._tets[:total], alive, seeds, limit)
         assert k == k_ref
         np.testing.assert_array_equal(np.sort(got), ref)
+
+
+def test_cut_cli_reports_the_crumb_it_removed_and_writes_no_trace_of_it(tmp_path):
+    import re
+
+    from click.testing import CliRunner
+
+    from cutkit.cli.cut import command
+    from cutkit.cutting.trajectory import Trajectory, write_trajectory
+    from cutkit.io.model_h5 import read_model, write_model
+    from cutkit.model.tetmodel import TetModel
+
+    p, t = box_mesh((6, 4, 4))
+    v0 = float(signed_volumes(p, t).sum())
+    write_model(tmp_path / "m.h5", TetModel(points=p, tets=t, labels=np.ones(len(t), np.int32)))
+    a, d = _unit([1, -1, 0]), _unit([1, 1, -2])
+    tips = np.array([0.2 * np.ones(3) + s * d + 6.0 * a for s in np.linspace(-6.0, 6.0, 25)])
+    axes = np.repeat(a[None], len(tips), 0)
+    normals = np.repeat(_unit(np.cross(a, d))[None], len(tips), 0)
+    write_trajectory(tmp_path / "f.csv", Trajectory(t=np.arange(len(tips)) * 0.01, tip=tips, a=axes, n=normals,
+                                                     blade_length=12.0))
+    r = CliRunner().invoke(command, [str(tmp_path / "m.h5"), "--trajectory", str(tmp_path / "f.csv"),
+                                     "-o", str(tmp_path / "out")])
+    assert r.exit_code == 0, r.output
+    found = re.search(r"1 crumb cut loose .* removed: ([0-9.e-]+) mm\^3", r.output.replace("\n", " "))
+    assert found, r.output
+    m = read_model(tmp_path / "out" / "model.h5")
+    # the written model: one piece, its volume the model's less the crumb's, every node used
+    assert float(signed_volumes(m.points, m.tets).sum()) + float(found.group(1)) == pytest.approx(v0, rel=1e-3)
+    assert np.unique(m.tets).size == len(m.points)
+    assert "cut loose besides the largest" not in r.output
