@@ -103,11 +103,17 @@ def stage_reporter(bar: Progress, task):
     return on_stage
 
 
-def print_uncut_note(uncut: int) -> None:
-    """Tell how many edges the blade met that its stroke could not cut (``CutMesh.edges_left_uncut``), if any."""
-    if uncut:
-        note(f"{uncut} edge{'s' * (uncut != 1)} the blade met could not be cut in its stroke (deferred where "
-             "it ended, or a copy along an earlier cut cut elsewhere) and stay joined; see docs/cutting.md")
+def print_crumbs_note(cm) -> None:
+    """Tell the crumbs the cut removed and the larger pieces it set loose (``cutkit.cutting.crumbs``), if any."""
+    from cutkit.cutting.crumbs import CRUMB_VOLUME_FRACTION, crumb_volume, loose_pieces
+
+    if cm.crumb_count:
+        note(f"{cm.crumb_count} crumb{'s' * (cm.crumb_count != 1)} cut loose (each at most "
+             f"{CRUMB_VOLUME_FRACTION:g} of the model's volume) removed: {crumb_volume(cm):.4g} mm^3")
+    loose = loose_pieces(cm)[1:]
+    if loose.size:
+        note(f"{loose.size} piece{'s' * (loose.size != 1)} cut loose besides the largest: "
+             + ", ".join(f"{v:.4g}" for v in loose[:10]) + (" ..." if loose.size > 10 else "") + " mm^3")
 
 
 def missed_message(points, tips) -> str:

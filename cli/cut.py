@@ -19,9 +19,11 @@ def command(model, trajectory, out_dir, overwrite, blade_length, centre_nodes):
 
     import numpy as np
 
-    from cutkit.cli._ui import folder_guard, missed_message, note, print_uncut_note, progress, say, warn
+    from cutkit.cli._ui import (folder_guard, missed_message, note, print_crumbs_note, progress, say,
+                                warn)
     from cutkit.io.atomic import check_output_folder, clear_outputs
     from cutkit.cutting import CutMesh, cut_step, cut_surface_faces, to_model
+    from cutkit.cutting.contact import uncut_edges_line
     from cutkit.cutting.rebase import rebase_if_left
     from cutkit.cutting.trajectory import read_trajectory
     from cutkit.errors import InputError
@@ -74,7 +76,10 @@ def command(model, trajectory, out_dir, overwrite, blade_length, centre_nodes):
         return
     say(f"{len(traj.t)} poses, {strokes} stroke{'s' * (strokes != 1)}, {n_cut} tets cut into "
         f"{len(new)}, worst new dihedral {worst:.1f} deg -> {out_dir}/cut.pvd, {out_dir}/model.h5")
+    print_crumbs_note(cm)
     if cm.started_inside:
         note("the blade lay inside the tissue at the first pose: the cut starts where it lay, with no entry "
              "through the surface")
-    print_uncut_note(cm.edges_left_uncut())
+    line = uncut_edges_line(cm)
+    if line:
+        warn(line)

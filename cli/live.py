@@ -173,7 +173,7 @@ def _open(haptics, trajectory, speed, igtl_port, igtl_device, no_window, igtl, c
 
 
 def _report(console, summary, out_dir) -> None:
-    from cutkit.cli._ui import print_uncut_note, say, warn
+    from cutkit.cli._ui import say, warn
 
     live = summary["live"]
     for w in summary["warnings"]:
@@ -183,6 +183,5 @@ def _report(console, summary, out_dir) -> None:
         f"{live['wall_s']:.1f} s, haptics {live['haptic_hz']:.0f} Hz, {live['fps']:.0f} fps, "
         f"relaxation {live['relax_passes_per_s']:.0f} passes/s"
         + (f", pose-to-picture latency p50 {lat['p50']:.0f} ms p95 {lat['p95']:.0f} ms" if lat else ""))
-    print_uncut_note(summary["edges_left_uncut"])
     say(f"recorded: {out_dir}/trajectory.csv (replay: cutkit simulate MODEL --trajectory "
                   f"{out_dir}/trajectory.csv -o OUT/), forces.csv, summary.json, model.h5")

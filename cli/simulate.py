@@ -140,7 +140,7 @@ def run_with_progress(tet_model, traj, out_dir, opt, model_path=None):
 
 def report(console, summary, out_dir) -> None:
     """Print the closing lines: warnings, counts, rates, what to open."""
-    from cutkit.cli._ui import print_uncut_note, say, warn
+    from cutkit.cli._ui import say, warn
 
     for w in summary["warnings"]:
         warn(w)
@@ -149,7 +149,6 @@ def report(console, summary, out_dir) -> None:
         f"{summary['cut_tets']} tets cut into {summary['new_tets']} "
         f"({summary['new_tets_per_cut_tet']:.1f} per cut tet); {states_line(summary['states'])}; "
         f"cut opening {summary['cut_opening_mm']['final_mean']:.2f} mm mean")
-    print_uncut_note(summary["edges_left_uncut"])
     say(
         f"{summary['simulated_s']:.2f} s simulated in {summary['wall_s']:.1f} s "
         f"(simulated/wall {summary['simulated_per_wall']:.2f}; relaxation {t['relaxation']:.1f} s, "

@@ -17,6 +17,9 @@ ORACLE_EPS = 1e-6
 
 KINDS = ("straight", "curved", "tremor", "reversal", "reentry", "crossing", "vertex", "edge", "face",
          "guillotine", "press")
+#: More kinds: entering through a side face below the top, drawn forward, back and forward again
+#: along its own cut, a through cut that separates a piece, and three strokes at random angles.
+MORE_KINDS = ("side", "retrace", "separate", "strokes")
 
 
 def jittered_block(shape=(5, 3, 3), jitter=0.2, seed=0):
@@ -98,6 +101,22 @@ def make_path(kind, rng, L, tremor=0.0):
         side = [(tip + [dx, 0.0, 0.0], a) for dx in np.linspace(0.0, rng.uniform(0.5, 0.5 * L[0]), n // 2 + 2)[1:]]
         tip = side[-1][0]
         poses = down + side + [(tip - s * a, a) for s in np.linspace(0.0, depth + 1.0, 4)[1:]]
+    elif kind == "side":  # the tip below the top: the blade enters edge-first through the side face x = 0
+        poses = line(xs, y0, rng.uniform(0.3, 0.7) * L[2], a)
+    elif kind == "retrace":  # forward, back over its own cut, forward again
+        xm = rng.uniform(0.4, 0.9) * L[0]
+        go = np.linspace(-0.5, xm, n)
+        poses = line(np.concatenate([go, go[::-1][1:], go[1:]]), y0, z0, a)
+    elif kind == "separate":  # the tip below the mesh: cuts it in two
+        poses = line(xs, y0, -0.5, _unit([rng.uniform(-0.3, 0.3), rng.uniform(-0.3, 0.3), -1.0]))
+    elif kind == "strokes":  # three straight strokes at random angles, lifted between
+        poses = []
+        for k in range(3):
+            ang, c = rng.uniform(0.0, np.pi), rng.uniform(0.2, 0.8, 3) * L
+            d = np.array([np.cos(ang), np.sin(ang), 0.0])
+            reach = np.linalg.norm(L[:2]) / 2 + 1.0
+            poses += [None] if k else []
+            poses += [(c + s * d, a) for s in np.linspace(-reach, reach, int(rng.integers(4, 10)))]
     else:  # guillotine: one step from above to below, the blade longer than the mesh
         x = rng.uniform(0.3, L[0] - 0.3)
         a = _unit([0, -1.0, rng.uniform(-0.3, 0.3)])

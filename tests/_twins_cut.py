@@ -549,3 +549,30 @@ def edge_crosses_triangle(p, q, tri, end_eps=1e-9, bary_eps=1e-12):
     if b1 < -bary_eps or b2 < -bary_eps or b1 + b2 > 1 + bary_eps:
         return -1.0
     return t
+
+
+# ---------------------------------------------------------------- twin of cutkit.cutting._kernels_crumbs
+def loose_small_pieces_twin(X, tets, alive, seeds, limit):
+    """Crumb tets (sorted) and count: the pieces (live tets joined by shared nodes) through ``seeds``
+    whose whole rest volume is at most ``limit``; every piece found with a union-find over the mesh."""
+    live = np.flatnonzero(alive)
+    parent = {int(t): int(t) for t in live}
+
+    def find(i):
+        while parent[i] != i:
+            i = parent[i]
+        return i
+
+    by_node = {}
+    for t in live.tolist():
+        for v in tets[t].tolist():
+            if v in by_node:
+                parent[find(t)] = find(by_node[v])
+            else:
+                by_node[v] = t
+    vol = {}
+    for t in live.tolist():
+        vol[find(t)] = vol.get(find(t), 0.0) + float(volumes(X, tets[t:t + 1])[0])
+    crumbs = {find(int(s)) for s in seeds if alive[s] and vol[find(int(s))] <= limit}
+    out = sorted(t for t in live.tolist() if find(t) in crumbs)
+    return np.array(out, np.int64), len(crumbs)

@@ -90,6 +90,12 @@ def test_cut_cli_reports_the_edges_the_blade_left_uncut(tmp_path):
     assert cm.edges_left_uncut() > 0
     found = re.search(r"([0-9]+) edges? the blade met could not be cut", r.output.replace("\n", " "))
     assert found and int(found.group(1)) == cm.edges_left_uncut(), r.output
+    # ... in one warning line naming each (up to 8) by its rest midpoint
+    places = cm.uncut_edge_places()
+    assert len(places) == cm.edges_left_uncut()
+    named = re.findall(r"\(([-0-9.]+), ([-0-9.]+), ([-0-9.]+)\)", r.output.replace("\n", " "))
+    assert len(named) == min(len(places), 8)
+    np.testing.assert_allclose(np.array(named, float), places[:8], atol=0.006)
 
 
 def test_cut_cli_a_second_stroke_crosses_the_first(tmp_path):

@@ -154,3 +154,28 @@ def test_simulate_refuses_a_blade_put_inside(tmp_path, capsys):
     assert err == ("cutkit: error: the blade lies inside the tissue at the trajectory's first pose (tip at 4, 8.5, 6.3 mm): "
                    "start the trajectory outside the tissue, so that the blade enters through its surface")
     assert not out.exists()
+
+
+@pytest.mark.parametrize("face", ["y0", "y3", "z0", "z3"])
+@pytest.mark.parametrize("upwards", [False, True])
+def test_a_blade_lying_on_the_skin_cuts_nothing(face, upwards):
+    """A blade in a boundary face's plane, sliding over the face, never enters: no edge is cut,
+    whichever way it moves (the swept quad's normal then points into the tissue or out of it)."""
+    p, t = box_mesh((5, 3, 3))
+    axis, level = {"y": 1, "z": 2}[face[0]], float(face[1])
+    other = 3 - axis  # the blade slides along the other of y, z
+    cm = CutMesh(p, t, blade_length=10.0)
+    for s in np.linspace(-0.5, 3.5, 9)[::1 if upwards else -1]:
+        tip = np.zeros(3)
+        tip[0], tip[axis], tip[other] = 4.0, level, s
+        cut_step(cm, tip, np.array([1.0, 0.0, 0.0]))
+    assert not cm.subtets and cm.n_points == len(p)
+
+
+def test_a_blade_through_the_tissue_in_an_inner_face_plane_still_cuts():
+    """The same slide one cell in, in the plane of inner faces: a through cut (one wall)."""
+    p, t = box_mesh((5, 3, 3))
+    cm = CutMesh(p, t, blade_length=10.0)
+    for s in np.linspace(-0.5, 3.5, 9):
+        cut_step(cm, np.array([6.0, 1.0, s]), np.array([1.0, 0.0, 0.0]))
+    assert components(cm.tets) == 2

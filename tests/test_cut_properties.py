@@ -20,6 +20,8 @@ from _cut_paths import (KINDS, crossed_edges, crossing_strokes, delaunay_ball, j
 from cutkit.collision._swept_kernels import tri_tri  # noqa: F401  (compiled once for the oracle below)
 from cutkit.cutting import CutMesh, cut_step, to_model
 from cutkit.cutting import subdivision as S
+from cutkit.cutting import crumbs as CRUMBS
+from cutkit.cutting.crumbs import crumb_volume, loose_pieces
 from cutkit.cutting.rebase import blade_in_tissue, rebase_if_left
 from cutkit.mesh.check import check_mesh
 from cutkit.mesh.generate import box_mesh
@@ -51,7 +53,9 @@ def assert_clean(cm, v0, where):
     m = to_model(cm)
     rep = check_mesh(m.points, m.tets, m.labels)
     assert rep.passed, (where, [(r.name, r.detail) for r in rep.rows if not r.passed])
-    v = float(signed_volumes(m.points, m.tets).sum())
+    # no crumb is left in the model; those removed are accounted for by their volume
+    assert loose_pieces(cm)[-1] > CRUMBS.CRUMB_VOLUME_FRACTION * cm.model_volume, where
+    v = float(signed_volumes(m.points, m.tets).sum()) + crumb_volume(cm)
     assert abs(v - v0) <= VOLUME_REL_TOL * v0, (where, v, v0)
 
 

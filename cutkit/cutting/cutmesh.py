@@ -30,6 +30,7 @@ from cutkit.mesh.geometry import TET_EDGES, min_volume
 from cutkit.mesh.topology import unique_edges, unique_faces, tet_neighbors
 from cutkit.cutting import subdivision as S
 from cutkit.cutting import _kernels_step as K
+from cutkit.cutting.crumbs import init_crumbs
 from cutkit.cutting.rebase import cut_twins, init_records, rebase, twin_face_bary
 from cutkit.cutting.resubdivision import resubdivide
 
@@ -144,6 +145,7 @@ class CutMesh:
         self.started_inside = False  # the blade's first pose lay inside the tissue (cut_step)
         self._delta_reset()
         init_records(self, n0, m0)  # what outlives a rebase (model counts, earlier strokes' cut surface)
+        init_crumbs(self)  # pieces cut loose below CRUMB_VOLUME_FRACTION of the model are removed
 
     @classmethod
     def from_model(cls, model, blade_length=20.0, centre_nodes=False, compact_splits=True):
@@ -294,6 +296,12 @@ class CutMesh:
         mine = self.refused_edges.union(self.pending_edges)
         return self.uncut_before + sum(1 for e in mine if not np.isfinite(self.edge_t[e]))
 
+    def uncut_edge_places(self):
+        """(k, 3) float64 rest midpoints, mm, of the edges :meth:`edges_left_uncut` counts (every stroke's)."""
+        mine = sorted(e for e in self.refused_edges.union(self.pending_edges) if not np.isfinite(self.edge_t[e]))
+        here = self._X[self.edges[mine]].mean(axis=1) if mine else np.zeros((0, 3))
+        return np.vstack([self.uncut_places_before, here])
+
     def _retry_pending(self, touched):
         """Cut the deferred edges of the tets in ``touched`` (list, extended in place) that are now allowed."""
         if not self.pending_edges:
@@ -441,6 +449,16 @@ class CutMesh:
     def _vol0(self, o):
         """Signed volume of original tet o at the current positions."""
         return _vol(self._x, self.orig_tets[o])
+
+    def remove_tets(self, ids):
+        """Take the live tets ``ids`` (k,) int64 out of the mesh (listed in the step's ``removed_tets``).
+
+        Their original tets keep their cut state; a later re-subdivision of
+        one of them makes its sub-tets again (crumbs: :mod:`.crumbs`).
+        """
+        ids = np.asarray(ids, np.int64)
+        self._alive[ids] = False
+        self._delta["removed_tets"].extend(ids.tolist())
 
     def _add_tets(self, new, o):
         """Append the tets ``new`` (list of 4-tuples) as sub-tets of original ``o``; returns their ids."""

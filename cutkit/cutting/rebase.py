@@ -49,6 +49,7 @@ def init_records(cm, n_model_points, n_model_tets):
     cm.cut_faces_before = set()
     cm.n_rebases = 0
     cm.uncut_before = 0
+    cm.uncut_places_before = np.zeros((0, 3))  # their rest midpoints, mm (CutMesh.uncut_edge_places)
     cm.node_rep = np.arange(n_model_points, dtype=np.int64)  # see _node_reps
     cm.edge_twins, cm.face_twins = {}, {}  # see find_twins
 
@@ -112,6 +113,7 @@ def rebase(cm):
         Old tet id (CutMesh numbering before the call) of each new original
         tetrahedron ``i``; node ids are unchanged.
     """
+    from cutkit.cutting.crumbs import crumb_volume
     from cutkit.cutting.cutmesh import CutMesh
     from cutkit.cutting.export import cut_surface_faces
 
@@ -131,9 +133,13 @@ def rebase(cm):
     fresh.cut_faces_before = cut_faces
     fresh.n_rebases = cm.n_rebases + 1
     fresh.uncut_before = cm.edges_left_uncut()
+    fresh.uncut_places_before = cm.uncut_edge_places()
     fresh.step_count = cm.step_count
     fresh.started_inside = cm.started_inside
     fresh.node_rep = _node_reps(cm)
+    fresh.model_volume = cm.model_volume  # crumbs are measured against the model as loaded
+    fresh.crumb_volume_before = crumb_volume(cm)
+    fresh.crumb_count = cm.crumb_count
     find_twins(fresh)
     # replace the whole state: caches keyed by the old numbering (surface BVH, sweep buffers) go too
     vars(cm).clear()

@@ -18,6 +18,7 @@ from cutkit.cutting import _kernels_split as KP
 from cutkit.cutting import _kernels_step as K
 from cutkit.cutting import cutmesh as CM  # its tolerances (a circular import: read at call time)
 from cutkit.cutting import subdivision as S
+from cutkit.cutting.crumbs import forget_crumb_tets
 from cutkit.cutting.splits import COMPACT_VOL_MIN, SPLIT_ANGLE_GAIN, SPLIT_ANGLE_GOOD, compact_split, fix_diagonals
 
 #: Where T may go when no tip is inside (fractions of the way from the cut
@@ -80,11 +81,12 @@ def resubdivide(cm, o):
         # the cone of the face triangles to T (each piece's copy of T for a complete split or a general tet)
         new = _cone(tris, cm.tet_T[o][group[corner]] if complete or general else cm.tet_T[o, 0])
     # replace the old sub-tets
-    old = cm.subtets.get(o, [o])
+    old = forget_crumb_tets(cm, cm.subtets.get(o, [o]))  # a crumb's tets are dead already
     cm._alive[old] = False
     cm._delta["removed_tets"].extend(old)
     ids = cm._add_tets(new, o)
     cm.subtets[o] = ids
+    cm.sub_start[o], cm.sub_count[o] = ids[0], len(ids)  # contiguous (_add_tets)
     cm._delta["added_tets"].extend(ids)
     # a partly cut tet across a split face follows the diagonal this split chose
     for nb in fix_diagonals(cm, o, choice):

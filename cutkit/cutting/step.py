@@ -32,6 +32,8 @@ import numpy as np
 
 from cutkit.errors import InputError
 from cutkit.cutting import _kernels_step as KS
+from cutkit.cutting.contact import touches_only
+from cutkit.cutting.crumbs import remove_crumbs
 from cutkit.cutting.cutmesh import CutMesh
 
 #: Maximum number of face crossings of the tip walk per step.
@@ -231,7 +233,7 @@ def cut_step(cm: CutMesh, tip, a) -> StepResult:
     cut_edges = []
     for (kind, i), val in zip(ev_id.tolist(), ev_val):
         if kind == KS.EV_EDGE:
-            ring = cm.try_cut_edge(i, val[0])
+            ring = not touches_only(cm, i, val[0], swept) and cm.try_cut_edge(i, val[0])
             if ring:
                 cut_edges.append(i)
                 cut_edges.extend(cm.retried_edges)  # deferred edges this cut let through
@@ -261,6 +263,9 @@ def cut_step(cm: CutMesh, tip, a) -> StepResult:
     cm.previous_active_tets = cm.active_tets
     cm.active_tets = np.unique(active)
     cm.prev_pose = (P1, Q1)
+    # a piece this step set loose below CRUMB_VOLUME_FRACTION of the model is removed (crumbs.py)
+    made = np.array(cm._delta["added_tets"], np.int64)
+    remove_crumbs(cm, made[cm._alive[made]] if made.size else made)
     d = cm._delta
     moved = np.unique(np.array(d["moved_nodes"], np.int64))
     # net change: a tet made and unmade within the step (re-subdivided twice) is in neither

@@ -156,6 +156,18 @@ def volume_change(tis) -> float:
     return float(signed_volumes(tis.positions, tets).sum()) / rest - 1.0 if rest > 0 else 0.0
 
 
+def crumbs_report(cm) -> dict:
+    """``summary.json``'s crumb keys: crumbs removed (count, rest volume mm^3), pieces left loose (mm^3 each).
+
+    ``loose_pieces_mm3`` lists the rest volume of every piece but the largest
+    (tets joined by shared nodes; :func:`cutkit.cutting.crumbs.loose_pieces`).
+    """
+    from cutkit.cutting.crumbs import crumb_volume, loose_pieces
+
+    return {"crumbs_removed": int(cm.crumb_count), "crumb_volume_mm3": crumb_volume(cm),
+            "loose_pieces_mm3": [float(v) for v in loose_pieces(cm)[1:]]}
+
+
 def summary(session, *, model_path, loop_wall: float, t_traj_end, opening_at_traj_end, frames: int,
             forces: ForceRecorder, interrupted: bool, rates: bool) -> dict:
     """What ``summary.json`` holds (docs/simulate.md)."""
@@ -179,6 +191,7 @@ def summary(session, *, model_path, loop_wall: float, t_traj_end, opening_at_tra
         "new_tets_per_cut_tet": (new_tets / n_cut) if n_cut else 0.0,
         "rebases": int(session.cut_before["rebases"]),
         "edges_left_uncut": int(cm.edges_left_uncut()),
+        **crumbs_report(cm),
         "states": list(session.states_seen),
         "frames": int(frames),
         "pictures": [],
@@ -233,7 +246,7 @@ def extents_text(points, tips) -> str:
 
 
 def closing_warnings(session, tips=None) -> None:
-    """The warnings a finished session adds: no touch, or a touch without a cut.
+    """The warnings a finished session adds: no touch, or a touch without a cut; crossed edges left uncut.
 
     ``tips`` (the trajectory's blade tips, mm) adds the model's and the trajectory's extents."""
     if session.counts["entries"] == 0:
@@ -242,6 +255,11 @@ def closing_warnings(session, tips=None) -> None:
     elif not session.tets_cut:
         reached = "J_c x depth of cut" if session.opt.scalpel == "fracture" else "F_enter"
         session.warnings.append(f"the blade touched the tissue but never cut it ({reached} not reached)")
+    from cutkit.cutting.contact import uncut_edges_line
+
+    line = uncut_edges_line(session.tis.cm)  # crossed edges left uncut, counted and named
+    if line:
+        session.warnings.append(line)
 
 
 def write_cut_model(session, out_dir, summary_: dict) -> None:
@@ -270,4 +288,4 @@ def write_json(path, obj) -> None:
 
 
 __all__ = ["FrameRecorder", "ForceRecorder", "PoseRecorder", "NodeColours", "summary", "write_cut_model",
-           "closing_warnings", "count_inverted", "write_json"]
+           "closing_warnings", "count_inverted", "crumbs_report", "write_json"]

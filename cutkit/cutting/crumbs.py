@@ -1,0 +1,124 @@
+"""Crumbs: pieces the cut sets loose that are too small to be simulated.
+
+A blade drawn back over its own cut, tremor or several strokes can cut a
+piece loose that is a sliver of a few tetrahedra.  The physics would carry
+it as a free body with almost no mass.  :func:`remove_crumbs` runs at the
+end of every cut step (:func:`cutkit.cutting.step.cut_step`): a piece made
+loose whose rest volume is at most ``CRUMB_VOLUME_FRACTION`` of the
+model's is removed from the model (its tets leave the live mesh and are
+listed in the step's ``removed_tets``); its volume is kept in
+``CutMesh.crumb_volume``.  Its nodes are left without tets, like the tip
+nodes of a finished split: they are never written (``to_model`` keeps only
+used nodes) and carry no mass.  :func:`loose_pieces` reports the larger
+pieces the cut has set loose.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from cutkit.cutting import _kernels_crumbs as KC
+
+#: A piece cut loose with a rest volume at most this fraction of the model's is a crumb and is
+#: removed (the measure of issue 30: a body this small carries no useful physics).
+CRUMB_VOLUME_FRACTION = 1e-3
+
+
+def init_crumbs(cm):
+    """Crumb bookkeeping of a fresh :class:`~cutkit.cutting.cutmesh.CutMesh` (original tets only)."""
+    n0, m0 = cm.n_orig_points, cm.orig_tets.shape[0]
+    flat = cm.orig_tets.ravel()
+    cm.node_tet_idx = np.argsort(flat, kind="stable") // 4
+    cm.node_tet_off = np.zeros(n0 + 1, np.int64)
+    np.cumsum(np.bincount(flat, minlength=n0), out=cm.node_tet_off[1:])
+    cm.sub_start = np.zeros(m0, np.int64)
+    cm.sub_count = np.zeros(m0, np.int64)
+    X = cm._X[:n0]
+    d = X[cm.orig_tets[:, 1:]] - X[cm.orig_tets[:, :1]]
+    cm.model_volume = float(np.linalg.det(d).sum() / 6.0)
+    cm.crumb_tets = {}  # tet id -> rest volume, for crumb tets of this cut state
+    cm.crumb_volume_before = 0.0  # crumbs removed before the last rebase, mm^3
+    cm.crumb_mark = np.zeros(m0, np.int64)  # per-tet marks of the crumb search (see loose_small_pieces)
+    cm.crumb_stamp = 0
+    cm.crumb_count = 0  # crumbs removed (a crumb re-made by a later step and removed again counts again)
+
+
+def crumb_volume(cm) -> float:
+    """Rest volume removed as crumbs so far, over every stroke, mm^3."""
+    return cm.crumb_volume_before + float(sum(cm.crumb_tets.values()))
+
+
+def remove_crumbs(cm, seeds) -> int:
+    """Remove the crumbs among the pieces of the live tets ``seeds`` (the step's new tets).
+
+    Parameters
+    ----------
+    cm : CutMesh
+    seeds : (s,) int64  tet ids (dead ones are skipped)
+
+    Returns
+    -------
+    n : int  crumbs removed
+    """
+    seeds = np.ascontiguousarray(seeds, np.int64)
+    if not seeds.size:
+        return 0
+    total = cm.n_tets_total
+    if cm.crumb_mark.shape[0] < total:
+        mark = np.zeros(max(total, 2 * cm.crumb_mark.shape[0]), np.int64)
+        mark[:cm.crumb_mark.shape[0]] = cm.crumb_mark
+        cm.crumb_mark = mark
+    cm.crumb_stamp += 4  # marks of earlier calls are below it: no per-step reset
+    inc = KC.Incidence(cm.node_tet_off, cm.node_tet_idx, cm._def_nodes, cm.n_orig_points, cm.sub_start,
+                       cm.sub_count, cm.neighbors)
+    limit = CRUMB_VOLUME_FRACTION * cm.model_volume
+    dead, n_pieces = KC.loose_small_pieces(cm._X, cm._tets, cm._alive, inc, seeds, limit, cm.crumb_mark,
+                                           cm.crumb_stamp)
+    if not n_pieces:
+        return 0
+    vols = _volumes(cm._X, cm._tets[dead])
+    cm.remove_tets(dead)
+    cm.crumb_tets.update(zip(dead.tolist(), vols.tolist()))
+    cm.crumb_count += int(n_pieces)
+    return int(n_pieces)
+
+
+def forget_crumb_tets(cm, ids) -> list:
+    """The live ones among tet ids ``ids`` about to be replaced; dead crumb tets among them are forgotten.
+
+    A tet of a crumb re-made by a later re-subdivision of its original tet
+    is found again as a crumb in the same step, so its volume is counted once.
+    """
+    live = [t for t in ids if cm._alive[t]]
+    if len(live) != len(ids):
+        for t in ids:
+            cm.crumb_tets.pop(t, None)
+    return live
+
+
+def _volumes(X, tets):
+    d = X[tets[:, 1:]] - X[tets[:, :1]]
+    return np.linalg.det(d) / 6.0
+
+
+def loose_pieces(cm):
+    """Rest volumes of the pieces of the live mesh (shared nodes join tets), largest first.
+
+    Returns
+    -------
+    volumes : (p,) float64  mm^3, one per piece, in decreasing order
+    """
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    tets = cm.tets
+    if not len(tets):
+        return np.zeros(0)
+    k, n = len(tets), cm.n_points
+    # the bipartite graph tets -- nodes: tets sharing a node are in one piece
+    rows = np.repeat(np.arange(k), 4)
+    g = coo_matrix((np.ones(4 * k), (rows, k + tets.ravel())), shape=(k + n, k + n))
+    _, comp = connected_components(g, directed=False)
+    vols = np.bincount(comp[:k], weights=_volumes(cm._X, tets))
+    vols = vols[vols > 0]
+    return np.sort(vols)[::-1]

@@ -1,0 +1,113 @@
+"""Crumbs: a piece cut loose below CRUMB_VOLUME_FRACTION of the model is removed, its volume reported."""
+
+import numpy as np
+import pytest
+
+from _twins_cut import loose_small_pieces_twin
+
+from cutkit.cutting import CutMesh, cut_step, to_model
+from cutkit.cutting import _kernels_crumbs as KC
+from cutkit.cutting.crumbs import CRUMB_VOLUME_FRACTION, crumb_volume, loose_pieces
+from cutkit.mesh.check import check_mesh
+from cutkit.mesh.generate import box_mesh
+from cutkit.mesh.quality import signed_volumes
+
+
+def _unit(v):
+    v = np.asarray(v, float)
+    return v / np.linalg.norm(v)
+
+
+def corner_cut(cm, level):
+    """Sweep a blade through the whole plane x + y + z = level (cuts the corner at the origin off)."""
+    n, a, d = _unit([1, 1, 1]), _unit([1, -1, 0]), _unit([1, 1, -2])
+    c = level / 3.0 * np.ones(3)
+    for s in np.linspace(-6.0, 6.0, 25):
+        cut_step(cm, c + s * d + 6.0 * a, a)
+    return n
+
+
+def assert_sound(cm, v0):
+    m = to_model(cm)
+    rep = check_mesh(m.points, m.tets, m.labels)
+    assert rep.passed, [(r.name, r.detail) for r in rep.rows if not r.passed]
+    assert abs(float(signed_volumes(m.points, m.tets).sum()) + crumb_volume(cm) - v0) <= 1e-12 * v0
+    assert np.unique(m.tets).size == len(m.points)  # no orphan node written
+
+
+@pytest.mark.parametrize("level", [0.4, 0.6])
+def test_a_corner_cut_off_below_the_crumb_volume_is_removed(level):
+    p, t = box_mesh((6, 4, 4))
+    v0 = float(signed_volumes(p, t).sum())
+    cm = CutMesh(p, t, blade_length=12.0)
+    corner_cut(cm, level)
+    assert cm.crumb_count >= 1
+    # the piece that left: the tets on the corner's side of the cut, by the independent volume sum
+    assert 0 < crumb_volume(cm) <= CRUMB_VOLUME_FRACTION * v0
+    assert_sound(cm, v0)
+    vols = loose_pieces(cm)
+    assert vols.size == 1 and vols[0] == pytest.approx(v0 - crumb_volume(cm), rel=1e-12)
+
+
+def test_a_larger_piece_cut_loose_stays_and_is_reported():
+    p, t = box_mesh((6, 4, 4))
+    v0 = float(signed_volumes(p, t).sum())
+    cm = CutMesh(p, t, blade_length=12.0)
+    corner_cut(cm, 2.2)
+    assert cm.crumb_count == 0 and crumb_volume(cm) == 0.0
+    vols = loose_pieces(cm)
+    assert vols.size == 2 and vols[1] > CRUMB_VOLUME_FRACTION * v0
+    assert vols.sum() == pytest.approx(v0, rel=1e-12)
+    assert_sound(cm, v0)
+
+
+def test_crumb_kernel_matches_twin():
+    p, t = box_mesh((6, 4, 4))
+    cm = CutMesh(p, t, blade_length=12.0)
+    cm.model_volume = 1e-9  # keep every piece while cutting, to have pieces to sort
+    corner_cut(cm, 0.6)
+    corner_cut(cm, 2.2)
+    total = cm.n_tets_total
+    alive = cm._alive[:total].copy()
+    live = np.flatnonzero(alive)
+    rng = np.random.default_rng(0)
+    inc = KC.Incidence(cm.node_tet_off, cm.node_tet_idx, cm._def_nodes, cm.n_orig_points, cm.sub_start,
+                       cm.sub_count, cm.neighbors)
+    mark = np.zeros(total, np.int64)
+    for i, limit in enumerate((1e-3, 0.05, 1.0, 5.0, 50.0)):
+        seeds = rng.choice(live, 12)
+        got, k = KC.loose_small_pieces(cm._X, cm._tets[:total], alive, inc, seeds, limit, mark, 4 * (i + 1))
+        ref, k_ref = loose_small_pieces_twin(cm._X, cm._tets[:total], alive, seeds, limit)
+        assert k == k_ref
+        np.testing.assert_array_equal(np.sort(got), ref)
+
+
+def test_cut_cli_reports_the_crumb_it_removed_and_writes_no_trace_of_it(tmp_path):
+    import re
+
+    from click.testing import CliRunner
+
+    from cutkit.cli.cut import command
+    from cutkit.cutting.trajectory import Trajectory, write_trajectory
+    from cutkit.io.model_h5 import read_model, write_model
+    from cutkit.model.tetmodel import TetModel
+
+    p, t = box_mesh((6, 4, 4))
+    v0 = float(signed_volumes(p, t).sum())
+    write_model(tmp_path / "m.h5", TetModel(points=p, tets=t, labels=np.ones(len(t), np.int32)))
+    a, d = _unit([1, -1, 0]), _unit([1, 1, -2])
+    tips = np.array([0.2 * np.ones(3) + s * d + 6.0 * a for s in np.linspace(-6.0, 6.0, 25)])
+    axes = np.repeat(a[None], len(tips), 0)
+    normals = np.repeat(_unit(np.cross(a, d))[None], len(tips), 0)
+    write_trajectory(tmp_path / "f.csv", Trajectory(t=np.arange(len(tips)) * 0.01, tip=tips, a=axes, n=normals,
+                                                     blade_length=12.0))
+    r = CliRunner().invoke(command, [str(tmp_path / "m.h5"), "--trajectory", str(tmp_path / "f.csv"),
+                                     "-o", str(tmp_path / "out")])
+    assert r.exit_code == 0, r.output
+    found = re.search(r"1 crumb cut loose .* removed: ([0-9.e-]+) mm\^3", r.output.replace("\n", " "))
+    assert found, r.output
+    m = read_model(tmp_path / "out" / "model.h5")
+    # the written model: one piece, its volume the model's less the crumb's, every node used
+    assert float(signed_volumes(m.points, m.tets).sum()) + float(found.group(1)) == pytest.approx(v0, rel=1e-3)
+    assert np.unique(m.tets).size == len(m.points)
+    assert "cut loose besides the largest" not in r.output
