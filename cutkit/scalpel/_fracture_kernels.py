@@ -17,7 +17,7 @@ import math
 from numba import njit
 
 from cutkit.scalpel._kernels import (
-    AXIS_EPS,
+    blade_frame,
     CUTTING,
     FREE,
     N_OUT,
@@ -48,34 +48,6 @@ from cutkit.scalpel._kernels import (
 
 #: The edge counts as moving back when it moves back by more than this, mm.
 BACK_EPS = 1e-9
-
-
-@njit(cache=True)
-def blade_frame(normal, a_in, n_in):
-    """Unit (a, n) in the blade plane of unit normal ``normal`` (section 6.1), as 6 floats.
-
-    ``a`` is the device's ``a_in`` projected into the plane (or a fallback
-    in the plane where it is degenerate), ``n = b x a``.
-    """
-    b0, b1, b2 = normal[0], normal[1], normal[2]
-    ab = a_in[0] * b0 + a_in[1] * b1 + a_in[2] * b2
-    a0, a1, a2 = a_in[0] - ab * b0, a_in[1] - ab * b1, a_in[2] - ab * b2
-    la = math.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
-    if la < AXIS_EPS:
-        a0 = n_in[1] * b2 - n_in[2] * b1
-        a1 = n_in[2] * b0 - n_in[0] * b2
-        a2 = n_in[0] * b1 - n_in[1] * b0
-        la = math.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
-        if la < AXIS_EPS:
-            if abs(b0) < 0.9:
-                a0, a1, a2 = 0.0, b2, -b1
-            else:
-                a0, a1, a2 = -b2, 0.0, b0
-            la = math.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
-    a0 /= la
-    a1 /= la
-    a2 /= la
-    return a0, a1, a2, b1 * a2 - b2 * a1, b2 * a0 - b0 * a2, b0 * a1 - b1 * a0
 
 
 @njit(cache=True)

@@ -106,6 +106,34 @@ def _dynamic_axis(f_x, v_x, d_x, p, abs_perp):
 
 
 @njit(cache=True)
+def blade_frame(normal, a_in, n_in):
+    """Unit (a, n) in the blade plane of unit normal ``normal`` (section 6.1), as 6 floats.
+
+    ``a`` is the device's ``a_in`` projected into the plane (or a fallback
+    in the plane where it is degenerate), ``n = b x a``.
+    """
+    b0, b1, b2 = normal[0], normal[1], normal[2]
+    ab = a_in[0] * b0 + a_in[1] * b1 + a_in[2] * b2
+    a0, a1, a2 = a_in[0] - ab * b0, a_in[1] - ab * b1, a_in[2] - ab * b2
+    la = math.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
+    if la < AXIS_EPS:
+        a0 = n_in[1] * b2 - n_in[2] * b1
+        a1 = n_in[2] * b0 - n_in[0] * b2
+        a2 = n_in[0] * b1 - n_in[1] * b0
+        la = math.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
+        if la < AXIS_EPS:
+            if abs(b0) < 0.9:
+                a0, a1, a2 = 0.0, b2, -b1
+            else:
+                a0, a1, a2 = -b2, 0.0, b0
+            la = math.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
+    a0 /= la
+    a1 /= la
+    a2 /= la
+    return a0, a1, a2, b1 * a2 - b2 * a1, b2 * a0 - b0 * a2, b0 * a1 - b1 * a0
+
+
+@njit(cache=True)
 def scalpel_step(params, proxy, velocity, code, entry, normal, tip, a_in, n_in, f_sim, out):
     """Advance the scalpel proxy by one time step.
 
@@ -142,30 +170,8 @@ def scalpel_step(params, proxy, velocity, code, entry, normal, tip, a_in, n_in, 
         return
 
     b0, b1, b2 = normal[0], normal[1], normal[2]
-    # a: the device's a projected into the blade plane (6.1)
-    ab = a_in[0] * b0 + a_in[1] * b1 + a_in[2] * b2
-    a0, a1, a2 = a_in[0] - ab * b0, a_in[1] - ab * b1, a_in[2] - ab * b2
-    la = math.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
-    if la < AXIS_EPS:
-        # a along the plane normal: fall back on n x b, which lies in the plane
-        a0 = n_in[1] * b2 - n_in[2] * b1
-        a1 = n_in[2] * b0 - n_in[0] * b2
-        a2 = n_in[0] * b1 - n_in[1] * b0
-        la = math.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
-        if la < AXIS_EPS:
-            # any direction perpendicular to b
-            if abs(b0) < 0.9:
-                a0, a1, a2 = 0.0, b2, -b1
-            else:
-                a0, a1, a2 = -b2, 0.0, b0
-            la = math.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
-    a0 /= la
-    a1 /= la
-    a2 /= la
-    # n = b x a completes the right-handed frame (a, n, b)
-    n0 = b1 * a2 - b2 * a1
-    n1 = b2 * a0 - b0 * a2
-    n2 = b0 * a1 - b1 * a0
+    # a: the device's a projected into the blade plane, n = b x a (6.1)
+    a0, a1, a2, n0, n1, n2 = blade_frame(normal, a_in, n_in)
 
     # F_ext from the coupling springs: in-plane spring plus the plane
     # restoring spring, proportional to the tip's distance from the plane (6.5)
