@@ -118,14 +118,6 @@ def test_every_step_is_a_clean_mesh(name, kind, tremor, seed, blade_length):
     run_path(cm, make_path(kind, np.random.default_rng(seed), L, tremor), v0, end_strokes=True)
 
 
-@pytest.mark.slow
-@settings(max_examples=600, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-@given(st.sampled_from(sorted(MESHES)), st.sampled_from(KINDS), st.sampled_from([0.0, 0.1, 0.3, 1.0]),
-       st.integers(0, 2**31 - 1), st.sampled_from([2.5, 10.0]))
-def test_every_step_is_a_clean_mesh_many(name, kind, tremor, seed, blade_length):
-    test_every_step_is_a_clean_mesh.hypothesis.inner_test(name, kind, tremor, seed, blade_length)
-
-
 def stroke_losses(cm, stroke):
     """(lost, refused, deferred): sets of this stroke's original edges crossed strictly inside and
     left uncut; of those, the refused and the deferred (:func:`_cut_paths.uncut_reason`)."""

@@ -229,7 +229,7 @@ def test_igtl_malformed_messages_are_dropped_with_one_line(igtl_source, caplog):
 
 def test_the_mirrored_force_model_keeps_the_service_alive_without_flooding_it(monkeypatch):
     """A SIM_UPDATE at most every KEEP_ALIVE_S (well inside the service's watchdog), however often the loop asks."""
-    import cutkit.simulate.live as live
+    import cutkit.simulate.live_parts as live
     from cutkit.haptics.server import WATCHDOG_TIMEOUT_S
 
     class Source:

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from cutkit.scalpel import FREE
-from cutkit.simulate.live import MAX_CATCH_UP_TICKS, MirroredForceModel, RelaxThread, TickMeter
+from cutkit.simulate.live_parts import MAX_CATCH_UP_TICKS, MirroredForceModel, RelaxThread, TickMeter
 from cutkit.simulate.live_rebase import CATCH_UP_BUDGET_S, BackgroundRebase, StillPicture
 from cutkit.simulate.run import HAPTIC_DT, RATE_WARN_FRACTION, SimulateOptions
 

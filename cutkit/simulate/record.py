@@ -265,7 +265,7 @@ def closing_warnings(session, tips=None) -> None:
 def write_cut_model(session, out_dir, summary_: dict) -> None:
     """``model.h5``: the cut model in its rest configuration with its displacement."""
     from cutkit.io.model_h5 import write_model
-    from cutkit.simulate.run import cut_model
+    from cutkit.simulate.tissues import cut_model
 
     t1 = time.perf_counter()
     with session.lock:

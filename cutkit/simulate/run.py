@@ -32,16 +32,13 @@ import numpy as np
 
 from cutkit.errors import InputError
 from cutkit.model.tetmodel import MATERIAL_MODELS
+from cutkit.simulate.tissues import SETTLE_MAX_SWEEPS, cut_model, make_tissue  # noqa: F401 (public here too)
 
 #: The haptic step, s: the force model runs at 1 kHz whatever else happens (section 6).
 HAPTIC_DT = 1e-3
 #: ``simulate --haptics`` and live sessions warn when the haptic loop reaches
 #: less than this fraction of 1 kHz.
 RATE_WARN_FRACTION = 0.9
-#: Most settle iterations of each material model by default: Newton steps of
-#: the element model, which stops earlier at its residual (SimulateOptions.settle_rtol),
-#: Gauss-Seidel sweeps of the springs.
-SETTLE_MAX_SWEEPS = {"neohookean": 50, "springs": 100}
 #: Default volume stiffness (bulk modulus of the volume term over E): see
 #: docs/simulate.md for what it does to the demo's inverted tets and opening.
 VOLUME_STIFFNESS = 0.0
@@ -67,7 +64,7 @@ class SimulateOptions:
         settles under its prestress and boundary conditions.  The element
         model stops at the relative residual ``settle_rtol``; the springs
         make exactly this many sweeps at the step ``settle_step_s``.  None:
-        :data:`SETTLE_MAX_SWEEPS` of the material model.
+        :data:`cutkit.simulate.tissues.SETTLE_MAX_SWEEPS` of the material model.
     settle_rtol : float
         Relative residual the element model's settle reaches.
     settle_step_s : float
@@ -410,22 +407,6 @@ def preflight(model, model_path: str = "MODEL", available: int | None = None, me
                          f"{model_path} --ratio R -o SMALLER.h5`)")
 
 
-def make_tissue(model, material_model: str, opt: SimulateOptions, blade_length: float):
-    """The tissue of a run: :class:`ElasticTissue` or the paper's springs (:class:`Tissue`)."""
-    if material_model == "springs":
-        from cutkit.simulate.tissue import Tissue
-
-        return Tissue(model, blade_length=blade_length, dt0=opt.dt0, n_lists=opt.n_lists,
-                      tolerance_fraction=opt.tolerance_fraction, centre_nodes=opt.centre_nodes,
-                      volume_stiffness=opt.volume_stiffness)
-    from cutkit.simulate.elastic_tissue import DEFAULT_SOLVER, ElasticTissue
-
-    return ElasticTissue(model, blade_length=blade_length, step_s=1.0 / opt.geometry_rate_hz,
-                         centre_nodes=opt.centre_nodes,
-                         solver=opt.solver or ("newton" if opt.element == "anp" else DEFAULT_SOLVER),
-                         element=opt.element)
-
-
 def relax_steps_warning(report: dict) -> str | None:
     """The one line a run's warnings get when a relaxation step ended unconverged, else None."""
     if not report["not_converged"]:
@@ -433,35 +414,3 @@ def relax_steps_warning(report: dict) -> str | None:
     return (f"{report['not_converged']} of {report['count']} relaxation steps ended unconverged "
             f"(worst residual {report['worst_relative_residual']:.1e} of the force scale, asked "
             f"{report['rtol']:.0e}; solver {report['solver']})")
-
-
-def cut_model(tis, model, summary: dict | None = None):
-    """The cut tissue as a model: rest configuration, cut topology, displacement as point data.
-
-    A model is defined in its rest configuration (the springs' rest lengths
-    follow from it), so ``points`` are the rest positions of the cut mesh,
-    where every tetrahedron is positively oriented; ``point_data
-    ["displacement"]`` (mm) holds the relaxed deformation (ParaView: Warp By
-    Vector).  Nodes no tetrahedron uses are dropped (``to_model`` compacts
-    the numbering and carries the boundary conditions over to it).
-    """
-    import dataclasses
-
-    from cutkit.cutting import to_model
-
-    cm = tis.cm
-    m = to_model(cm, model, points=cm.points, point_data={"displacement": tis.displacement})
-    provenance = dict(m.provenance)
-    stages = dict(provenance.get("stages", {}))
-    if summary is not None:
-        stages["simulate"] = {"options": summary.get("options"), "cut_tets": summary.get("cut_tets"),
-                              "simulated_s": summary.get("simulated_s")}
-    provenance["stages"] = stages
-    return dataclasses.replace(m, provenance=provenance)
-
-
-
-
-# kept importable from here
-from cutkit.simulate.session import cut_opening as _cut_opening  # noqa: E402,F401
-from cutkit.simulate.tasks import LEAVE_MARGIN_MM  # noqa: E402,F401

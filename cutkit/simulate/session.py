@@ -33,7 +33,7 @@ from cutkit.simulate.tasks import ContactTask, CutTask, HandoverLock, RelaxTask
 
 def settle(tis, material_model: str, opt, warnings: list) -> dict:
     """Settle the tissue under its prestress and boundary conditions; the settled state is the start."""
-    from cutkit.simulate.run import SETTLE_MAX_SWEEPS
+    from cutkit.simulate.tissues import SETTLE_MAX_SWEEPS
 
     sweeps = SETTLE_MAX_SWEEPS[material_model] if opt.settle_iterations is None else opt.settle_iterations
     if sweeps <= 0:
@@ -76,7 +76,7 @@ class Session:
 
     def __init__(self, model, opt, blade_length: float, blade_breadth: float, scalpel=None):
         from cutkit.simulate.blade import InProcessScalpel, scalpel_blade
-        from cutkit.simulate.run import make_tissue
+        from cutkit.simulate.tissues import make_tissue
 
         wall0 = time.perf_counter()
         self.model, self.opt = model, opt

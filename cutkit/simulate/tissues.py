@@ -1,0 +1,57 @@
+"""The tissue of a run: which model cuts and relaxes (:func:`make_tissue`), and the cut tissue as a model (:func:`cut_model`).
+
+Used by the offline run (:mod:`cutkit.simulate.run`), the session that
+settles and holds the tissue (:mod:`cutkit.simulate.session`) and the
+recorders that write the cut model (:mod:`cutkit.simulate.record`); it
+imports none of them.
+"""
+
+from __future__ import annotations
+
+#: Most settle iterations of each material model by default: Newton steps of
+#: the element model, which stops earlier at its residual (SimulateOptions.settle_rtol),
+#: Gauss-Seidel sweeps of the springs.
+SETTLE_MAX_SWEEPS = {"neohookean": 50, "springs": 100}
+
+
+def make_tissue(model, material_model: str, opt, blade_length: float):
+    """The tissue of a run: :class:`ElasticTissue` or the paper's springs (:class:`Tissue`)."""
+    if material_model == "springs":
+        from cutkit.simulate.tissue import Tissue
+
+        return Tissue(model, blade_length=blade_length, dt0=opt.dt0, n_lists=opt.n_lists,
+                      tolerance_fraction=opt.tolerance_fraction, centre_nodes=opt.centre_nodes,
+                      volume_stiffness=opt.volume_stiffness)
+    from cutkit.simulate.elastic_tissue import DEFAULT_SOLVER, ElasticTissue
+
+    return ElasticTissue(model, blade_length=blade_length, step_s=1.0 / opt.geometry_rate_hz,
+                         centre_nodes=opt.centre_nodes,
+                         solver=opt.solver or ("newton" if opt.element == "anp" else DEFAULT_SOLVER),
+                         element=opt.element)
+
+
+
+
+def cut_model(tis, model, summary: dict | None = None):
+    """The cut tissue as a model: rest configuration, cut topology, displacement as point data.
+
+    A model is defined in its rest configuration (the springs' rest lengths
+    follow from it), so ``points`` are the rest positions of the cut mesh,
+    where every tetrahedron is positively oriented; ``point_data
+    ["displacement"]`` (mm) holds the relaxed deformation (ParaView: Warp By
+    Vector).  Nodes no tetrahedron uses are dropped (``to_model`` compacts
+    the numbering and carries the boundary conditions over to it).
+    """
+    import dataclasses
+
+    from cutkit.cutting import to_model
+
+    cm = tis.cm
+    m = to_model(cm, model, points=cm.points, point_data={"displacement": tis.displacement})
+    provenance = dict(m.provenance)
+    stages = dict(provenance.get("stages", {}))
+    if summary is not None:
+        stages["simulate"] = {"options": summary.get("options"), "cut_tets": summary.get("cut_tets"),
+                              "simulated_s": summary.get("simulated_s")}
+    provenance["stages"] = stages
+    return dataclasses.replace(m, provenance=provenance)
