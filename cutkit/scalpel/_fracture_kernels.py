@@ -18,9 +18,8 @@ from numba import njit
 
 from cutkit.scalpel._kernels import (
     blade_frame,
+    free_blade,
     CUTTING,
-    FREE,
-    N_OUT,
     N_PER_MM2_PER_PA,
     N_PER_MM_PER_J_PER_M2,
     O_A,
@@ -107,14 +106,7 @@ def fracture_step(params, proxy, velocity, code, crack, entry, normal, control, 
     out : (N_OUT,) float64, out
     """
     tip, a_in, n_in = control
-    for i in range(N_OUT):
-        out[i] = 0.0
-    if code[0] == FREE:
-        for i in range(3):
-            proxy[i] = tip[i]
-            velocity[i] = 0.0
-            out[O_A + i] = a_in[i]
-            out[O_N + i] = n_in[i]
+    if free_blade(code, proxy, velocity, tip, a_in, n_in, out):
         return
     a0, a1, a2, n0, n1, n2 = blade_frame(normal, a_in, n_in)
     r0, r1, r2 = tip[0] - entry[0], tip[1] - entry[1], tip[2] - entry[2]

@@ -106,6 +106,22 @@ def _dynamic_axis(f_x, v_x, d_x, p, abs_perp):
 
 
 @njit(cache=True)
+def free_blade(code, proxy, velocity, tip, a_in, n_in, out):
+    """Clear ``out``; a free blade (no contact) puts the proxy on the tip at rest and reports
+    the device's own frame.  True when the blade is free (the step is then done)."""
+    for i in range(N_OUT):
+        out[i] = 0.0
+    if code[0] != FREE:
+        return False
+    for i in range(3):
+        proxy[i] = tip[i]
+        velocity[i] = 0.0
+        out[O_A + i] = a_in[i]
+        out[O_N + i] = n_in[i]
+    return True
+
+
+@njit(cache=True)
 def blade_frame(normal, a_in, n_in):
     """Unit (a, n) in the blade plane of unit normal ``normal`` (section 6.1), as 6 floats.
 
@@ -159,14 +175,7 @@ def scalpel_step(params, proxy, velocity, code, entry, normal, tip, a_in, n_in, 
         External force from the tissue simulation, N.
     out : (N_OUT,) float64, out
     """
-    for i in range(N_OUT):
-        out[i] = 0.0
-    if code[0] == FREE:
-        for i in range(3):
-            proxy[i] = tip[i]
-            velocity[i] = 0.0
-            out[O_A + i] = a_in[i]
-            out[O_N + i] = n_in[i]
+    if free_blade(code, proxy, velocity, tip, a_in, n_in, out):
         return
 
     b0, b1, b2 = normal[0], normal[1], normal[2]
