@@ -234,6 +234,8 @@ def cut_step(cm: CutMesh, tip, a) -> StepResult:
     cut_edges = []
     for (kind, i), val in zip(ev_id.tolist(), ev_val):
         if kind == KS.EV_EDGE:
+            if np.isfinite(cm.edge_t[i]):  # cut already: an edge is cut once
+                continue
             s = recrossed(cm, i, val[0], swept)  # an end moved away from the cut earlier in the step
             s = -1.0 if s < 0.0 or touches_only(cm, i, s, swept) else snap_away(cm, i, s, swept)
             ring = s >= 0.0 and cm.try_cut_edge(i, s)
