@@ -105,6 +105,13 @@ def _in_tets(x, tets, q) -> bool:
     return False
 
 
+def _tri_bary(g, ru, rv):
+    """The coordinates (l1, l2) along a triangle's edges u, v of a point w, from the Gram matrix ``g``
+    (2, 2) of u, v and ``ru`` = w.u, ``rv`` = w.v (the 2 x 2 normal equations, Cramer's rule)."""
+    det = g[0, 0] * g[1, 1] - g[0, 1] * g[0, 1]
+    return (g[1, 1] * ru - g[0, 1] * rv) / det, (g[0, 0] * rv - g[0, 1] * ru) / det
+
+
 def _meets_from_outside(cm, e, t, swept):
     """Whether the swept surface meets edge ``e`` (at parameter ``t``) only on its border, from outside.
 
@@ -137,7 +144,7 @@ def _meets_from_outside(cm, e, t, swept):
         met = True
         u, v, w = tri[1] - tri[0], tri[2] - tri[0], c - tri[0]
         g = np.array([[u @ u, u @ v], [u @ v, v @ v]])
-        l1, l2 = np.linalg.solve(g, [w @ u, w @ v])
+        l1, l2 = _tri_bary(g, w @ u, w @ v)
         if min(1.0 - l1 - l2, l1, l2) > BORDER_EPS:
             return False
         n = np.cross(u, v)
@@ -149,7 +156,7 @@ def _meets_from_outside(cm, e, t, swept):
         # just below it, so the swept surface lies just above)
         for th in np.linspace(0.0, 2 * np.pi, SIDE_SAMPLES, endpoint=False):
             d = np.cos(th) * e1 + np.sin(th) * e2
-            b1, b2 = np.linalg.solve(g, [(w + step * d) @ u, (w + step * d) @ v])
+            b1, b2 = _tri_bary(g, (w + step * d) @ u, (w + step * d) @ v)
             if min(1.0 - b1 - b2, b1, b2) >= 0.0 and _in_tets(x, around, c + step * (d + SIDE_LIFT * n)):
                 return False
     return met
