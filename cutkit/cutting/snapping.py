@@ -41,9 +41,11 @@ Rest and current positions move together (the current move is carried to
 the rest configuration through the inverse deformation of one tetrahedron
 around the vertex; the texture coordinates likewise).  The step reports the
 vertex in ``StepResult.moved_nodes`` with its rest position before the
-move in ``moved_from``, as for cut nodes that moved: the tissues place it
-through the old shape of the tetrahedra around it and re-make their rest
-data.
+move in ``moved_from``, as for cut nodes that moved: the element tissue
+places it through the old shape of the tetrahedra around it and re-makes
+their rest data.  The spring tissue re-interpolates moved nodes from their
+defining nodes, which an original vertex lacks: it cannot take a snapped
+vertex (``simulate`` does not turn snapping on).
 """
 
 from __future__ import annotations
