@@ -144,3 +144,50 @@ def test_snapping_is_off_by_default():
     cm = CutMesh(p, t, blade_length=10.0)
     _cut(cm, [[x, 1.03, -1.0] for x in np.linspace(-0.5, 5.5, 40)], [0.05, 0.02, -1.0])
     assert not cm.snapped_nodes and np.array_equal(cm.points[:len(p)], p)
+
+
+def _old_map(X_old, x_old, tets, point):
+    """The tissue before a step, piecewise affine over ``tets``: the current place of rest ``point``."""
+    for tv in tets:
+        T = (X_old[tv[1:]] - X_old[tv[0]]).T
+        b = np.linalg.solve(T, point - X_old[tv[0]])
+        if b.min() >= -1e-9 and b.sum() <= 1 + 1e-9:
+            return x_old[tv[0]] + (x_old[tv[1:]] - x_old[tv[0]]).T @ b
+    raise AssertionError("point outside the star")
+
+
+def test_the_element_tissue_places_a_snapped_vertex_through_the_old_shape():
+    from _fem_reference import kuhn_box
+    from cutkit.model.tetmodel import Materials, Prestress, TetModel
+    from cutkit.simulate.elastic_tissue import ElasticTissue
+
+    row = dict(label=1, name="m", E=30e3, poisson_ratio=0.45, density=1090.0, damping=8.0, F_enter=0.8,
+               mu_static=1e-6, mu_dynamic=1e-6, rho_dynamic=1e-8, alpha_static=0.1, alpha_dynamic=0.1,
+               c_edge=1.0, c_shape=1.0)
+    p, t = kuhn_box((6.0, 3.0, 3.0), (6, 3, 3))
+    rng = np.random.default_rng(5)
+    inner = np.all((p > 0) & (p < [6.0, 3.0, 3.0]), axis=1)
+    p = p + np.where(inner[:, None], rng.uniform(-0.2, 0.2, p.shape), 0.0)
+    ps = Prestress(label=np.array([1], np.int32), fibre_direction=np.array([[0.0, 1.0, 0.0]]),
+                   prestrain=np.array([0.1]))
+    tis = ElasticTissue(TetModel.from_arrays(p, t, materials=Materials.from_rows([row]), prestress=ps),
+                        blade_length=1.6, step_s=0.02)
+    tis.em.fixed[p[:, 2] == 0] = True
+    tis.cm.snap_vertices = True
+    X = tis.cm.rest_points
+    tis.state.positions[:] = X + 0.1 * np.sin(X[:, [1, 2, 0]])  # a smooth deformation: current != rest
+    checked = 0
+    for xb in np.linspace(-0.5, 6.5, 15):
+        X_old, x_old, live = tis.cm.rest_points.copy(), tis.positions.copy(), tis.cm.tets
+        res = cut_step(tis.cm, [xb, 1.03, 3.5], [0.0, 0.0, 1.0])
+        tis.apply_cut(res)
+        for v in [k for k in res.moved_nodes.tolist() if k < len(p)]:
+            # the tissue before the step: its live tets around v, over their rest places before the step
+            X_before = X_old.copy()
+            old = res.moved_nodes < len(X_old)
+            X_before[res.moved_nodes[old]] = res.moved_from[old]
+            ref = _old_map(X_before, x_old, live[(live == v).any(axis=1)], tis.cm.rest_points[v])
+            assert np.allclose(tis.positions[v], ref, atol=1e-9)
+            checked += 1
+    assert checked and np.isfinite(tis.positions).all()
+    assert np.abs(x_old - X_old).max() > 0.05
