@@ -179,3 +179,17 @@ def test_a_blade_through_the_tissue_in_an_inner_face_plane_still_cuts():
     for s in np.linspace(-0.5, 3.5, 9):
         cut_step(cm, np.array([6.0, 1.0, s]), np.array([1.0, 0.0, 0.0]))
     assert components(cm.tets) == 2
+
+
+@pytest.mark.parametrize("a", [(0.0, 0.0, -1.0), (0.3, 0.0, -1.0), (0.0, 0.3, -1.0), (-0.5, 0.2, -1.0)])
+@pytest.mark.parametrize("y", [1.0, 1.37])
+def test_a_tip_sliding_along_the_skin_cuts_nothing(a, y):
+    """The tip dragged over the top face, the blade above it: the swept quad meets the surface only
+    along its border (the tip's path), never goes in, and cuts nothing; 0.3 mm deeper it cuts."""
+    p, t = box_mesh((5, 3, 3))
+    a = np.asarray(a) / np.linalg.norm(a)
+    for depth, cuts in ((0.0, False), (0.3, True)):
+        cm = CutMesh(p, t, blade_length=10.0)
+        for x in np.linspace(-0.5, 5.5, 25):
+            cut_step(cm, [x, y, 3.0 - depth], a)
+        assert bool(cm.subtets) == cuts and (cm.n_points > len(p)) == cuts

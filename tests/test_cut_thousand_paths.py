@@ -14,6 +14,10 @@ stroke and of the path:
 * every original edge the stroke's swept surface crossed strictly inside
   (the oracle of ``tests/_cut_paths.py``) is cut or counted by
   ``edges_left_uncut`` (named in the warning line).
+
+The bound on the cut-made tetrahedra's smallest dihedral angle
+(``MIN_CUT_DIHEDRAL_DEG``) is not met yet: its test is an expected failure
+until it is (distribution and causes: ``benchmarks/cut_slivers.py``).
 """
 
 from pathlib import Path
@@ -28,7 +32,7 @@ from cutkit.cutting.crumbs import CRUMB_VOLUME_FRACTION, crumb_volume, loose_pie
 from cutkit.cutting.rebase import blade_in_tissue, rebase_if_left
 from cutkit.mesh.check import check_mesh
 from cutkit.mesh.generate import box_mesh
-from cutkit.mesh.quality import signed_volumes
+from cutkit.mesh.quality import min_dihedral_angles, signed_volumes
 
 #: Paths per mesh (three meshes: 1,008 paths).
 PATHS_PER_MESH = 336
@@ -36,6 +40,10 @@ PATHS_PER_MESH = 336
 CHUNKS = 4
 ALL_KINDS = KINDS + MORE_KINDS
 TREMORS = (0.0, 0.1, 0.3, 1.0)
+#: Every cut-made tetrahedron's smallest dihedral angle should be at least this (issue 30).
+MIN_CUT_DIHEDRAL_DEG = 5.0
+#: The bound's test takes every this-many-th path of each mesh.
+BOUND_EVERY = 8
 
 
 def _meshes():
@@ -49,12 +57,15 @@ MESHES = _meshes()
 
 
 def _sound(cm, v0, where):
+    """Assert the written mesh sound (docstring above); returns its cut-made tets' worst dihedral angle (deg)."""
     m = to_model(cm)
     rep = check_mesh(m.points, m.tets, m.labels)
     assert rep.passed, (where, [(r.name, r.detail) for r in rep.rows if not r.passed])
     v = float(signed_volumes(m.points, m.tets).sum()) + crumb_volume(cm)
     assert abs(v - v0) <= 1e-12 * v0, (where, v, v0)
     assert loose_pieces(cm)[-1] > CRUMB_VOLUME_FRACTION * cm.model_volume, where
+    made = m.tets[m.cell_data["new_tet"] == 1]
+    return float(min_dihedral_angles(m.points, made).min()) if len(made) else 180.0
 
 
 def _unreported(cm, stroke):
@@ -65,14 +76,15 @@ def _unreported(cm, stroke):
 
 
 def cut_path(p, t, poses, blade_length, where):
-    """Cut ``poses``; check the mesh at every stroke's end; returns the unreported uncut edges."""
+    """Cut ``poses``; check the mesh at every stroke's end; returns the unreported uncut edges and the worst
+    cut-made dihedral angle (deg)."""
     v0 = float(signed_volumes(p, t).sum())
     cm = CutMesh(p, t, blade_length=blade_length)
-    stroke, missed = [], []
+    stroke, missed, worst = [], [], [180.0]
 
     def end():
         missed.extend(_unreported(cm, stroke))
-        _sound(cm, v0, where)
+        worst.append(_sound(cm, v0, where))
         stroke.clear()
 
     for pose in poses:
@@ -89,18 +101,32 @@ def cut_path(p, t, poses, blade_length, where):
             end()
             rebase_if_left(cm)
     end()
-    return missed
+    return missed, min(worst)
+
+
+def _path(name, i):
+    """(poses, blade length, where) of path ``i`` on mesh ``name``."""
+    p, _ = MESHES[name]
+    kind, tremor = ALL_KINDS[i % len(ALL_KINDS)], TREMORS[(i // len(ALL_KINDS)) % len(TREMORS)]
+    poses = make_path(kind, np.random.default_rng(1000 * i + 7), p.max(axis=0), tremor)
+    return poses, 2.5 if i % 2 else 10.0, (name, i, kind, tremor)
 
 
 @pytest.mark.parametrize("chunk", range(CHUNKS))
 @pytest.mark.parametrize("name", sorted(MESHES))
 def test_a_thousand_paths_stay_sound(name, chunk):
     p, t = MESHES[name]
-    L = p.max(axis=0)
     for i in range(chunk, PATHS_PER_MESH, CHUNKS):
-        kind, tremor = ALL_KINDS[i % len(ALL_KINDS)], TREMORS[(i // len(ALL_KINDS)) % len(TREMORS)]
-        rng = np.random.default_rng(1000 * i + 7)
-        poses = make_path(kind, rng, L, tremor)
-        where = (name, i, kind, tremor)
-        missed = cut_path(p, t, poses, 2.5 if i % 2 else 10.0, where)
+        poses, blade_length, where = _path(name, i)
+        missed, _ = cut_path(p, t, poses, blade_length, where)
         assert not missed, (where, sorted(missed)[:10])
+
+
+@pytest.mark.xfail(strict=True, reason="corners cut off near a vertex at the snap limits: worst 0.2-0.6 deg "
+                   "(docs/cutting.md, Angles; benchmarks/cut_slivers.py)")
+@pytest.mark.parametrize("name", sorted(MESHES))
+def test_cut_made_tets_keep_the_dihedral_bound(name):
+    p, t = MESHES[name]
+    worst = {i: cut_path(p, t, *_path(name, i))[1] for i in range(0, PATHS_PER_MESH, BOUND_EVERY)}
+    below = {i: w for i, w in worst.items() if w < MIN_CUT_DIHEDRAL_DEG}
+    assert not below, (name, len(below), min(worst.values()))

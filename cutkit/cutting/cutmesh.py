@@ -33,6 +33,7 @@ from cutkit.cutting import _kernels_step as K
 from cutkit.cutting.crumbs import init_crumbs
 from cutkit.cutting.rebase import cut_twins, init_records, rebase, twin_face_bary
 from cutkit.cutting.resubdivision import resubdivide
+from cutkit.cutting.snapping import init_snapping
 
 #: Edge intersection parameters are clamped into [EDGE_SNAP, 1 - EDGE_SNAP]
 #: (a crossing near a vertex, or through it, becomes a crossing near it).
@@ -74,10 +75,11 @@ class CutMesh:
     blade_length : float  mm
     centre_nodes : bool  use the Fig. 2c centre node in split faces (default False: fewer, better tets)
     compact_splits : bool  cone complete splits to a vertex per side (see _compact_split)
+    snap_vertices : bool  move an uncut vertex away from the cut before an edge is cut near it (:mod:`.snapping`)
     """
 
     def __init__(self, points, tets, rest_points=None, texcoords=None, labels=None,
-                 blade_length=20.0, centre_nodes=False, compact_splits=True):
+                 blade_length=20.0, centre_nodes=False, compact_splits=True, snap_vertices=False):
         points = np.ascontiguousarray(points, np.float64)
         tets = np.ascontiguousarray(tets, np.int64)
         if points.ndim != 2 or points.shape[1] != 3:
@@ -146,12 +148,14 @@ class CutMesh:
         self._delta_reset()
         init_records(self, n0, m0)  # what outlives a rebase (model counts, earlier strokes' cut surface)
         init_crumbs(self)  # pieces cut loose below CRUMB_VOLUME_FRACTION of the model are removed
+        init_snapping(self, snap_vertices)  # vertices moved away from the cut instead of slivers
 
     @classmethod
-    def from_model(cls, model, blade_length=20.0, centre_nodes=False, compact_splits=True):
+    def from_model(cls, model, blade_length=20.0, centre_nodes=False, compact_splits=True, snap_vertices=False):
         """Cut state of a :class:`~cutkit.model.tetmodel.TetModel` (rest = current positions)."""
         return cls(model.points, model.tets, texcoords=model.texcoords, labels=model.labels,
-                   blade_length=blade_length, centre_nodes=centre_nodes, compact_splits=compact_splits)
+                   blade_length=blade_length, centre_nodes=centre_nodes, compact_splits=compact_splits,
+                   snap_vertices=snap_vertices)
 
     def rebase(self):
         """Make the live tets the original ones of a fresh cut state (blade out); see :func:`.rebase.rebase`.
@@ -200,6 +204,24 @@ class CutMesh:
             moved_from[i] = self._X[i].copy()
         self._set_node(i, nodes, w, lo)
         self._delta["moved_nodes"].append(i)
+
+    def move_original_node(self, v, dx, dX, duvw=None):
+        """Move original node ``v`` by ``dx`` (3,) current, ``dX`` (3,) rest, ``duvw`` (3,) texture (or None).
+
+        Recorded as a moved node of the step (:mod:`.snapping`: a vertex moved away from the cut).
+        """
+        moved_from = self._delta["moved_from"]
+        if v not in moved_from:
+            moved_from[v] = self._X[v].copy()
+        self._x[v] += dx
+        self._X[v] += dX
+        if duvw is not None and self._uvw is not None:
+            self._uvw[v] += duvw
+        self._delta["moved_nodes"].append(v)
+
+    def reinterpolate_node(self, i, nodes, w):
+        """Place cut node ``i`` again by its weights ``w`` (k,) on original ``nodes`` (k,) (one moved)."""
+        self._move_node(i, nodes, w)
 
     @property
     def points(self):

@@ -125,7 +125,8 @@ def rebase(cm):
     model_node = node_model_source(cm, np.arange(n))
     fresh = CutMesh(cm._x[:n], cm._tets[ids], rest_points=cm._X[:n],
                     texcoords=None if cm._uvw is None else cm._uvw[:n], labels=cm.labels[origin],
-                    blade_length=cm.blade_length, centre_nodes=cm.centre_nodes, compact_splits=cm.compact_splits)
+                    blade_length=cm.blade_length, centre_nodes=cm.centre_nodes, compact_splits=cm.compact_splits,
+                    snap_vertices=cm.snap_vertices)
     fresh.n_model_points, fresh.n_model_tets = cm.n_model_points, cm.n_model_tets
     fresh.model_tet = cm.model_tet[origin]
     fresh.orig_made_by_cut = made
@@ -140,6 +141,7 @@ def rebase(cm):
     fresh.model_volume = cm.model_volume  # crumbs are measured against the model as loaded
     fresh.crumb_volume_before = crumb_volume(cm)
     fresh.crumb_count = cm.crumb_count
+    fresh.snapped_nodes, fresh.snap_counts = cm.snapped_nodes, cm.snap_counts  # snapping.py
     find_twins(fresh)
     # replace the whole state: caches keyed by the old numbering (surface BVH, sweep buffers) go too
     vars(cm).clear()

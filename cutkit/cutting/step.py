@@ -34,6 +34,7 @@ from cutkit.errors import InputError
 from cutkit.cutting import _kernels_step as KS
 from cutkit.cutting.contact import touches_only
 from cutkit.cutting.crumbs import remove_crumbs
+from cutkit.cutting.snapping import new_crossings, recrossed, snap_away
 from cutkit.cutting.cutmesh import CutMesh
 
 #: Maximum number of face crossings of the tip walk per step.
@@ -233,7 +234,11 @@ def cut_step(cm: CutMesh, tip, a) -> StepResult:
     cut_edges = []
     for (kind, i), val in zip(ev_id.tolist(), ev_val):
         if kind == KS.EV_EDGE:
-            ring = not touches_only(cm, i, val[0], swept) and cm.try_cut_edge(i, val[0])
+            if np.isfinite(cm.edge_t[i]):  # cut already: an edge is cut once
+                continue
+            s = recrossed(cm, i, val[0], swept)  # an end moved away from the cut earlier in the step
+            s = -1.0 if s < 0.0 or touches_only(cm, i, s, swept) else snap_away(cm, i, s, swept)
+            ring = s >= 0.0 and cm.try_cut_edge(i, s)
             if ring:
                 cut_edges.append(i)
                 cut_edges.extend(cm.retried_edges)  # deferred edges this cut let through
@@ -243,6 +248,13 @@ def cut_step(cm: CutMesh, tip, a) -> StepResult:
             # the blade crosses face i: moves its notch node F (crack front);
             # only positions change, the topology does not
             cm.set_face_crossing(i, val.copy())
+    for i, s in new_crossings(cm, swept):  # edges of nodes moved away from the cut that cross now
+        ring = not touches_only(cm, i, s, swept) and cm.try_cut_edge(i, s)
+        if ring:
+            cut_edges.append(i)
+            cut_edges.extend(cm.retried_edges)
+            changed.update(ring)
+        cm.retried_edges.clear()
     # tip node T follows the tip inside its tetrahedron (a move, unless the
     # tet's topology changes anyway)
     if tip_tet >= 0:
