@@ -274,3 +274,38 @@ def test_a_backlog_of_a_fast_blade_cuts_every_millimetre():
     assert ticked == list(range(201))
     # the bound is reached at every third due pose (1.2 x the bound), and the last comes in step
     assert cut_on == [0, 60, 120, 180, 200]
+
+
+def _geometry_loop(pending: bool, frame_age_periods: float):
+    """A stand-in session whose geometry update cuts one tet when ``pending``; the newest frame is
+    ``frame_age_periods`` frame periods old.  Returns the order of frames and cuts."""
+    from types import SimpleNamespace
+
+    from cutkit.simulate.live_loop import LiveLoop
+
+    events = []
+    loop = LiveLoop.__new__(LiveLoop)
+    s = SimpleNamespace(tets_cut=0, tis=SimpleNamespace(n_nodes=10), cut=SimpleNamespace(pending=pending),
+                        scalpel=SimpleNamespace(code=-1))
+
+    def geometry_update():
+        events.append("cut")
+        s.tets_cut += int(s.cut.pending)
+        return np.zeros((10, 3))
+
+    s.geometry_update = geometry_update
+    loop.session, loop.still, loop.pose, loop.pending_cut = s, None, (np.zeros(3), None, None, 1.0), []
+    loop.relax, loop.rebaser, loop.on_frame = SimpleNamespace(f_ext=None), SimpleNamespace(busy=False), None
+    loop.frame_period, loop.now = 1.0 / 30.0, lambda: 10.0
+    loop.frame_s = [10.0 - frame_age_periods / 30.0]
+    loop._frame = lambda on_frame: events.append("frame")
+    loop._geometry()
+    return events, loop.pending_cut
+
+
+def test_a_cut_is_preceded_by_a_frame_when_the_newest_frame_is_half_a_period_old():
+    """The cut holds the main thread: a frame goes out first when one is half due (bounds the frame gap
+    to about one cut and one frame); a fresh frame, or a geometry update that does not cut, adds none."""
+    assert _geometry_loop(pending=True, frame_age_periods=0.8) == (["frame", "cut"], [1.0])
+    assert _geometry_loop(pending=True, frame_age_periods=0.2) == (["cut"], [1.0])
+    assert _geometry_loop(pending=False, frame_age_periods=0.8) == (["cut"], [])

@@ -21,6 +21,8 @@ LOOP_IDLE_S = 0.0005
 #: once the blade has moved this far since the last cut, mm: the cut of the newest then sweeps at most
 #: about this far (one sweep from a held stroke's first pose to one 8 mm deep went through uncut).
 MAX_SKIPPED_SWEEP_MM = 1.0
+#: A cut is preceded by a frame when the newest frame is older than this many frame periods.
+PRE_CUT_FRAME_AGE = 0.5
 
 
 class OuterBoundary:
@@ -138,6 +140,7 @@ class LiveLoop:
         self.faces = np.zeros((0, 3), np.int64), self.boundary.get(0)
         self.faces_version = 0
         self.view_closed = False  # a window closed by its user ends the session (checked at frames)
+        self.on_frame = None  # run()'s on_frame, for the frames drawn before a cut
 
     def run(self, max_seconds=None, idle_end_s: float = 0.5, stop=None, on_frame=None,
             until_idle_s: float | None = None, on_start=None) -> dict:
@@ -157,6 +160,7 @@ class LiveLoop:
         self.relax = RelaxThread(s, clock, chunk)
         self.relax.start()
         self.interrupted = False
+        self.on_frame = on_frame
         stopped_by = None
         try:
             if on_start is not None:
@@ -336,6 +340,10 @@ class LiveLoop:
 
     def _geometry(self) -> None:
         s = self.session
+        if s.cut.pending and self.still is None and self._frame_stale():
+            # a cut holds this thread for tens of ms: draw first, so that the longest gap between
+            # frames (and OpenIGTLink messages) is about one cut and one frame, not a frame period more
+            self._frame(self.on_frame)
         before = s.tets_cut, s.tis.n_nodes
         if self.pose is not None:
             self.cut_tip = np.array(self.pose[0], np.float64)
@@ -346,6 +354,10 @@ class LiveLoop:
             self.pending_cut.append(self.pose[3])
         if s.scalpel.code == FREE:  # the hierarchy serves the entry test: refit to the relaxed surface
             s.refit()
+
+    def _frame_stale(self) -> bool:
+        """Whether the newest frame is older than :data:`PRE_CUT_FRAME_AGE` frame periods."""
+        return bool(self.frame_s) and self.now() - self.frame_s[-1] > PRE_CUT_FRAME_AGE * self.frame_period
 
     def _frame(self, on_frame) -> None:
         from cutkit.cutting import cut_surface_faces
