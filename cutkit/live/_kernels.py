@@ -6,7 +6,7 @@ import numpy as np
 from numba import njit
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)  # the OpenIGTLink view runs it on the endpoint's client threads
 def vertex_normals(points, faces, out):
     """Area-weighted unit vertex normals into ``out``.
 
