@@ -124,3 +124,18 @@ def test_bad_rings_are_refused():
     p, em, f = block()
     with pytest.raises(InputError, match="region_rings"):
         NewtonSolver(em, region_rings=-1)
+
+
+@pytest.mark.parametrize("project", [0, 1])
+def test_the_region_matrix_is_the_whole_matrix_on_the_region(project):
+    p, em, f = block()
+    x = p + np.random.default_rng(1).normal(scale=0.05, size=p.shape)
+    solver = NewtonSolver(em)
+    region = np.zeros(em.n_nodes, bool)
+    region[(p[:, 0] >= 5) & (p[:, 2] >= 1)] = True
+    sub = ~em.fixed & region[:, None]
+    dofs = np.flatnonzero(sub.ravel())
+    add = em.masses / H ** 2
+    whole = solver.matrix(x, sub, add, project)[dofs][:, dofs].toarray()
+    part = solver.region_matrix(x, sub, region, add, project)[dofs][:, dofs].toarray()
+    assert np.allclose(part, whole, rtol=1e-12, atol=1e-12 * np.abs(whole).max())
