@@ -36,6 +36,8 @@ def run(model, traj, rings, hold_s: float) -> dict:
         t0 = time.perf_counter()
         info = original_solve(self, *a, **k)
         walls.append(time.perf_counter() - t0)
+        print(f"solve {len(walls)}: {walls[-1]:.3f} s, {info.iterations} iterations, residual {info.residual:.3g} N, "
+              f"regions {self.region_log[-info.iterations:] if info.iterations else []}", file=sys.stderr, flush=True)
         return info
 
     def kept_solver(self):
