@@ -22,6 +22,15 @@ drops inertia and damping: the same iterations solve for static equilibrium.
 
 A solve stops on the true residual: ``||r|| <= atol`` over all free dofs
 (N), the same criterion as :func:`cutkit.relax.vbd.local_step`'s ``atol``.
+
+With ``region_rings`` set, each iteration solves only where the model is out
+of balance (:func:`newton_region`): the smallest set of nodes outside of which
+the residual norm is below :data:`REGION_FRACTION` of ``atol``, grown by that
+many rings of the tet graph, the rest held.  Its system is small enough to
+factorise (milliseconds), and the line search and the stopping test still take
+the whole model's G and residual, so a solve ends only when the WHOLE model is
+in balance: the slow, global modes (a wound's gaping) are never cut off, they
+widen the region (issue 29, "locality without losing the slow modes").
 """
 
 from __future__ import annotations
@@ -77,6 +86,14 @@ AMG_REBUILD_ITERATIONS = 100
 #: across iterations, steps and cuts).  The first is the default: on the cut knee it reaches 10^-3 of
 #: the force scale 2.2-2.8x sooner (docs/relaxation.md, "Why block Jacobi").
 PRECONDITIONERS = ("block_jacobi", "amg")
+#: A local iteration's region holds the nodes that carry the residual: outside it the residual norm is
+#: at most this fraction of the tolerance (:func:`newton_region`).
+REGION_FRACTION = 0.1
+#: A local iteration that leaves more than this fraction of the residual it started from doubles the
+#: rings of the iterations after it (a mode wider than the region: the region grows to meet it).
+REGION_WIDEN = 0.5
+#: A region of more than this fraction of the free dofs is solved as the whole model.
+REGION_MAX_FRACTION = 0.5
 
 
 class NewtonSolver:
@@ -100,22 +117,33 @@ class NewtonSolver:
         takes the exact Hessian wherever it is positive definite.
     preconditioner : str
         One of :data:`PRECONDITIONERS`: what preconditions the CG solves.
+    region_rings : int, optional
+        None: every iteration solves the whole model.  k >= 0: each iteration
+        solves on :func:`newton_region` grown by k rings (doubled after an
+        iteration that gains little), the rest held; the solve still stops on
+        the whole model's residual.
     """
 
     def __init__(self, em: ElementModel, *, linear: str = "auto", hessian: str = "auto",
-                 preconditioner: str = "block_jacobi"):
+                 preconditioner: str = "block_jacobi", region_rings: int | None = None):
         if linear not in LINEAR_SOLVERS:
             raise InputError(f"linear solver must be one of {', '.join(LINEAR_SOLVERS)}, not {linear!r}")
         if hessian not in HESSIANS:
             raise InputError(f"hessian must be one of {', '.join(HESSIANS)}, not {hessian!r}")
         if preconditioner not in PRECONDITIONERS:
             raise InputError(f"preconditioner must be one of {', '.join(PRECONDITIONERS)}, not {preconditioner!r}")
+        if region_rings is not None and not (isinstance(region_rings, (int, np.integer)) and region_rings >= 0):
+            raise InputError(f"region_rings must be None or a non-negative integer, not {region_rings!r}")
         self.em = em
+        self.region_rings = None if region_rings is None else int(region_rings)
+        #: dofs of each local iteration's region (0: that iteration solved the whole model)
+        self.region_log: list[int] = []
         self.preconditioner = preconditioner
         self.linear = linear
         self.hessian = hessian
         self.counts = {"factorisations": 0, "indefinite": 0, "pattern_builds": 0, "cg_iterations": 0,
-                       "amg_setups": 0}
+                       "amg_setups": 0,
+                       "local_iterations": 0, "global_iterations": 0}
         self._amg = None  # (hierarchy, dofs it was built on)
         self.reset()
 
@@ -179,19 +207,7 @@ class NewtonSolver:
         """d with A d = r, or None where a Cholesky factorisation finds A not positive definite
         (x (n, 3) and free (n, 3) bool: where A was assembled, for a multigrid setup)."""
         if self.linear == "cholesky" or (self.linear == "auto" and A.shape[0] <= CHOLESKY_MAX_DOFS):
-            import cholespy
-
-            self.counts["factorisations"] += 1
-            try:
-                with _quiet_stderr():  # CHOLMOD reports an indefinite matrix on stderr as well
-                    L = cholespy.CholeskySolverD(A.shape[0], A.indptr.astype(np.int32),
-                                                 A.indices.astype(np.int32), A.data, cholespy.MatrixType.CSR)
-            except ValueError:
-                self.counts["indefinite"] += 1
-                return None
-            d = np.zeros_like(r)
-            L.solve(np.ascontiguousarray(r), d)
-            return d
+            return self._factor_solve(A, r)
         if self.preconditioner == "block_jacobi":
             M = node_block_inverse(A, self.pattern())
             if M is None:  # a diagonal block is not positive definite, so neither is A
@@ -274,20 +290,111 @@ class NewtonSolver:
         r = problem.residual(x)
         r0 = res = float(np.linalg.norm(r))
         it = 0
+        rings = self.region_rings
         while res > atol and it < max_iterations:
             if stop is not None and stop[0]:
                 if it == 0:
                     return SolveInfo(0, r0, r0, False, taken=False)
                 break
-            d = self._direction(x, r, free, terms.inertia + terms.damping)
+            d = None
+            if rings is not None:
+                d = self._local_direction(x, r, free, terms.inertia + terms.damping, atol, rings)
+            local = d is not None
+            if d is None:
+                d = self._direction(x, r, free, terms.inertia + terms.damping)
+                self.counts["global_iterations"] += 1
             if d is None:
                 break
+            before = res
             moved, r = _line_search(problem, x, d, r, res)
             it += 1
             res = float(np.linalg.norm(r))
+            if local and res > max(atol, REGION_WIDEN * before):
+                rings = 2 * rings + 1  # the out-of-balance mode reaches past the region: widen it
             if not moved:
+                if local:
+                    continue  # the rings were doubled above: the next iteration solves a wider region
                 break
         return SolveInfo(it, r0, res, res <= atol)
+
+    def _local_direction(self, x, r, free, diagonal_add, atol: float, rings: int):
+        """The Newton step on :func:`newton_region` (the rest held), or None where the region is
+        too large to factorise or its system is not positive definite (the caller then takes the
+        whole model's step)."""
+        pat = self.pattern()
+        region = newton_region(r, free, pat.node_ptr, pat.node_idx, REGION_FRACTION * atol, rings)
+        sub = free & region[:, None]
+        dofs = np.flatnonzero(sub.ravel())
+        if dofs.size == 0 or dofs.size > min(CHOLESKY_MAX_DOFS, REGION_MAX_FRACTION * np.count_nonzero(free)):
+            self.region_log.append(0)
+            return None
+        modes = {"auto": (0, 1), "projected": (1,), "exact": (0,)}[self.hessian]
+        for mode in modes:
+            A = self.region_matrix(x, sub, region, diagonal_add, mode)[dofs][:, dofs].tocsr()
+            ds = self._factor_solve(A, r.ravel()[dofs])
+            if ds is not None:
+                d = np.zeros(x.size)
+                d[dofs] = ds
+                self.counts["local_iterations"] += 1
+                self.region_log.append(int(dofs.size))
+                return d.reshape(-1, 3)
+        self.region_log.append(0)
+        return None
+
+    def region_matrix(self, x, sub, region, diagonal_add, mode: int):
+        """:meth:`matrix` with ``sub`` free, assembled from the elements that touch ``region`` only.
+
+        The other elements add nothing to the region's rows (the knee's whole assembly costs about
+        1 s), so the rows and columns of ``sub``'s dofs equal :meth:`matrix`'s; the rest are not
+        assembled.
+
+        Parameters
+        ----------
+        x : (n, 3) float64
+        sub : (n, 3) bool
+            The free dofs, all inside ``region``.
+        region : (n,) bool
+        diagonal_add : (n,) float64
+        mode : int
+            As :meth:`matrix`'s ``project``.
+
+        Returns
+        -------
+        (3n, 3n) scipy CSR float64
+        """
+        import scipy.sparse as sp
+
+        if self.em.element == "anp":  # a node's pressure couples its whole patch: assemble it all
+            return self.matrix(x, sub, diagonal_add, mode)
+        pat, el = self.pattern(), self._elements()
+        ids = np.flatnonzero(region[el.tets].any(axis=1))
+        part = KE.Elements(*(np.ascontiguousarray(a[ids]) for a in el))
+        data = np.empty(pat.indices.shape[0])
+        KN.assemble_hessian(x, part, pat._replace(element_blocks=np.ascontiguousarray(pat.element_blocks[ids])),
+                            int(mode), data)
+        add = np.repeat(np.asarray(diagonal_add, np.float64), 3)
+        if not np.any(add > 0):
+            add = STATIC_SHIFT * np.abs(data[pat.diagonal])
+        KN.constrain(pat, ~sub.ravel(), add, data)
+        n3 = 3 * self.em.n_nodes
+        return sp.csr_matrix((data, pat.indices, pat.indptr), shape=(n3, n3))
+
+    def _factor_solve(self, A, r: np.ndarray):
+        """d with A d = r by cholespy's sparse Cholesky factorisation; None where A is not positive
+        definite."""
+        import cholespy
+
+        self.counts["factorisations"] += 1
+        try:
+            with _quiet_stderr():  # CHOLMOD reports an indefinite matrix on stderr as well
+                L = cholespy.CholeskySolverD(A.shape[0], A.indptr.astype(np.int32),
+                                             A.indices.astype(np.int32), A.data, cholespy.MatrixType.CSR)
+        except ValueError:
+            self.counts["indefinite"] += 1
+            return None
+        d = np.zeros_like(r)
+        L.solve(np.ascontiguousarray(r), d)
+        return d
 
 
     def _direction(self, x, r, free, diagonal_add):
@@ -300,6 +407,43 @@ class NewtonSolver:
                 d[~free] = 0.0
                 return d
         return None
+
+
+def newton_region(r: np.ndarray, free: np.ndarray, node_ptr: np.ndarray, node_idx: np.ndarray,
+                  outside: float, rings: int) -> np.ndarray:
+    """The nodes a local Newton iteration solves for: where the model is out of balance, and around.
+
+    The seed is the smallest set of nodes (largest residuals first) outside of which the residual
+    norm is at most ``outside``; it grows by ``rings`` rings of the node graph.
+
+    Parameters
+    ----------
+    r : (n, 3) float64
+        N: the residual (zero at held dofs).
+    free : (n, 3) bool
+    node_ptr, node_idx : (n + 1,) and (k,) int
+        Each node's neighbours (CSR, ``Pattern.node_ptr`` / ``node_idx``).
+    outside : float
+        N: the residual norm the region may leave out.
+    rings : int
+        >= 0.
+
+    Returns
+    -------
+    (n,) bool
+        The region; nodes with no free dof are left out.
+    """
+    r2 = np.einsum("ij,ij->i", r, r)
+    order = np.argsort(-r2, kind="stable")
+    # tail[k]: the squared residual of every node after the k largest
+    tail = np.concatenate([np.cumsum(r2[order][::-1])[::-1], [0.0]])
+    k = int(np.argmax(tail <= outside * outside))
+    region = np.zeros(r.shape[0], bool)
+    region[order[:k]] = True
+    counts = np.diff(node_ptr)
+    for _ in range(int(rings)):
+        region[node_idx[np.repeat(region, counts)]] = True
+    return region & free.any(axis=1)
 
 
 def node_block_inverse(A, pattern: KN.Pattern):

@@ -56,6 +56,10 @@ SOLVERS = ("newton", "vbd")
 DEFAULT_SOLVER = "vbd"
 #: Newton iterations one step may take before it moves on (reported, as the sweep cap is).
 NEWTON_STEP_MAX_ITERATIONS = 30
+#: None: each Newton iteration solves the whole model; k: it solves where the model is out of balance,
+#: grown by k rings, and the step still ends on the whole model's residual
+#: (:class:`~cutkit.relax.newton.NewtonSolver`'s ``region_rings``; docs/relaxation.md, "Local Newton").
+NEWTON_REGION_RINGS: int | None = None
 
 
 #: A new or moved node within this (barycentric) distance outside the nearest tet of the
@@ -151,7 +155,7 @@ class ElasticTissue(TissueBase):
             return None
         from cutkit.relax.newton import NewtonSolver
 
-        return NewtonSolver(self.em)
+        return NewtonSolver(self.em, region_rings=NEWTON_REGION_RINGS)
 
     def _force_scale(self) -> float:
         """N: the out-of-balance force of the model as built (prestress, prescribed
