@@ -246,6 +246,31 @@ class CutMesh:
         """(k,) int64 original tet of each alive tet."""
         return self._tet_orig[:self.n_tets_total][self._alive[:self.n_tets_total]]
 
+    @property
+    def tet_corners(self):
+        """(n_tets_total, 4) int64 corners of every tet id, dead ones included (a view)."""
+        return self._tets[:self.n_tets_total]
+
+    @property
+    def tet_origins(self):
+        """(n_tets_total,) int64 original tet of every tet id, dead ones included (a view)."""
+        return self._tet_orig[:self.n_tets_total]
+
+    @property
+    def tet_alive(self):
+        """(n_tets_total,) bool whether each tet id is alive (a view)."""
+        return self._alive[:self.n_tets_total]
+
+    @property
+    def defining_nodes(self):
+        """(n_points, 4) int64 original nodes each node interpolates, -1 padded (a view)."""
+        return self._def_nodes[:self.n_points]
+
+    @property
+    def defining_weights(self):
+        """(n_points, 4) float64 the interpolation weights of :attr:`defining_nodes` (a view)."""
+        return self._def_w[:self.n_points]
+
     # ------------------------------------------------------------------ deltas
     def _delta_reset(self):
         self._delta = {"added_nodes": [], "moved_nodes": [], "removed_tets": [], "added_tets": [], "moved_from": {}}

@@ -36,6 +36,7 @@ from cutkit.cutting.contact import touches_only
 from cutkit.cutting.crumbs import remove_crumbs
 from cutkit.cutting.snapping import new_crossings, recrossed, snap_away
 from cutkit.cutting.cutmesh import CutMesh
+from cutkit.tissue.delta import TopologyDelta, twins_of
 
 #: Maximum number of face crossings of the tip walk per step.
 MAX_WALK = 10000
@@ -58,6 +59,7 @@ class StepResult:
     cut_edges : (e,) int64     original edges cut in this step
     active_tets : (k,) int64   original tets the blade touches now
     tip_tet : int              original tet containing the tip, -1 if outside
+    delta : TopologyDelta      the same change as the physics receive it (cutkit.tissue.delta)
     """
 
     added_nodes: np.ndarray
@@ -68,6 +70,7 @@ class StepResult:
     cut_edges: np.ndarray
     active_tets: np.ndarray
     tip_tet: int
+    delta: TopologyDelta
 
 
 def find_trajectory_tetra(cm: CutMesh, start: int, target) -> int:
@@ -195,6 +198,7 @@ def cut_step(cm: CutMesh, tip, a) -> StepResult:
         raise InputError("blade pose: a is the zero vector")
     a = a / na
     cm._delta_reset()
+    n_nodes_before = cm.n_points
     cm.step_count += 1
     stamp = cm.step_count
     P1, Q1 = tip, tip - cm.blade_length * a
@@ -286,13 +290,48 @@ def cut_step(cm: CutMesh, tip, a) -> StepResult:
     if added.size and not cm._alive[added].all():
         transient = added[~cm._alive[added]]
         added, removed = added[cm._alive[added]], removed[~np.isin(removed, transient)]
+    moved_from = np.array([d["moved_from"][i] for i in moved.tolist()], np.float64).reshape(-1, 3)
     return StepResult(
         added_nodes=np.array(d["added_nodes"], np.int64),
         moved_nodes=moved,
-        moved_from=np.array([d["moved_from"][i] for i in moved.tolist()], np.float64).reshape(-1, 3),
+        moved_from=moved_from,
         removed_tets=removed,
         added_tets=added,
         cut_edges=np.array(cut_edges, np.int64),
         active_tets=cm.active_tets,
         tip_tet=int(tip_tet),
+        delta=topology_delta(cm, n_nodes_before, moved, moved_from, removed, added),
     )
+
+
+def topology_delta(cm: CutMesh, n_nodes_before: int, moved, moved_from, removed, added) -> TopologyDelta:
+    """The step's change as a :class:`~cutkit.tissue.TopologyDelta` (read off ``cm`` after the step).
+
+    Parameters
+    ----------
+    cm : CutMesh
+        After the step.
+    n_nodes_before : int
+        ``cm.n_points`` before the step.
+    moved : (b,) int64
+        Nodes re-interpolated in the step, ascending.
+    moved_from : (b, 3) float64
+        Their rest positions before the step.
+    removed, added : (r,) int64, (c,) int64
+        Tets alive before and not after, and after and not before.
+    """
+    new = np.arange(n_nodes_before, cm.n_points, dtype=np.int64)
+    parents = cm.defining_nodes[new]
+    weights = np.where(parents >= 0, cm.defining_weights[new], 0.0)
+    moved_parents = cm.defining_nodes[moved]
+    tets, origin = cm.tet_corners, cm.tet_origins
+    return TopologyDelta(
+        n_nodes_before=int(n_nodes_before), n_nodes_after=int(cm.n_points),
+        added_nodes=new, added_node_parents=parents, added_node_weights=weights,
+        added_node_rest=cm.rest_points[new].copy(), added_node_twin=twins_of(parents, weights),
+        moved_nodes=moved, moved_rest_from=moved_from, moved_rest_to=cm.rest_points[moved].copy(),
+        moved_node_parents=moved_parents,
+        moved_node_weights=np.where(moved_parents >= 0, cm.defining_weights[moved], 0.0),
+        removed_tets=removed, removed_tet_corners=tets[removed].copy(),
+        added_tets=added, added_tet_corners=tets[added].copy(), added_tet_origin=origin[added].copy(),
+        n_tets_total=int(cm.n_tets_total))
