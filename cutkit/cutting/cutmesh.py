@@ -123,6 +123,7 @@ class CutMesh:
         self._alive = np.zeros(tcap, bool); self._alive[:m0] = True
         self._tet_orig = np.zeros(tcap, np.int64); self._tet_orig[:m0] = np.arange(m0)
         self.n_tets_total = m0
+        self._sweep_buf = None  # work buffers of the local traversal (sweep_buffers)
         self.labels = np.zeros(m0, np.int32) if labels is None else np.asarray(labels, np.int32)
         self.subtets = {}  # original tet -> list of current tet ids (only for cut tets)
         # ---- cut state
@@ -506,6 +507,22 @@ class CutMesh:
         ids = np.asarray(ids, np.int64)
         self._alive[ids] = False
         self._delta["removed_tets"].extend(ids.tolist())
+
+    def sweep_buffers(self) -> dict:
+        """The work buffers of the local traversal (``step._sweep``), made on first use and kept.
+
+        Returns
+        -------
+        dict
+            ``stack`` (s,) int64, ``active`` (k,) int64, ``ev_id`` (q, 2) int64, ``ev_val``
+            (q, 3) float64, ``counts`` (3,) int64; the caller may replace a short one by a
+            longer one in the dict.
+        """
+        if self._sweep_buf is None:
+            self._sweep_buf = {"stack": np.empty(256, np.int64), "active": np.empty(64, np.int64),
+                               "ev_id": np.empty((128, 2), np.int64), "ev_val": np.empty((128, 3)),
+                               "counts": np.zeros(3, np.int64)}
+        return self._sweep_buf
 
     def _add_tets(self, new, o):
         """Append the tets ``new`` (list of 4-tuples) as sub-tets of original ``o``; returns their ids."""

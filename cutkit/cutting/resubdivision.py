@@ -82,8 +82,7 @@ def resubdivide(cm, o):
         new = _cone(tris, cm.tet_T[o][group[corner]] if complete or general else cm.tet_T[o, 0])
     # replace the old sub-tets
     old = forget_crumb_tets(cm, cm.subtets.get(o, [o]))  # a crumb's tets are dead already
-    cm._alive[old] = False
-    cm._delta["removed_tets"].extend(old)
+    cm.remove_tets(old)
     ids = cm._add_tets(new, o)
     cm.subtets[o] = ids
     cm.sub_start[o], cm.sub_count[o] = ids[0], len(ids)  # contiguous (_add_tets)

@@ -157,11 +157,7 @@ def _sweep(cm, stamp, seeds, swept, blade, P0):
 
     Returns views: active (k,) int64, events (q, 2) int64 (kind, id), values (q, 3) float64.
     """
-    buf = getattr(cm, "_sweep_buf", None)
-    if buf is None:
-        cm._sweep_buf = buf = {"stack": np.empty(256, np.int64), "active": np.empty(64, np.int64),
-                               "ev_id": np.empty((128, 2), np.int64), "ev_val": np.empty((128, 3)),
-                               "counts": np.zeros(3, np.int64)}
+    buf = cm.sweep_buffers()
     seeds = list(dict.fromkeys(seeds))  # first occurrences, in order
     while len(seeds) + 4 > buf["stack"].size:
         buf["stack"] = np.empty(2 * buf["stack"].size, np.int64)

@@ -513,7 +513,7 @@ class ElasticTissue(TissueBase):
         if changed.any():
             em.fixed[nodes[changed]] = fixed[changed, None]
             self.state.velocities[nodes[changed & fixed]] = 0.0
-            em._classes = None
+            em.forget_colour_classes()
 
     def _recolour(self, added: np.ndarray, n_old: int) -> None:
         """New nodes get a colour; so does any node of a new tet that shares one with another."""
@@ -530,7 +530,7 @@ class ElasticTissue(TissueBase):
                     clash[:, b] |= c[:, a] == c[:, b]
             if clash.any():
                 em.recolour(np.unique(q[clash]))
-        em._classes = None
+        em.forget_colour_classes()
 
     # ------------------------------------------------------------ strokes
     def rebase(self, old_of_new: np.ndarray, old_orig: np.ndarray) -> None:
