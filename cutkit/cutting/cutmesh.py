@@ -34,17 +34,7 @@ from cutkit.cutting.crumbs import init_crumbs
 from cutkit.cutting.rebase import cut_twins, init_records, rebase, twin_face_bary
 from cutkit.cutting.resubdivision import resubdivide
 from cutkit.cutting.snapping import init_snapping
-
-#: Edge intersection parameters are clamped into [EDGE_SNAP, 1 - EDGE_SNAP]
-#: (a crossing near a vertex, or through it, becomes a crossing near it).
-#: Measured on random blade paths (docs/cutting.md): 0.1 gives cut-made
-#: dihedral angles down to 0.5 degrees, 0.25 keeps them above about 3 degrees
-#: (median worst 7-8) for a cut surface at most a quarter edge off the blade.
-EDGE_SNAP = 0.25
-#: Face nodes keep every barycentric coordinate >= FACE_BARY_MIN (same reason).
-FACE_BARY_MIN = 0.2
-#: Tip/centre nodes T keep every barycentric coordinate >= TET_BARY_MIN (same reason).
-TET_BARY_MIN = 0.15
+from cutkit.cutting.tolerances import EDGE_SNAP, FACE_BARY_MIN, TET_BARY_MIN, clamp_bary
 
 
 _TET_EDGES_L = TET_EDGES.tolist()
@@ -57,9 +47,7 @@ def _vol(x, t):
     return float(min_volume(x, np.asarray(t, np.int64).reshape(1, 4)))
 
 
-def _clamp_bary(b, lo):
-    """Valid barycentric weights (k,) float64, each >= lo (see ``_kernels_step.clamp_bary``)."""
-    return K.clamp_bary(np.asarray(b, np.float64), float(lo))
+_clamp_bary = clamp_bary
 
 
 class CutMesh:
