@@ -2,8 +2,10 @@
 
 :class:`TopologyDelta` is the typed message of one cut step (what it
 removed, added and moved); the physics consume only it.
+:class:`TissuePhysics` names what a session asks of a physics.
 """
 
 from cutkit.tissue.delta import TopologyDelta
+from cutkit.tissue.physics import TissuePhysics
 
-__all__ = ["TopologyDelta"]
+__all__ = ["TopologyDelta", "TissuePhysics"]
