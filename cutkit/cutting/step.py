@@ -185,14 +185,7 @@ def cut_step(cm: CutMesh, tip, a) -> StepResult:
     tip : (3,) float64  blade tip, mm
     a : (3,) float64  unit vector along the blade, handle to tip
     """
-    tip = np.asarray(tip, np.float64).reshape(-1)
-    a = np.asarray(a, np.float64).reshape(-1)
-    if tip.shape != (3,) or a.shape != (3,) or not np.all(np.isfinite(tip)) or not np.all(np.isfinite(a)):
-        raise InputError("blade pose: tip and a must be finite 3-vectors")
-    na = np.linalg.norm(a)
-    if na == 0:
-        raise InputError("blade pose: a is the zero vector")
-    a = a / na
+    tip, a = _blade_pose(tip, a)
     cm._delta_reset()
     n_nodes_before = cm.n_points
     cm.step_count += 1
@@ -203,6 +196,41 @@ def cut_step(cm: CutMesh, tip, a) -> StepResult:
     else:
         P0, Q0 = cm.prev_pose
     # 1. seeds: the tip walk, then the surface entry
+    seeds, tip_tet = _step_seeds(cm, P0, Q0, P1, Q1)
+    swept = np.array([[P0, Q0, Q1], [P0, Q1, P1]])
+    blade = np.array([Q1, P1])
+    # 2. local traversal (numba); its events are replayed in visit order
+    active, ev_id, ev_val = _sweep(cm, stamp, seeds, swept, blade, P0)
+    changed, cut_edges = _replay_events(cm, ev_id, ev_val, swept)
+    _follow_tip(cm, tip_tet, P1, changed)
+    # 3. re-subdivide every original tet whose cut state changed
+    # (complete splits first: they choose the diagonals of their split faces, splits.compact_split)
+    for o in sorted(changed, key=lambda o: (not cm.completely_split(o), o)):
+        cm.resubdivide(o)
+    cm.previous_active_tets = cm.active_tets
+    cm.active_tets = np.unique(active)
+    cm.prev_pose = (P1, Q1)
+    return _step_result(cm, n_nodes_before, cut_edges, tip_tet)
+
+
+def _blade_pose(tip, a):
+    """The pose checked and normalised: tip (3,) float64 and unit a (3,) float64."""
+    tip = np.asarray(tip, np.float64).reshape(-1)
+    a = np.asarray(a, np.float64).reshape(-1)
+    if tip.shape != (3,) or a.shape != (3,) or not np.all(np.isfinite(tip)) or not np.all(np.isfinite(a)):
+        raise InputError("blade pose: tip and a must be finite 3-vectors")
+    na = np.linalg.norm(a)
+    if na == 0:
+        raise InputError("blade pose: a is the zero vector")
+    return tip, a / na
+
+
+def _step_seeds(cm: CutMesh, P0, Q0, P1, Q1):
+    """Seeds of the local traversal (list of original tets) and the tip's original tet (-1: outside).
+
+    The paper's findTrajectoryTetra from the last tip tet; with the tip
+    outside, the entry from the surface collision of the whole blade.
+    """
     seeds = cm.active_tets.tolist()
     tip_tet = -1
     if cm.tip_tet >= 0:
@@ -226,10 +254,15 @@ def cut_step(cm: CutMesh, tip, a) -> StepResult:
         seeds.append(tip_tet)
     if cm.tip_tet >= 0:
         seeds.append(cm.tip_tet)
-    swept = np.array([[P0, Q0, Q1], [P0, Q1, P1]])
-    blade = np.array([Q1, P1])
-    # 2. local traversal (numba); its events are replayed in visit order
-    active, ev_id, ev_val = _sweep(cm, stamp, seeds, swept, blade, P0)
+    return seeds, tip_tet
+
+
+def _replay_events(cm: CutMesh, ev_id, ev_val, swept):
+    """Replay the traversal's events through the cut state machine, in visit order.
+
+    Returns the set of original tets whose cut state changed and the list
+    of original edges cut (in cutting order).
+    """
     changed = set()
     cut_edges = []
     for (kind, i), val in zip(ev_id.tolist(), ev_val):
@@ -255,6 +288,11 @@ def cut_step(cm: CutMesh, tip, a) -> StepResult:
             cut_edges.extend(cm.retried_edges)
             changed.update(ring)
         cm.retried_edges.clear()
+    return changed, cut_edges
+
+
+def _follow_tip(cm: CutMesh, tip_tet: int, P1, changed: set) -> None:
+    """Move the tip node T with the tip, and mark the tets the tip left or entered as ``changed``."""
     # tip node T follows the tip inside its tetrahedron (a move, unless the
     # tet's topology changes anyway)
     if tip_tet >= 0:
@@ -268,13 +306,10 @@ def cut_step(cm: CutMesh, tip, a) -> StepResult:
     if tip_tet != cm.tip_tet:
         changed.update(o for o in (cm.tip_tet, tip_tet) if o in cm.subtets and not cm.completely_split(o))
     cm.tip_tet = tip_tet
-    # 3. re-subdivide every original tet whose cut state changed
-    # (complete splits first: they choose the diagonals of their split faces, splits.compact_split)
-    for o in sorted(changed, key=lambda o: (not cm.completely_split(o), o)):
-        cm.resubdivide(o)
-    cm.previous_active_tets = cm.active_tets
-    cm.active_tets = np.unique(active)
-    cm.prev_pose = (P1, Q1)
+
+
+def _step_result(cm: CutMesh, n_nodes_before: int, cut_edges: list, tip_tet: int) -> StepResult:
+    """Remove the step's crumbs and gather its net change into a :class:`StepResult`."""
     # a piece this step set loose below CRUMB_VOLUME_FRACTION of the model is removed (crumbs.py)
     made = np.array(cm._delta["added_tets"], np.int64)
     remove_crumbs(cm, made[cm._alive[made]] if made.size else made)
