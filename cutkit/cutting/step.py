@@ -335,6 +335,13 @@ def _step_result(cm: CutMesh, n_nodes_before: int, cut_edges: list, tip_tet: int
     )
 
 
+#: The node fields of a delta that adds and moves no node (read-only, shared).
+_NO_NODES = tuple(np.zeros(shape, dtype) for shape, dtype in
+                  (((0,), np.int64), ((0, 4), np.int64), ((0, 4), np.float64), ((0, 3), np.float64), ((0,), np.int64)))
+for _a in _NO_NODES:
+    _a.flags.writeable = False
+
+
 def topology_delta(cm: CutMesh, n_nodes_before: int, moved, moved_from, removed, added) -> TopologyDelta:
     """The step's change as a :class:`~cutkit.tissue.TopologyDelta` (read off ``cm`` after the step).
 
@@ -351,18 +358,24 @@ def topology_delta(cm: CutMesh, n_nodes_before: int, moved, moved_from, removed,
     removed, added : (r,) int64, (c,) int64
         Tets alive before and not after, and after and not before.
     """
-    new = np.arange(n_nodes_before, cm.n_points, dtype=np.int64)
-    parents = cm.defining_nodes[new]
-    weights = np.where(parents >= 0, cm.defining_weights[new], 0.0)
-    moved_parents = cm.defining_nodes[moved]
+    if cm.n_points == n_nodes_before and moved.size == 0:  # most steps: no node made or moved
+        new, parents, weights, rest, twin = _NO_NODES
+        moved_parents, moved_weights, moved_to = _NO_NODES[1], _NO_NODES[2], _NO_NODES[3]
+    else:
+        new = np.arange(n_nodes_before, cm.n_points, dtype=np.int64)
+        parents = cm.defining_nodes[new]
+        weights = np.where(parents >= 0, cm.defining_weights[new], 0.0)
+        rest, twin = cm.rest_points[new].copy(), twins_of(parents, weights)
+        moved_parents = cm.defining_nodes[moved]
+        moved_weights = np.where(moved_parents >= 0, cm.defining_weights[moved], 0.0)
+        moved_to = cm.rest_points[moved].copy()
     tets, origin = cm.tet_corners, cm.tet_origins
     return TopologyDelta(
         n_nodes_before=int(n_nodes_before), n_nodes_after=int(cm.n_points),
         added_nodes=new, added_node_parents=parents, added_node_weights=weights,
-        added_node_rest=cm.rest_points[new].copy(), added_node_twin=twins_of(parents, weights),
-        moved_nodes=moved, moved_rest_from=moved_from, moved_rest_to=cm.rest_points[moved].copy(),
-        moved_node_parents=moved_parents,
-        moved_node_weights=np.where(moved_parents >= 0, cm.defining_weights[moved], 0.0),
-        removed_tets=removed, removed_tet_corners=tets[removed].copy(),
-        added_tets=added, added_tet_corners=tets[added].copy(), added_tet_origin=origin[added].copy(),
+        added_node_rest=rest, added_node_twin=twin,
+        moved_nodes=moved, moved_rest_from=moved_from, moved_rest_to=moved_to,
+        moved_node_parents=moved_parents, moved_node_weights=moved_weights,
+        removed_tets=removed, removed_tet_corners=tets[removed],
+        added_tets=added, added_tet_corners=tets[added], added_tet_origin=origin[added],
         n_tets_total=int(cm.n_tets_total))
