@@ -2,7 +2,8 @@
 
 from cutkit.cutting.cutmesh import EDGE_SNAP, FACE_BARY_MIN, TET_BARY_MIN, CutMesh
 from cutkit.cutting.splits import COMPACT_VOL_MIN
-from cutkit.cutting.export import compact_nodes, cut_surface_faces, to_model
+from cutkit.cutting.export import compact_nodes, to_model
+from cutkit.cutting.rebase import cut_surface_faces
 from cutkit.cutting.step import StepResult, cut_step, find_trajectory_tetra, surface_bvh, tet_containing
 
 __all__ = ["CutMesh", "cut_step", "StepResult", "find_trajectory_tetra",

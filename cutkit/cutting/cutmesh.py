@@ -34,17 +34,7 @@ from cutkit.cutting.crumbs import init_crumbs
 from cutkit.cutting.rebase import cut_twins, init_records, rebase, twin_face_bary
 from cutkit.cutting.resubdivision import resubdivide
 from cutkit.cutting.snapping import init_snapping
-
-#: Edge intersection parameters are clamped into [EDGE_SNAP, 1 - EDGE_SNAP]
-#: (a crossing near a vertex, or through it, becomes a crossing near it).
-#: Measured on random blade paths (docs/cutting.md): 0.1 gives cut-made
-#: dihedral angles down to 0.5 degrees, 0.25 keeps them above about 3 degrees
-#: (median worst 7-8) for a cut surface at most a quarter edge off the blade.
-EDGE_SNAP = 0.25
-#: Face nodes keep every barycentric coordinate >= FACE_BARY_MIN (same reason).
-FACE_BARY_MIN = 0.2
-#: Tip/centre nodes T keep every barycentric coordinate >= TET_BARY_MIN (same reason).
-TET_BARY_MIN = 0.15
+from cutkit.cutting.tolerances import EDGE_SNAP, FACE_BARY_MIN, TET_BARY_MIN, clamp_bary
 
 
 _TET_EDGES_L = TET_EDGES.tolist()
@@ -57,9 +47,7 @@ def _vol(x, t):
     return float(min_volume(x, np.asarray(t, np.int64).reshape(1, 4)))
 
 
-def _clamp_bary(b, lo):
-    """Valid barycentric weights (k,) float64, each >= lo (see ``_kernels_step.clamp_bary``)."""
-    return K.clamp_bary(np.asarray(b, np.float64), float(lo))
+_clamp_bary = clamp_bary
 
 
 class CutMesh:
@@ -123,6 +111,7 @@ class CutMesh:
         self._alive = np.zeros(tcap, bool); self._alive[:m0] = True
         self._tet_orig = np.zeros(tcap, np.int64); self._tet_orig[:m0] = np.arange(m0)
         self.n_tets_total = m0
+        self._sweep_buf = None  # work buffers of the local traversal (sweep_buffers)
         self.labels = np.zeros(m0, np.int32) if labels is None else np.asarray(labels, np.int32)
         self.subtets = {}  # original tet -> list of current tet ids (only for cut tets)
         # ---- cut state
@@ -245,6 +234,31 @@ class CutMesh:
     def tet_origin(self):
         """(k,) int64 original tet of each alive tet."""
         return self._tet_orig[:self.n_tets_total][self._alive[:self.n_tets_total]]
+
+    @property
+    def tet_corners(self):
+        """(n_tets_total, 4) int64 corners of every tet id, dead ones included (a view)."""
+        return self._tets[:self.n_tets_total]
+
+    @property
+    def tet_origins(self):
+        """(n_tets_total,) int64 original tet of every tet id, dead ones included (a view)."""
+        return self._tet_orig[:self.n_tets_total]
+
+    @property
+    def tet_alive(self):
+        """(n_tets_total,) bool whether each tet id is alive (a view)."""
+        return self._alive[:self.n_tets_total]
+
+    @property
+    def defining_nodes(self):
+        """(n_points, 4) int64 original nodes each node interpolates, -1 padded (a view)."""
+        return self._def_nodes[:self.n_points]
+
+    @property
+    def defining_weights(self):
+        """(n_points, 4) float64 the interpolation weights of :attr:`defining_nodes` (a view)."""
+        return self._def_w[:self.n_points]
 
     # ------------------------------------------------------------------ deltas
     def _delta_reset(self):
@@ -481,6 +495,22 @@ class CutMesh:
         ids = np.asarray(ids, np.int64)
         self._alive[ids] = False
         self._delta["removed_tets"].extend(ids.tolist())
+
+    def sweep_buffers(self) -> dict:
+        """The work buffers of the local traversal (``step._sweep``), made on first use and kept.
+
+        Returns
+        -------
+        dict
+            ``stack`` (s,) int64, ``active`` (k,) int64, ``ev_id`` (q, 2) int64, ``ev_val``
+            (q, 3) float64, ``counts`` (3,) int64; the caller may replace a short one by a
+            longer one in the dict.
+        """
+        if self._sweep_buf is None:
+            self._sweep_buf = {"stack": np.empty(256, np.int64), "active": np.empty(64, np.int64),
+                               "ev_id": np.empty((128, 2), np.int64), "ev_val": np.empty((128, 3)),
+                               "counts": np.zeros(3, np.int64)}
+        return self._sweep_buf
 
     def _add_tets(self, new, o):
         """Append the tets ``new`` (list of 4-tuples) as sub-tets of original ``o``; returns their ids."""

@@ -5,31 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from cutkit.cutting.cutmesh import CutMesh
-from cutkit.cutting.rebase import cut_surface_mask, made_by_cut, node_model_source
-
-
-def cut_surface_faces(cm: CutMesh) -> np.ndarray:
-    """(k, 3) int64 boundary triangles of the cut surface (both sides of each cut, every stroke).
-
-    Only tets made by a cut (in this stroke or one before a
-    :meth:`~CutMesh.rebase`) hold cut nodes, so the faces are looked for
-    among them alone: the work follows the size of the cut, not of the
-    mesh.  Which of their boundary triangles are cut surface (not a piece
-    of the model's outer surface, not a face shared with an uncut tet) is
-    told by :func:`cutkit.cutting.rebase.cut_surface_mask`.
-    """
-    from cutkit.mesh.topology import boundary_faces
-
-    m0, total = cm.orig_tets.shape[0], cm.n_tets_total
-    ids = m0 + np.flatnonzero(cm._alive[m0:total])
-    if cm.n_rebases:  # live original tets made by the strokes before the rebase
-        ids = np.concatenate([np.flatnonzero(cm.orig_made_by_cut & cm._alive[:m0]), ids])
-    if ids.shape[0] == 0:
-        return np.zeros((0, 3), np.int64)
-    faces, _ = boundary_faces(cm._tets[ids])
-    # A face of the cut surface belongs to cut-made tets only, so appearing
-    # once among them it appears once in the whole mesh: it is on the boundary.
-    return faces[cut_surface_mask(cm, faces)]
+from cutkit.cutting.rebase import made_by_cut, node_model_source
 
 
 def compact_nodes(tets, n_points):

@@ -97,6 +97,30 @@ def cut_surface_mask(cm, faces):
     return out
 
 
+def cut_surface_faces(cm) -> np.ndarray:
+    """(k, 3) int64 boundary triangles of the cut surface (both sides of each cut, every stroke).
+
+    Only tets made by a cut (in this stroke or one before a
+    :meth:`~CutMesh.rebase`) hold cut nodes, so the faces are looked for
+    among them alone: the work follows the size of the cut, not of the
+    mesh.  Which of their boundary triangles are cut surface (not a piece
+    of the model's outer surface, not a face shared with an uncut tet) is
+    told by :func:`cut_surface_mask`.
+    """
+    from cutkit.mesh.topology import boundary_faces
+
+    m0, total = cm.orig_tets.shape[0], cm.n_tets_total
+    ids = m0 + np.flatnonzero(cm._alive[m0:total])
+    if cm.n_rebases:  # live original tets made by the strokes before the rebase
+        ids = np.concatenate([np.flatnonzero(cm.orig_made_by_cut & cm._alive[:m0]), ids])
+    if ids.shape[0] == 0:
+        return np.zeros((0, 3), np.int64)
+    faces, _ = boundary_faces(cm._tets[ids])
+    # A face of the cut surface belongs to cut-made tets only, so appearing
+    # once among them it appears once in the whole mesh: it is on the boundary.
+    return faces[cut_surface_mask(cm, faces)]
+
+
 def rebase(cm):
     """Make the live tetrahedra of ``cm`` the original ones of a fresh cut state (in place).
 
@@ -114,8 +138,6 @@ def rebase(cm):
         tetrahedron ``i``; node ids are unchanged.
     """
     from cutkit.cutting.crumbs import crumb_volume
-    from cutkit.cutting.cutmesh import CutMesh
-    from cutkit.cutting.export import cut_surface_faces
 
     cut_faces = {tuple(f) for f in np.sort(cut_surface_faces(cm), axis=1).tolist()}
     n = cm.n_points
@@ -123,7 +145,7 @@ def rebase(cm):
     origin = cm._tet_orig[ids]
     made = made_by_cut(cm, ids)
     model_node = node_model_source(cm, np.arange(n))
-    fresh = CutMesh(cm._x[:n], cm._tets[ids], rest_points=cm._X[:n],
+    fresh = type(cm)(cm._x[:n], cm._tets[ids], rest_points=cm._X[:n],
                     texcoords=None if cm._uvw is None else cm._uvw[:n], labels=cm.labels[origin],
                     blade_length=cm.blade_length, centre_nodes=cm.centre_nodes, compact_splits=cm.compact_splits,
                     snap_vertices=cm.snap_vertices)

@@ -16,9 +16,9 @@ import numpy as np
 
 from cutkit.cutting import _kernels_split as KP
 from cutkit.cutting import _kernels_step as K
-from cutkit.cutting import cutmesh as CM  # its tolerances (a circular import: read at call time)
 from cutkit.cutting import subdivision as S
 from cutkit.cutting.crumbs import forget_crumb_tets
+from cutkit.cutting.tolerances import TET_BARY_MIN, clamp_bary
 from cutkit.cutting.splits import COMPACT_VOL_MIN, SPLIT_ANGLE_GAIN, SPLIT_ANGLE_GOOD, compact_split, fix_diagonals
 
 #: Where T may go when no tip is inside (fractions of the way from the cut
@@ -50,7 +50,7 @@ def resubdivide(cm, o):
     ct = cm.cut_tables()
     if free_T:  # the mean of the tet's cut nodes
         tb = K.cut_nodes_centroid(ct, o, mask)
-    tb = CM._clamp_bary(tb, CM.TET_BARY_MIN)
+    tb = clamp_bary(tb, TET_BARY_MIN)
     complete = case in ("corner", "quad")
     general = case == "general"  # a forked face: one T per piece, always the T-cone
     group = np.array(group, np.int64)  # side (piece) of each corner
@@ -82,8 +82,7 @@ def resubdivide(cm, o):
         new = _cone(tris, cm.tet_T[o][group[corner]] if complete or general else cm.tet_T[o, 0])
     # replace the old sub-tets
     old = forget_crumb_tets(cm, cm.subtets.get(o, [o]))  # a crumb's tets are dead already
-    cm._alive[old] = False
-    cm._delta["removed_tets"].extend(old)
+    cm.remove_tets(old)
     ids = cm._add_tets(new, o)
     cm.subtets[o] = ids
     cm.sub_start[o], cm.sub_count[o] = ids[0], len(ids)  # contiguous (_add_tets)
@@ -132,5 +131,5 @@ def _best_T(cm, v, tb, tris, free):
         cm._grow_nodes()
         cm.n_points -= 1
     b, angle = K.best_cone_apex(cm._x, np.asarray(v, np.int64), np.asarray(tb, np.float64),
-                                _T_BLENDS if free else _T_AT_CENTROID, tris, CM.TET_BARY_MIN, cm.n_points)
+                                _T_BLENDS if free else _T_AT_CENTROID, tris, TET_BARY_MIN, cm.n_points)
     return b, float(angle)

@@ -36,6 +36,7 @@ from cutkit.cutting.contact import touches_only
 from cutkit.cutting.crumbs import remove_crumbs
 from cutkit.cutting.snapping import new_crossings, recrossed, snap_away
 from cutkit.cutting.cutmesh import CutMesh
+from cutkit.tissue.delta import TopologyDelta, twins_of
 
 #: Maximum number of face crossings of the tip walk per step.
 MAX_WALK = 10000
@@ -58,6 +59,7 @@ class StepResult:
     cut_edges : (e,) int64     original edges cut in this step
     active_tets : (k,) int64   original tets the blade touches now
     tip_tet : int              original tet containing the tip, -1 if outside
+    delta : TopologyDelta      the same change as the physics receive it (cutkit.tissue.delta)
     """
 
     added_nodes: np.ndarray
@@ -68,6 +70,7 @@ class StepResult:
     cut_edges: np.ndarray
     active_tets: np.ndarray
     tip_tet: int
+    delta: TopologyDelta
 
 
 def find_trajectory_tetra(cm: CutMesh, start: int, target) -> int:
@@ -154,11 +157,7 @@ def _sweep(cm, stamp, seeds, swept, blade, P0):
 
     Returns views: active (k,) int64, events (q, 2) int64 (kind, id), values (q, 3) float64.
     """
-    buf = getattr(cm, "_sweep_buf", None)
-    if buf is None:
-        cm._sweep_buf = buf = {"stack": np.empty(256, np.int64), "active": np.empty(64, np.int64),
-                               "ev_id": np.empty((128, 2), np.int64), "ev_val": np.empty((128, 3)),
-                               "counts": np.zeros(3, np.int64)}
+    buf = cm.sweep_buffers()
     seeds = list(dict.fromkeys(seeds))  # first occurrences, in order
     while len(seeds) + 4 > buf["stack"].size:
         buf["stack"] = np.empty(2 * buf["stack"].size, np.int64)
@@ -186,15 +185,9 @@ def cut_step(cm: CutMesh, tip, a) -> StepResult:
     tip : (3,) float64  blade tip, mm
     a : (3,) float64  unit vector along the blade, handle to tip
     """
-    tip = np.asarray(tip, np.float64).reshape(-1)
-    a = np.asarray(a, np.float64).reshape(-1)
-    if tip.shape != (3,) or a.shape != (3,) or not np.all(np.isfinite(tip)) or not np.all(np.isfinite(a)):
-        raise InputError("blade pose: tip and a must be finite 3-vectors")
-    na = np.linalg.norm(a)
-    if na == 0:
-        raise InputError("blade pose: a is the zero vector")
-    a = a / na
+    tip, a = _blade_pose(tip, a)
     cm._delta_reset()
+    n_nodes_before = cm.n_points
     cm.step_count += 1
     stamp = cm.step_count
     P1, Q1 = tip, tip - cm.blade_length * a
@@ -203,6 +196,41 @@ def cut_step(cm: CutMesh, tip, a) -> StepResult:
     else:
         P0, Q0 = cm.prev_pose
     # 1. seeds: the tip walk, then the surface entry
+    seeds, tip_tet = _step_seeds(cm, P0, Q0, P1, Q1)
+    swept = np.array([[P0, Q0, Q1], [P0, Q1, P1]])
+    blade = np.array([Q1, P1])
+    # 2. local traversal (numba); its events are replayed in visit order
+    active, ev_id, ev_val = _sweep(cm, stamp, seeds, swept, blade, P0)
+    changed, cut_edges = _replay_events(cm, ev_id, ev_val, swept)
+    _follow_tip(cm, tip_tet, P1, changed)
+    # 3. re-subdivide every original tet whose cut state changed
+    # (complete splits first: they choose the diagonals of their split faces, splits.compact_split)
+    for o in sorted(changed, key=lambda o: (not cm.completely_split(o), o)):
+        cm.resubdivide(o)
+    cm.previous_active_tets = cm.active_tets
+    cm.active_tets = np.unique(active)
+    cm.prev_pose = (P1, Q1)
+    return _step_result(cm, n_nodes_before, cut_edges, tip_tet)
+
+
+def _blade_pose(tip, a):
+    """The pose checked and normalised: tip (3,) float64 and unit a (3,) float64."""
+    tip = np.asarray(tip, np.float64).reshape(-1)
+    a = np.asarray(a, np.float64).reshape(-1)
+    if tip.shape != (3,) or a.shape != (3,) or not np.all(np.isfinite(tip)) or not np.all(np.isfinite(a)):
+        raise InputError("blade pose: tip and a must be finite 3-vectors")
+    na = np.linalg.norm(a)
+    if na == 0:
+        raise InputError("blade pose: a is the zero vector")
+    return tip, a / na
+
+
+def _step_seeds(cm: CutMesh, P0, Q0, P1, Q1):
+    """Seeds of the local traversal (list of original tets) and the tip's original tet (-1: outside).
+
+    The paper's findTrajectoryTetra from the last tip tet; with the tip
+    outside, the entry from the surface collision of the whole blade.
+    """
     seeds = cm.active_tets.tolist()
     tip_tet = -1
     if cm.tip_tet >= 0:
@@ -226,10 +254,15 @@ def cut_step(cm: CutMesh, tip, a) -> StepResult:
         seeds.append(tip_tet)
     if cm.tip_tet >= 0:
         seeds.append(cm.tip_tet)
-    swept = np.array([[P0, Q0, Q1], [P0, Q1, P1]])
-    blade = np.array([Q1, P1])
-    # 2. local traversal (numba); its events are replayed in visit order
-    active, ev_id, ev_val = _sweep(cm, stamp, seeds, swept, blade, P0)
+    return seeds, tip_tet
+
+
+def _replay_events(cm: CutMesh, ev_id, ev_val, swept):
+    """Replay the traversal's events through the cut state machine, in visit order.
+
+    Returns the set of original tets whose cut state changed and the list
+    of original edges cut (in cutting order).
+    """
     changed = set()
     cut_edges = []
     for (kind, i), val in zip(ev_id.tolist(), ev_val):
@@ -255,6 +288,11 @@ def cut_step(cm: CutMesh, tip, a) -> StepResult:
             cut_edges.extend(cm.retried_edges)
             changed.update(ring)
         cm.retried_edges.clear()
+    return changed, cut_edges
+
+
+def _follow_tip(cm: CutMesh, tip_tet: int, P1, changed: set) -> None:
+    """Move the tip node T with the tip, and mark the tets the tip left or entered as ``changed``."""
     # tip node T follows the tip inside its tetrahedron (a move, unless the
     # tet's topology changes anyway)
     if tip_tet >= 0:
@@ -268,13 +306,10 @@ def cut_step(cm: CutMesh, tip, a) -> StepResult:
     if tip_tet != cm.tip_tet:
         changed.update(o for o in (cm.tip_tet, tip_tet) if o in cm.subtets and not cm.completely_split(o))
     cm.tip_tet = tip_tet
-    # 3. re-subdivide every original tet whose cut state changed
-    # (complete splits first: they choose the diagonals of their split faces, splits.compact_split)
-    for o in sorted(changed, key=lambda o: (not cm.completely_split(o), o)):
-        cm.resubdivide(o)
-    cm.previous_active_tets = cm.active_tets
-    cm.active_tets = np.unique(active)
-    cm.prev_pose = (P1, Q1)
+
+
+def _step_result(cm: CutMesh, n_nodes_before: int, cut_edges: list, tip_tet: int) -> StepResult:
+    """Remove the step's crumbs and gather its net change into a :class:`StepResult`."""
     # a piece this step set loose below CRUMB_VOLUME_FRACTION of the model is removed (crumbs.py)
     made = np.array(cm._delta["added_tets"], np.int64)
     remove_crumbs(cm, made[cm._alive[made]] if made.size else made)
@@ -286,13 +321,61 @@ def cut_step(cm: CutMesh, tip, a) -> StepResult:
     if added.size and not cm._alive[added].all():
         transient = added[~cm._alive[added]]
         added, removed = added[cm._alive[added]], removed[~np.isin(removed, transient)]
+    moved_from = np.array([d["moved_from"][i] for i in moved.tolist()], np.float64).reshape(-1, 3)
     return StepResult(
         added_nodes=np.array(d["added_nodes"], np.int64),
         moved_nodes=moved,
-        moved_from=np.array([d["moved_from"][i] for i in moved.tolist()], np.float64).reshape(-1, 3),
+        moved_from=moved_from,
         removed_tets=removed,
         added_tets=added,
         cut_edges=np.array(cut_edges, np.int64),
         active_tets=cm.active_tets,
         tip_tet=int(tip_tet),
+        delta=topology_delta(cm, n_nodes_before, moved, moved_from, removed, added),
     )
+
+
+#: The node fields of a delta that adds and moves no node (read-only, shared).
+_NO_NODES = tuple(np.zeros(shape, dtype) for shape, dtype in
+                  (((0,), np.int64), ((0, 4), np.int64), ((0, 4), np.float64), ((0, 3), np.float64), ((0,), np.int64)))
+for _a in _NO_NODES:
+    _a.flags.writeable = False
+
+
+def topology_delta(cm: CutMesh, n_nodes_before: int, moved, moved_from, removed, added) -> TopologyDelta:
+    """The step's change as a :class:`~cutkit.tissue.TopologyDelta` (read off ``cm`` after the step).
+
+    Parameters
+    ----------
+    cm : CutMesh
+        After the step.
+    n_nodes_before : int
+        ``cm.n_points`` before the step.
+    moved : (b,) int64
+        Nodes re-interpolated in the step, ascending.
+    moved_from : (b, 3) float64
+        Their rest positions before the step.
+    removed, added : (r,) int64, (c,) int64
+        Tets alive before and not after, and after and not before.
+    """
+    if cm.n_points == n_nodes_before and moved.size == 0:  # most steps: no node made or moved
+        new, parents, weights, rest, twin = _NO_NODES
+        moved_parents, moved_weights, moved_to = _NO_NODES[1], _NO_NODES[2], _NO_NODES[3]
+    else:
+        new = np.arange(n_nodes_before, cm.n_points, dtype=np.int64)
+        parents = cm.defining_nodes[new]
+        weights = np.where(parents >= 0, cm.defining_weights[new], 0.0)
+        rest, twin = cm.rest_points[new].copy(), twins_of(parents, weights)
+        moved_parents = cm.defining_nodes[moved]
+        moved_weights = np.where(moved_parents >= 0, cm.defining_weights[moved], 0.0)
+        moved_to = cm.rest_points[moved].copy()
+    tets, origin = cm.tet_corners, cm.tet_origins
+    return TopologyDelta(
+        n_nodes_before=int(n_nodes_before), n_nodes_after=int(cm.n_points),
+        added_nodes=new, added_node_parents=parents, added_node_weights=weights,
+        added_node_rest=rest, added_node_twin=twin,
+        moved_nodes=moved, moved_rest_from=moved_from, moved_rest_to=moved_to,
+        moved_node_parents=moved_parents, moved_node_weights=moved_weights,
+        removed_tets=removed, removed_tet_corners=tets[removed],
+        added_tets=added, added_tet_corners=tets[added], added_tet_origin=origin[added],
+        n_tets_total=int(cm.n_tets_total))

@@ -332,6 +332,10 @@ class ElementModel:
         KA.colour_nodes_greedy(self.adjacency, self.tets, self.colour, nodes)
         self._classes = None
 
+    def forget_colour_classes(self) -> None:
+        """Drop the cached :meth:`colour_classes` (after colours or fixed flags were changed from outside)."""
+        self._classes = None
+
     def colour_classes(self) -> tuple[np.ndarray, np.ndarray]:
         """``offsets`` (c + 1,) int64 and ``nodes`` (k,) int64 of the nodes a sweep moves, by colour."""
         if self._classes is None:

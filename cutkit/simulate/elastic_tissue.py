@@ -315,7 +315,11 @@ class ElasticTissue(TissueBase):
 
     # ------------------------------------------------------------ cut
     def apply_cut(self, res) -> dict:
-        """Carry a :class:`~cutkit.cutting.StepResult` over to the elements.
+        """Carry a :class:`~cutkit.cutting.StepResult` over to the elements: :meth:`apply_delta` of its ``delta``."""
+        return self.apply_delta(res.delta)
+
+    def apply_delta(self, delta) -> dict:
+        """Carry a cut step's :class:`~cutkit.tissue.TopologyDelta` over to the elements.
 
         Returns
         -------
@@ -323,17 +327,16 @@ class ElasticTissue(TissueBase):
             ``nodes_added``, ``elements_added``, ``elements_removed``.
         """
         cm, em = self.cm, self.em
-        n_old, n_new = em.n_nodes, cm.n_points
-        moved = np.asarray(res.moved_nodes, np.int64)
+        n_old, n_new = em.n_nodes, delta.n_nodes_after
+        moved = delta.moved_nodes
         old_moved = moved[moved < n_old]
         # a tet made and unmade within the step is never simulated; the tets around moved nodes
         # that the step did not touch get their rest shape again
-        added, removed, again, before = step_tet_sets(np.asarray(res.added_tets, np.int64),
-                                                      np.asarray(res.removed_tets, np.int64),
+        added, removed, again, before = step_tet_sets(delta.added_tets, delta.removed_tets,
                                                       tets_around(em.adjacency, old_moved))
         # the tissue as it was before the step, piecewise affine over the removed tets and those
         # around moved nodes: new and moved nodes are placed in it (see _through_old_shape)
-        old_shape = self._old_shape(before, old_moved, np.asarray(res.moved_from, np.float64)[moved < n_old])
+        old_shape = self._old_shape(before, old_moved, delta.moved_rest_from[moved < n_old])
         x_moved = self._through_old_shape(old_shape, old_moved)
         x_before = self.state.positions[old_moved].copy()
         if n_new > n_old:
@@ -514,7 +517,7 @@ class ElasticTissue(TissueBase):
         if changed.any():
             em.fixed[nodes[changed]] = fixed[changed, None]
             self.state.velocities[nodes[changed & fixed]] = 0.0
-            em._classes = None
+            em.forget_colour_classes()
 
     def _recolour(self, added: np.ndarray, n_old: int) -> None:
         """New nodes get a colour; so does any node of a new tet that shares one with another."""
@@ -531,7 +534,7 @@ class ElasticTissue(TissueBase):
                     clash[:, b] |= c[:, a] == c[:, b]
             if clash.any():
                 em.recolour(np.unique(q[clash]))
-        em._classes = None
+        em.forget_colour_classes()
 
     # ------------------------------------------------------------ strokes
     def rebase(self, old_of_new: np.ndarray, old_orig: np.ndarray) -> None:

@@ -217,7 +217,7 @@ class CutTask:
     def _apply(self, result) -> None:
         """Hand a cut step's topology change over to the tissue."""
         with self.lock.urgent():
-            added = self.tis.apply_cut(result)
+            added = self.tis.apply_delta(result.delta)
         for key, value in added.items():
             self.counts[key] = self.counts.get(key, 0) + value
         self.counts["cut_steps"] += 1

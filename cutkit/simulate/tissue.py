@@ -147,7 +147,11 @@ class Tissue(TissueBase):
 
     # ------------------------------------------------------------------ cut
     def apply_cut(self, res) -> dict:
-        """Carry a :class:`~cutkit.cutting.StepResult` over to the springs.
+        """Carry a :class:`~cutkit.cutting.StepResult` over to the springs: :meth:`apply_delta` of its ``delta``."""
+        return self.apply_delta(res.delta)
+
+    def apply_delta(self, delta) -> dict:
+        """Carry a cut step's :class:`~cutkit.tissue.TopologyDelta` over to the springs.
 
         Returns
         -------
@@ -156,10 +160,10 @@ class Tissue(TissueBase):
         """
         cm, sm = self.cm, self.springs
         n_old = sm.n_nodes
-        n_new = cm.n_points
-        added = [int(t) for t in res.added_tets]
-        removed = [int(t) for t in res.removed_tets]
-        moved = [int(k) for k in res.moved_nodes]
+        n_new = delta.n_nodes_after
+        added = [int(t) for t in delta.added_tets]
+        removed = [int(t) for t in delta.removed_tets]
+        moved = [int(k) for k in delta.moved_nodes]
         if not added and not removed and not moved and n_new == n_old:
             return {"nodes_added": 0, "springs_added": 0, "springs_removed": 0}
         if self.rec_V.shape[0] < cm._tets.shape[0]:
@@ -167,22 +171,22 @@ class Tissue(TissueBase):
             self.rec_V = np.concatenate([self.rec_V, np.zeros(grow)])
             self.rec_sv = np.concatenate([self.rec_sv, np.zeros((grow, 6))])
 
-        new = self._cut_nodes(n_old, n_new, moved)
+        new = self._cut_nodes(n_old, n_new, delta)
         keys, sums = self._cut_tet_sums(added, removed, moved)
         new_pairs, n_dead = self._cut_springs(keys, sums)
         self._cut_refresh(new_pairs)
         return {"nodes_added": int(new.size), "springs_added": len(new_pairs), "springs_removed": n_dead}
 
-    def _cut_nodes(self, n_old: int, n_new: int, moved: list) -> np.ndarray:
+    def _cut_nodes(self, n_old: int, n_new: int, delta) -> np.ndarray:
         """Append the cut's new nodes and re-interpolate the moved ones; returns the new node ids."""
-        cm, sm, st = self.cm, self.springs, self.state
+        sm, st = self.springs, self.state
         # ---- nodes: append, and re-interpolate moved ones
         new = np.arange(n_old, n_new)
         if new.size:
-            self._append_nodes(new)
-        if moved:
-            mv = np.asarray(moved, np.int64)
-            sm.rest_positions[mv] = cm._X[mv]
+            self._append_nodes(new, delta)
+        if delta.moved_nodes.size:
+            mv = delta.moved_nodes
+            sm.rest_positions[mv] = delta.moved_rest_to
             st.positions[mv] = self.interpolate_positions(mv)
         return new
 
@@ -333,11 +337,12 @@ class Tissue(TissueBase):
         self.springs.volume = VolumeTerm.build(self.springs.rest_positions, cm._tets[ids], V0,
                                                self.volume_stiffness * self.E[cm._tet_orig[ids]])
 
-    def _append_nodes(self, new: np.ndarray) -> None:
-        cm, sm, st = self.cm, self.springs, self.state
+    def _append_nodes(self, new: np.ndarray, delta) -> None:
+        """Append the delta's new nodes ``new`` (p,) int64: rest from the delta, the rest interpolated."""
+        sm, st = self.springs, self.state
         p = new.size
-        par = cm._def_nodes[new]
-        w = cm._def_w[new]
+        par = delta.added_node_parents
+        w = delta.added_node_weights
         valid = par >= 0
         pz = np.where(valid, par, 0)
         wz = np.where(valid, w, 0.0)
@@ -347,7 +352,7 @@ class Tissue(TissueBase):
         damp = (wz * sm.damping[pz]).sum(axis=1)
         # a node between held nodes only (e.g. a cut into bone) is held too
         held = np.all(~valid | self.bc_fixed[pz], axis=1)
-        X = cm._X[new]
+        X = delta.added_node_rest
         x = self.interpolate_positions(new)
         self.bc_fixed = np.concatenate([self.bc_fixed, held])
         self.node_tet_count = np.concatenate([self.node_tet_count, np.zeros(p, np.int64)])

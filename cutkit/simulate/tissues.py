@@ -8,14 +8,17 @@ imports none of them.
 
 from __future__ import annotations
 
+from cutkit.tissue.physics import TissuePhysics
+
 #: Most settle iterations of each material model by default: Newton steps of
 #: the element model, which stops earlier at its residual (SimulateOptions.settle_rtol),
 #: Gauss-Seidel sweeps of the springs.
 SETTLE_MAX_SWEEPS = {"neohookean": 50, "springs": 100}
 
 
-def make_tissue(model, material_model: str, opt, blade_length: float):
-    """The tissue of a run: :class:`ElasticTissue` or the paper's springs (:class:`Tissue`)."""
+def make_tissue(model, material_model: str, opt, blade_length: float) -> TissuePhysics:
+    """The tissue of a run: :class:`ElasticTissue` or the paper's springs (:class:`Tissue`), a
+    :class:`~cutkit.tissue.TissuePhysics`."""
     if material_model == "springs":
         from cutkit.simulate.tissue import Tissue
 

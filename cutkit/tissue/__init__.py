@@ -1,0 +1,11 @@
+"""The run-time tissue: what the cutting and the physics exchange.
+
+:class:`TopologyDelta` is the typed message of one cut step (what it
+removed, added and moved); the physics consume only it.
+:class:`TissuePhysics` names what a session asks of a physics.
+"""
+
+from cutkit.tissue.delta import TopologyDelta
+from cutkit.tissue.physics import TissuePhysics
+
+__all__ = ["TopologyDelta", "TissuePhysics"]

@@ -1,0 +1,82 @@
+"""What a session asks of a tissue's physics: the :class:`TissuePhysics` protocol.
+
+Two implementations: the paper's springs (Bielser & Gross 2000, section 5:
+:class:`cutkit.simulate.tissue.Tissue`) and the element model
+(:class:`cutkit.simulate.elastic_tissue.ElasticTissue`).  The session
+(:mod:`cutkit.simulate.session`) uses a tissue only through these names; a
+cut step reaches the physics only as a :class:`~cutkit.tissue.TopologyDelta`.
+"""
+
+from __future__ import annotations
+
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+
+from cutkit.tissue.delta import TopologyDelta
+
+
+@runtime_checkable
+class TissuePhysics(Protocol):
+    """The physics of a cut tissue, on the cut mesh's node numbering.
+
+    Attributes
+    ----------
+    n_nodes : int
+    positions : (n, 3) float64
+        Current positions, mm.
+    rest_positions : (n, 3) float64
+        Rest positions, mm.
+    velocities : (n, 3) float64
+        mm/s.
+    fixed : (n,) or (n, 3) bool
+        Held nodes (or components).
+    time : float
+        Simulated time, s.
+    """
+
+    @property
+    def n_nodes(self) -> int: ...
+
+    @property
+    def positions(self) -> np.ndarray: ...
+
+    @property
+    def rest_positions(self) -> np.ndarray: ...
+
+    @property
+    def velocities(self) -> np.ndarray: ...
+
+    @property
+    def fixed(self) -> np.ndarray: ...
+
+    @property
+    def time(self) -> float: ...
+
+    def settle(self, iterations: int, tolerance: float) -> dict:
+        """Relax to static equilibrium under prestress and boundary conditions, then rest at time 0.
+
+        ``tolerance`` is the model's own: the sweeps' step (s) for the
+        springs, the relative residual for the elements.
+        """
+        ...
+
+    def advance(self, f_ext: np.ndarray, until: float, stop=None) -> int:
+        """Bring every node to time ``until`` s under the loads ``f_ext`` (n, 3) float64, N.
+
+        ``stop`` ((1,) int64 or None) is read between steps: non-zero ends
+        the call early.  Returns the sweeps (or list passes) made.
+        """
+        ...
+
+    def apply_delta(self, delta: TopologyDelta) -> dict:
+        """Grow the model by one cut step's change; returns counts of what was added and removed."""
+        ...
+
+    def rebase(self, old_of_new: np.ndarray, old_orig: np.ndarray) -> None:
+        """Renumber the tets after the cut mesh's rebase: (m,) int64 old tet id and old origin of each new one."""
+        ...
+
+    def bearing_nodes(self, nodes: np.ndarray) -> np.ndarray:
+        """The nodes of ``nodes`` (k,) int64 that bear the blade's reaction."""
+        ...
