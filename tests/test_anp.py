@@ -19,9 +19,10 @@ from test_elastic_fem import E, solid
 TIGHT = dict(rtol=1e-10, atol=1e-16, max_iterations=100)
 
 
-def model(nu=0.45, cells=(2, 2, 1), L=(2.0, 2.0, 1.0), element="anp"):
+def model(nu=0.45, cells=(2, 2, 1), L=(2.0, 2.0, 1.0), element="anp", smoothing=0.0):
     p, t = kuhn_box(np.array(L), cells)
-    return p, t, build_element_model(TetModel.from_arrays(p, t, materials=solid(nu)), element=element)
+    return p, t, build_element_model(TetModel.from_arrays(p, t, materials=solid(nu)), element=element,
+                                     deviatoric_smoothing=smoothing)
 
 
 def arrays(em):
@@ -33,18 +34,20 @@ def wobbled(p, scale=0.05, seed=0):
     return p + scale * np.random.default_rng(seed).standard_normal(p.shape)
 
 
-def test_kernels_match_their_numpy_twins():
-    p, _, em = model()
+@pytest.mark.parametrize("smoothing", [0.0, 0.7])
+def test_kernels_match_their_numpy_twins(smoothing):
+    p, _, em = model(smoothing=smoothing)
     x = wobbled(p, 0.08)
     # squash one tet into the barrier band (J < 0.1) so its terms count too
     t0 = em.tets[0]
     x[t0[3]] = x[t0[0]] + 0.05 * (x[t0[3]] - x[t0[0]])
-    assert anp.anp_energy(em, x) == pytest.approx(T.energy(x, *arrays(em)), rel=1e-12)
-    np.testing.assert_allclose(anp.anp_forces(em, x), T.forces(x, *arrays(em)), rtol=1e-10, atol=1e-14)
+    assert anp.anp_energy(em, x) == pytest.approx(T.energy(x, *arrays(em), smoothing), rel=1e-12)
+    np.testing.assert_allclose(anp.anp_forces(em, x), T.forces(x, *arrays(em), smoothing), rtol=1e-10, atol=1e-14)
 
 
-def test_gradient_and_hessian_match_finite_differences():
-    p, _, em = model()
+@pytest.mark.parametrize("smoothing", [0.0, 0.7])
+def test_gradient_and_hessian_match_finite_differences(smoothing):
+    p, _, em = model(smoothing=smoothing)
     x = wobbled(p)
     f = anp.anp_forces(em, x)
     H = anp.anp_hessian(em, x, project=0).toarray()

@@ -71,9 +71,11 @@ def nodal_terms(em, el: KE.Elements | None = None) -> KP.NodalTerms:
     order = np.argsort(corners, kind="stable")
     ptr = np.zeros(n + 1, np.int64)
     ptr[1:] = np.cumsum(np.bincount(corners, minlength=n))
+    shear = np.repeat(el.mu[live], 4)
     return KP.NodalTerms(np.bincount(corners, quarter, minlength=n), np.bincount(corners, quarter * bulk, minlength=n),
                          ptr, np.ascontiguousarray(np.repeat(live, 4)[order]),
-                         np.ascontiguousarray(np.tile(np.arange(4), live.size)[order]))
+                         np.ascontiguousarray(np.tile(np.arange(4), live.size)[order]),
+                         np.bincount(corners, quarter * shear, minlength=n), float(em.deviatoric_smoothing))
 
 
 def anp_energy(em, positions) -> float:
