@@ -208,8 +208,9 @@ def test_static_solve_takes_the_element_per_run():
     assert tips[1] > 1.5 * tips[0]
 
 
-def cut_slab(element, nu=0.45):
-    """A prestrained slab (10 % along y) cut along y = 1.37 by the newton steps of the tissue."""
+def cut_slab(element, nu=0.45, smoothing=0.0):
+    """A prestrained slab (10 % along y) cut along y = 1.37 by the newton steps of the tissue
+    (``smoothing``: the ANP element's deviatoric smoothing)."""
     from cutkit.cutting import cut_step
     from cutkit.model.tetmodel import Materials, Prestress
     from cutkit.simulate.elastic_tissue import ElasticTissue
@@ -220,6 +221,7 @@ def cut_slab(element, nu=0.45):
                    prestrain=np.array([0.1]))
     model = TetModel.from_arrays(p, t, materials=Materials.from_rows([dict(ROW, poisson_ratio=nu)]), prestress=ps)
     tis = ElasticTissue(model, blade_length=1.6, step_s=0.02, solver="newton", element=element)
+    tis.em.deviatoric_smoothing = smoothing
     tis.em.fixed[p[:, 2] == 0] = True
     tis.bc_fixed = p[:, 2] == 0
     tis.advance(np.zeros((tis.n_nodes, 3)), 0.1)
