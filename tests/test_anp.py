@@ -232,8 +232,10 @@ def cut_slab(element, nu=0.45, smoothing=0.0):
     return tis
 
 
-def test_the_tissue_cuts_with_anp_and_inverts_no_tet():
-    tis = cut_slab("anp")
+@pytest.mark.parametrize("smoothing", [0.0, anp.ANP_SMOOTHING])
+def test_the_tissue_cuts_with_anp_and_inverts_no_tet(smoothing):
+    tis = cut_slab("anp", smoothing=smoothing)
+    assert tis.em.deviatoric_smoothing == smoothing
     rep = tis.relax_report()
     assert rep["not_converged"] == 0 and rep["worst_relative_residual"] <= rep["rtol"]
     assert tis.em.n_nodes > tis.cm.n_orig_points
