@@ -21,17 +21,43 @@ def _nodal(x, tets, Dminv, volume, mu, lam, n):
     return F, J, V_a, kv_a, J_a
 
 
-def energy(x, tets, Dminv, volume, mu, lam):
-    """sum_e V [mu/2 (|F|^2 - 3) - mu (J - 1) + mu/6 (J - 1)^2 + b(J)] + sum_a kv_a/2 (J_a - 1)^2."""
+def _unit_deviatoric(F):
+    """psi(F) = (|F|^2 - 3)/2 - (J - 1) + (J - 1)^2/6 and dpsi/dF, for F (k, 3, 3)."""
+    J = np.linalg.det(F)
+    cof = J[:, None, None] * np.transpose(np.linalg.inv(F), (0, 2, 1))
+    psi = 0.5 * (np.einsum("kij,kij->k", F, F) - 3.0) - (J - 1.0) + (J - 1.0) ** 2 / 6.0
+    return psi, F + ((J - 1.0) / 3.0 - 1.0)[:, None, None] * cof
+
+
+def _smoothed(F, tets, volume, mu, n):
+    """Nodal smoothed F_a = sum (V/4) F_e / V_a (n, 3, 3), shear weights G_a = sum V mu / 4, V_a."""
+    V_a = np.zeros(n)
+    G_a = np.zeros(n)
+    Fs = np.zeros((n, 3, 3))
+    for a in range(4):
+        np.add.at(V_a, tets[:, a], volume / 4)
+        np.add.at(G_a, tets[:, a], volume * mu / 4)
+        np.add.at(Fs, tets[:, a], (volume / 4)[:, None, None] * F)
+    used = V_a > 0
+    Fs[used] /= V_a[used, None, None]
+    Fs[~used] = np.eye(3)
+    return Fs, G_a, V_a
+
+
+def energy(x, tets, Dminv, volume, mu, lam, smoothing=0.0):
+    """sum_e V [(1 - alpha) mu (|F|^2 - 3)/2 - ... + b(J)] + sum_a kv_a/2 (J_a - 1)^2 + alpha sum_a G_a psi(Fs_a)."""
     live = volume > 0
     tets, Dminv, volume, mu, lam = tets[live], Dminv[live], volume[live], mu[live], lam[live]
     F, J, V_a, kv_a, J_a = _nodal(x, tets, Dminv, volume, mu, lam, x.shape[0])
     ic = np.einsum("mij,mij->m", F, F)
-    psi = 0.5 * mu * (ic - 3.0) - mu * (J - 1.0) + mu / 6.0 * (J - 1.0) ** 2 + barrier(J, lam + mu)[0]
-    return float(np.sum(volume * psi) + np.sum(0.5 * kv_a * (J_a - 1.0) ** 2))
+    keep = (1.0 - smoothing) * mu
+    psi = 0.5 * keep * (ic - 3.0) - keep * (J - 1.0) + keep / 6.0 * (J - 1.0) ** 2 + barrier(J, lam + mu)[0]
+    Fs, G_a, _ = _smoothed(F, tets, volume, mu, x.shape[0])
+    return float(np.sum(volume * psi) + np.sum(0.5 * kv_a * (J_a - 1.0) ** 2)
+                 + smoothing * np.sum(G_a * _unit_deviatoric(Fs)[0]))
 
 
-def forces(x, tets, Dminv, volume, mu, lam):
+def forces(x, tets, Dminv, volume, mu, lam, smoothing=0.0):
     """-dW/dx (n, 3): P = mu F + (mu/3 (J - 1) - mu + b'(J) + p_e) cof F, p_e the mean nodal pressure."""
     live = volume > 0
     tets, Dminv, volume, mu, lam = tets[live], Dminv[live], volume[live], mu[live], lam[live]
@@ -40,8 +66,15 @@ def forces(x, tets, Dminv, volume, mu, lam):
     pi = np.divide(kv_a * (J_a - 1.0), V_a, out=np.zeros(n), where=V_a > 0)
     p_e = pi[tets].mean(axis=1)
     cof = J[:, None, None] * np.transpose(np.linalg.inv(F), (0, 2, 1))
-    s = mu / 3.0 * (J - 1.0) - mu + barrier(J, lam + mu)[1] + p_e
-    P = mu[:, None, None] * F + s[:, None, None] * cof
+    keep = (1.0 - smoothing) * mu
+    s = keep / 3.0 * (J - 1.0) - keep + barrier(J, lam + mu)[1] + p_e
+    P = keep[:, None, None] * F + s[:, None, None] * cof
+    # the nodes' share: dW_s/dF_e = sum_{a in e} alpha G_a (V_e / 4 V_a) dpsi/dF(Fs_a) / V_e
+    Fs, G_a, V_s = _smoothed(F, tets, volume, mu, n)
+    dpsi = _unit_deviatoric(Fs)[1]
+    for a in range(4):
+        c = smoothing * G_a[tets[:, a]] / (4.0 * V_s[tets[:, a]])
+        P = P + c[:, None, None] * dpsi[tets[:, a]]
     # dF/dx_j = e_r b_j^T with b_1..b_3 the rows of Dminv, b_0 = -their sum
     B = np.concatenate([-Dminv.sum(axis=1, keepdims=True), Dminv], axis=1)  # (m, 4, 3)
     g = volume[:, None, None] * np.einsum("mrc,mjc->mjr", P, B)

@@ -39,8 +39,10 @@ from cutkit.relax._newton_kernels import _cofactor, _deformation, _levi
 
 #: Per node: natural volume V_a (n,), bulk weight kv_a (n,) (N mm: sum V_e K_e / 4),
 #: the tets around it ``node_ptr`` (n + 1,) int64 / ``node_tets`` (4m,) int64 with their corners
-#: ``node_corner`` (4m,) int64.
-NodalTerms = namedtuple("NodalTerms", ["volume", "bulk", "node_ptr", "node_tets", "node_corner"])
+#: ``node_corner`` (4m,) int64, the shear weight (n,) (N mm: sum V_e mu_e / 4) and the share
+#: alpha (float, 0..1) of the deviatoric energy carried by the nodes' smoothed deformation.
+NodalTerms = namedtuple("NodalTerms", ["volume", "bulk", "node_ptr", "node_tets", "node_corner", "shear",
+                                       "smoothing"])
 
 
 @njit(cache=True, nogil=True)
@@ -100,10 +102,14 @@ def energy(x, el, nodal):
         for r in range(3):
             for c in range(3):
                 ic += F[r, c] * F[r, c]
-        total += V * (0.5 * mu * (ic - 3.0) - mu * (Jt - 1.0) + mu / 6.0 * (Jt - 1.0) ** 2
+        keep = 1.0 - nodal.smoothing
+        total += V * (keep * (0.5 * mu * (ic - 3.0) - mu * (Jt - 1.0) + mu / 6.0 * (Jt - 1.0) ** 2)
                       + barrier(Jt, el.lam[t] + mu)[0])
     pi = np.empty(nodal.volume.shape[0])
-    return total + nodal_pressures(el, J, nodal, pi)
+    total += nodal_pressures(el, J, nodal, pi)
+    if nodal.smoothing > 0.0:
+        total += smoothed_energy(x, el, nodal)
+    return total
 
 
 @njit(cache=True, nogil=True)
@@ -129,8 +135,8 @@ def forces(x, el, nodal, out):
             continue
         _deformation(x, el, t, B, F)
         Jt = _cofactor(F, C)
-        mu = el.mu[t]
-        s = mu / 3.0 * (Jt - 1.0) - mu + barrier(Jt, el.lam[t] + mu)[1] + _element_pressure(el, t, pi)
+        mu = (1.0 - nodal.smoothing) * el.mu[t]
+        s = mu / 3.0 * (Jt - 1.0) - mu + barrier(Jt, el.lam[t] + el.mu[t])[1] + _element_pressure(el, t, pi)
         for j in range(4):
             i = el.tets[t, j]
             for r in range(3):
@@ -138,6 +144,8 @@ def forces(x, el, nodal, out):
                 for c in range(3):
                     acc += (mu * F[r, c] + s * C[r, c]) * B[j, c]
                 out[i, r] -= V * acc
+    if nodal.smoothing > 0.0:
+        smoothed_forces(x, el, nodal, out)
 
 
 @njit(cache=True, nogil=True)
@@ -155,16 +163,17 @@ def _project(HF):
 
 
 @njit(cache=True, nogil=True)
-def element_hessian(x, el, t, p_e, project, H):
-    """The element part of d2W/dx2 of element t (12, 12) (dof 3 j + s), its pressure p_e included."""
+def element_hessian(x, el, t, p_e, keep, project, H):
+    """The element part of d2W/dx2 of element t (12, 12) (dof 3 j + s), its pressure p_e included;
+    ``keep`` (1 - alpha) scales its deviatoric energy."""
     B = np.empty((4, 3))
     F = np.empty((3, 3))
     C = np.empty((3, 3))
     HF = np.empty((9, 9))
     _deformation(x, el, t, B, F)
     J = _cofactor(F, C)
-    mu = el.mu[t]
-    _, db, ddb = barrier(J, el.lam[t] + mu)
+    mu = keep * el.mu[t]
+    _, db, ddb = barrier(J, el.lam[t] + el.mu[t])
     s = mu / 3.0 * (J - 1.0) - mu + db + p_e
     w = mu / 3.0 + ddb
     for p in range(9):
@@ -252,7 +261,7 @@ def assemble_hessian(x, el, nodal, pattern, project, data):
     for t in range(m):
         if el.volume[t] <= 0.0:
             continue
-        element_hessian(x, el, t, _element_pressure(el, t, pi), project, H)
+        element_hessian(x, el, t, _element_pressure(el, t, pi), 1.0 - nodal.smoothing, project, H)
         for a in range(4):
             for b in range(4):
                 Hb[:, :] = H[3 * a:3 * a + 3, 3 * b:3 * b + 3]
@@ -274,4 +283,151 @@ def assemble_hessian(x, el, nodal, pattern, project, data):
                 for r in range(3):
                     for s in range(3):
                         Hb[r, s] = c * g[p, r] * g[q, s]
+                _add_block(pattern, patch[p], patch[q], Hb, data)
+    if nodal.smoothing > 0.0:
+        smoothed_hessian(x, el, nodal, pattern, project, data)
+
+
+# ---------------------------------------------------------------- the nodes' smoothed deviatoric part
+# With alpha = nodal.smoothing > 0 a share alpha of the deviatoric energy is carried by the nodes
+# (the alpha-FEM of Liu, Nguyen-Thoi & Lam 2008 / the selective smoothed FEM of Nguyen-Thoi,
+# Liu et al. 2009 with node-based smoothing): linear tets are too stiff in bending (they lock in
+# shear), node-based smoothed strain is too soft, and the blend is close to exact
+# (benchmarks/anp_deviatoric_blend.py):
+#
+#     W_s = alpha sum_a G_a psi(Fs_a),  Fs_a = sum_{e ni a} (V_e / 4) F_e / V_a,
+#     psi(F) = (|F|^2 - 3) / 2 - (J - 1) + (J - 1)^2 / 6,  G_a = sum_{e ni a} V_e mu_e / 4
+#
+# Fs_a is linear in x: dFs_a/dx_i = e_r w_i^T with w_i = sum_{e ni a, i} (V_e / 4 V_a) b_e,i,
+# so W_s has ANP's two-ring stencil.
+
+
+@njit(cache=True, nogil=True)
+def _smoothed_deformation(x, el, nodal, a, local, patch, w, F):
+    """Fs_a into F (3, 3), a's patch into patch (k,) and w (k, 3); returns k.
+    ``local`` (n,) is -1 on entry and on exit."""
+    B = np.empty((4, 3))
+    Fe = np.empty((3, 3))
+    F[:, :] = 0.0
+    k = 0
+    Va = nodal.volume[a]
+    for q in range(nodal.node_ptr[a], nodal.node_ptr[a + 1]):
+        t = nodal.node_tets[q]
+        _deformation(x, el, t, B, Fe)
+        c = 0.25 * el.volume[t] / Va
+        for r in range(3):
+            for cc in range(3):
+                F[r, cc] += c * Fe[r, cc]
+        for j in range(4):
+            i = el.tets[t, j]
+            if local[i] < 0:
+                local[i] = k
+                patch[k] = i
+                w[k, :] = 0.0
+                k += 1
+            for cc in range(3):
+                w[local[i], cc] += c * B[j, cc]
+    for q in range(k):
+        local[patch[q]] = -1
+    return k
+
+
+@njit(cache=True, nogil=True)
+def _unit_deviatoric(F, C):
+    """psi(F) and the factor s of its stress dpsi/dF = F + s cof F (C: cof F, filled here)."""
+    J = _cofactor(F, C)
+    ic = 0.0
+    for r in range(3):
+        for c in range(3):
+            ic += F[r, c] * F[r, c]
+    return 0.5 * (ic - 3.0) - (J - 1.0) + (J - 1.0) ** 2 / 6.0, (J - 1.0) / 3.0 - 1.0
+
+
+@njit(cache=True, nogil=True)
+def _scratch(nodal):
+    most = 0
+    for a in range(nodal.volume.shape[0]):
+        most = max(most, nodal.node_ptr[a + 1] - nodal.node_ptr[a])
+    return np.full(nodal.volume.shape[0], -1, np.int64), np.empty(4 * most, np.int64), np.empty((4 * most, 3))
+
+
+@njit(cache=True, nogil=True)
+def smoothed_energy(x, el, nodal):
+    """W_s (N mm)."""
+    local, patch, w = _scratch(nodal)
+    F = np.empty((3, 3))
+    C = np.empty((3, 3))
+    total = 0.0
+    for a in range(nodal.volume.shape[0]):
+        if nodal.volume[a] <= 0.0:
+            continue
+        _smoothed_deformation(x, el, nodal, a, local, patch, w, F)
+        total += nodal.shear[a] * _unit_deviatoric(F, C)[0]
+    return nodal.smoothing * total
+
+
+@njit(cache=True, nogil=True)
+def smoothed_forces(x, el, nodal, out):
+    """out (n, 3) -= dW_s/dx."""
+    local, patch, w = _scratch(nodal)
+    F = np.empty((3, 3))
+    C = np.empty((3, 3))
+    for a in range(nodal.volume.shape[0]):
+        if nodal.volume[a] <= 0.0:
+            continue
+        k = _smoothed_deformation(x, el, nodal, a, local, patch, w, F)
+        s = _unit_deviatoric(F, C)[1]
+        g = nodal.smoothing * nodal.shear[a]
+        for p in range(k):
+            for r in range(3):
+                acc = 0.0
+                for c in range(3):
+                    acc += (F[r, c] + s * C[r, c]) * w[p, c]
+                out[patch[p], r] -= g * acc
+
+
+@njit(cache=True, nogil=True)
+def _unit_stress_hessian(F, C, s, HF):
+    """d2psi/dF2 (9, 9) (index 3 r + c): I + cof (x) cof / 3 + s d2J/dF2."""
+    for p in range(9):
+        for q in range(9):
+            HF[p, q] = C[p // 3, p % 3] * C[q // 3, q % 3] / 3.0
+        HF[p, p] += 1.0
+    for i in range(3):
+        for j in range(3):
+            if i == j:
+                continue
+            for a in range(3):
+                for b in range(3):
+                    if a != b:
+                        HF[3 * i + a, 3 * j + b] += s * _levi(i, j) * _levi(a, b) * F[3 - i - j, 3 - a - b]
+
+
+@njit(cache=True, nogil=True)
+def smoothed_hessian(x, el, nodal, pattern, project, data):
+    """data += d2W_s/dx2 into the CSR values of the two-ring pattern; each node's 9x9 d2psi/dF2
+    projected to positive semi-definite where ``project``."""
+    local, patch, w = _scratch(nodal)
+    F = np.empty((3, 3))
+    C = np.empty((3, 3))
+    HF = np.empty((9, 9))
+    Hb = np.empty((3, 3))
+    for a in range(nodal.volume.shape[0]):
+        if nodal.volume[a] <= 0.0:
+            continue
+        k = _smoothed_deformation(x, el, nodal, a, local, patch, w, F)
+        s = _unit_deviatoric(F, C)[1]
+        _unit_stress_hessian(F, C, s, HF)
+        if project != 0:
+            _project(HF)
+        g = nodal.smoothing * nodal.shear[a]
+        for p in range(k):
+            for q in range(k):
+                for r in range(3):
+                    for t_ in range(3):
+                        acc = 0.0
+                        for c in range(3):
+                            for d in range(3):
+                                acc += w[p, c] * HF[3 * r + c, 3 * t_ + d] * w[q, d]
+                        Hb[r, t_] = g * acc
                 _add_block(pattern, patch[p], patch[q], Hb, data)

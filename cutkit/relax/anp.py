@@ -12,6 +12,14 @@ energy to the nodes, where it depends on the nodal volume ratio
 one constraint per node instead of one per element (about five times fewer).
 The energy, its split and its derivatives are in :mod:`cutkit.relax._anp_kernels`.
 
+That removes the volumetric locking but leaves the linear tet's stiffness in
+bending (its shear locking, there at nu 0.3 too).  With ``deviatoric_smoothing``
+alpha > 0 (``build_element_model``) a share alpha of the deviatoric energy is
+carried by each node's smoothed deformation gradient instead (the alpha-FEM of
+Liu, Nguyen-Thoi & Lam 2008; the selective node-based smoothed FEM of
+Nguyen-Thoi, Liu et al. 2009): node-based smoothing is as soft as linear tets
+are stiff, and :data:`ANP_SMOOTHING` is the measured blend.
+
 Everything the nodes need is derived from the element list each time it is
 asked for (:func:`nodal_terms`), so after a cut the duplicated nodes have
 the nodal volumes of the tets that hold them, and the natural (prestrained)
@@ -32,6 +40,12 @@ from cutkit.relax import _newton_kernels as KN
 #: The element choices of the element model: ``"nh"`` stable neo-Hookean linear tets (one
 #: volumetric energy per element), ``"anp"`` the average nodal pressure tetrahedron.
 ELEMENTS = ("nh", "anp")
+
+#: The share alpha of the deviatoric energy on the nodes (``deviatoric_smoothing``) that meets
+#: 5 % of a refined P2 reference on the cantilever at nu 0.3-0.49 and on the bonded block at
+#: nu 0.3-0.45 on the once-refined meshes (docs/relaxation.md; benchmarks/anp_deviatoric_blend.py
+#: scans alpha, benchmarks/element_locking.py --smoothing measures it).
+ANP_SMOOTHING = 0.7
 
 
 def check_element(element: str) -> str:
@@ -60,7 +74,8 @@ def nodal_terms(em, el: KE.Elements | None = None) -> KP.NodalTerms:
     -------
     NodalTerms
         ``volume`` (n,) mm^3 = sum V_e / 4, ``bulk`` (n,) N mm = sum V_e K_e / 4 with
-        K = lam + 2 mu / 3, and the node-to-tet lists of the active tets.
+        K = lam + 2 mu / 3, the node-to-tet lists of the active tets, ``shear`` (n,) N mm =
+        sum V_e mu_e / 4 and ``smoothing`` = ``em.deviatoric_smoothing``.
     """
     el = active_elements(em) if el is None else el
     n = em.n_nodes
@@ -71,9 +86,11 @@ def nodal_terms(em, el: KE.Elements | None = None) -> KP.NodalTerms:
     order = np.argsort(corners, kind="stable")
     ptr = np.zeros(n + 1, np.int64)
     ptr[1:] = np.cumsum(np.bincount(corners, minlength=n))
+    shear = np.repeat(el.mu[live], 4)
     return KP.NodalTerms(np.bincount(corners, quarter, minlength=n), np.bincount(corners, quarter * bulk, minlength=n),
                          ptr, np.ascontiguousarray(np.repeat(live, 4)[order]),
-                         np.ascontiguousarray(np.tile(np.arange(4), live.size)[order]))
+                         np.ascontiguousarray(np.tile(np.arange(4), live.size)[order]),
+                         np.bincount(corners, quarter * shear, minlength=n), float(em.deviatoric_smoothing))
 
 
 def anp_energy(em, positions) -> float:

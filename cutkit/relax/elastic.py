@@ -124,6 +124,9 @@ class ElementModel:
     element : str
         ``"nh"`` stable neo-Hookean linear tets, ``"anp"`` the average nodal
         pressure tetrahedron (:mod:`cutkit.relax.anp`; projected Newton only).
+    deviatoric_smoothing : float
+        ``"anp"`` only: the share alpha in [0, 1) of the deviatoric energy carried by
+        the nodes' smoothed deformation (:mod:`cutkit.relax.anp`); 0 is plain ANP.
     """
 
     tets: np.ndarray
@@ -146,6 +149,7 @@ class ElementModel:
     adj_used: int = 0
     colour: np.ndarray = field(default=None)
     element: str = "nh"
+    deviatoric_smoothing: float = 0.0
     _classes: tuple | None = None
     _tet_mark: np.ndarray | None = None  # scratch of remove_elements: a flag per element id
 
@@ -372,7 +376,8 @@ def _ranges(counts: np.ndarray) -> np.ndarray:
     return np.arange(int(counts.sum())) - np.repeat(np.cumsum(counts) - counts, counts)
 
 
-def build_element_model(model, *, poisson_ratio=None, element: str = "nh") -> ElementModel:
+def build_element_model(model, *, poisson_ratio=None, element: str = "nh",
+                        deviatoric_smoothing: float = 0.0) -> ElementModel:
     """The element model of a :class:`~cutkit.model.TetModel` in its rest configuration.
 
     Materials come from the model's table (``E`` Pa, ``poisson_ratio``,
@@ -387,9 +392,15 @@ def build_element_model(model, *, poisson_ratio=None, element: str = "nh") -> El
     element : str
         ``"nh"`` (stable neo-Hookean linear tets) or ``"anp"`` (average nodal
         pressure tetrahedron, :mod:`cutkit.relax.anp`).
+    deviatoric_smoothing : float
+        ``"anp"`` only: the share alpha in [0, 1) of the deviatoric energy carried by the
+        nodes (:mod:`cutkit.relax.anp`, ``ANP_SMOOTHING`` is the measured choice); 0 plain ANP.
     """
     if element not in ("nh", "anp"):
         raise InputError(f"element must be nh or anp, not {element!r}")
+    alpha = float(deviatoric_smoothing)
+    if not 0.0 <= alpha < 1.0 or (alpha > 0.0 and element != "anp"):
+        raise InputError(f"deviatoric_smoothing must be in [0, 1) and needs element anp, got {deviatoric_smoothing!r}")
     mat = material_of_tets(model, model.labels, poisson_ratio=poisson_ratio)
     n = model.n_points
     em = ElementModel.empty(n, model.n_tets)
@@ -398,6 +409,7 @@ def build_element_model(model, *, poisson_ratio=None, element: str = "nh") -> El
     em.damping[:] = node_damping(n, model.tets, mat["damping"])
     em.fixed[:] = fixed_nodes_mask(model)[:, None]
     em.element = element
+    em.deviatoric_smoothing = alpha
     em.recolour()
     em.lay_out_rows()
     return em
