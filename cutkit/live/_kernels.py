@@ -6,7 +6,7 @@ import numpy as np
 from numba import njit
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def vertex_normals(points, faces, out):
     """Area-weighted unit vertex normals into ``out``.
 

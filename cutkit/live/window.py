@@ -311,14 +311,7 @@ class WindowView:
         if isinstance(pose, str):  # "fit": the whole tissue (not the blade, which may be far off)
             self._pl.reset_camera(render=False, bounds=self._tissue.bounds)
         else:
-            # straight to VTK's camera: pyvista's camera_position resets the clipping range at each
-            # of position, focal point and up (each a pass over every actor's bounds), and was the
-            # most costly part of a frame on the knee
-            camera = self._pl.renderer.GetActiveCamera()
-            camera.SetPosition(*map(float, pose.position))
-            camera.SetFocalPoint(*map(float, pose.focal_point))
-            camera.SetViewUp(*map(float, pose.up))
-            self._pl.renderer.camera_set = True  # as pyvista's setter marks it: no reset at render
+            self._pl.camera_position = pose.as_list()
         self._pl.renderer.ResetCameraClippingRange()
 
     @property
