@@ -134,6 +134,25 @@ def test_window_draws_the_cut_surface_in_its_colour(window, tmp_path):
     assert "haptics 1000 Hz" in status and "relaxation 250 passes/s" in status and "tets cut 42" in status
 
 
+def test_window_uploads_new_colours_and_keeps_them_across_frames(window):
+    view, _ = window
+    frame = slab_with_wound()
+    view.show(frame)
+    for _ in range(2):  # the same colours: still the frame's
+        frame.points = frame.points + np.array([0.0, 0.0, 0.01])
+        view.show(frame)
+    assert np.array_equal(np.asarray(view._tissue.point_data["rgb"]), frame.rgb)
+    # another colour table of the same size (a still picture's) reaches the picture
+    other = slab_with_wound()
+    other.rgb = np.full_like(frame.rgb, 40)
+    view.show(other)
+    assert np.array_equal(np.asarray(view._tissue.point_data["rgb"]), other.rgb)
+    # no colours: the plain tissue colour
+    other.rgb = None
+    view.show(other)
+    assert np.all(np.asarray(view._tissue.point_data["rgb"]) == view.tissue_rgb)
+
+
 def test_window_turns_a_mouse_drag_into_blade_poses(window):
     view, src = window
     frame = slab_with_wound()

@@ -37,7 +37,8 @@ class LiveFrame:
     cut_faces : (c, 3) int64
         The cut surface's triangles (both lips), indices into ``points``.
     rgb : (n, 3) uint8 or None
-        Texture colour per node; None = a plain tissue colour.
+        Texture colour per node; None = a plain tissue colour.  Not changed in place once
+        shown: a window uploads the colours again only for another array or another size.
     tip, a, n : (3,) float64 or None
         Blade pose (trajectory convention: ``a`` handle to tip, ``n`` towards
         the edge); ``tip`` None = no blade to draw.

@@ -162,6 +162,7 @@ class WindowView:
         self._last_render = None
         self._faces = (None, None)  # faces last uploaded (boundary, cut)
         self._n = -1
+        self._rgb_key = None  # (buffer address, shape) of the colours last uploaded
         self._picker = None
         self._pressed = False
 
@@ -267,8 +268,13 @@ class WindowView:
             self._cut.faces = _cells(frame.cut_faces)
             old_c = frame.cut_faces.copy()
         self._faces = (old_b, old_c)
-        rgb = frame.rgb if frame.rgb is not None else np.broadcast_to(self.tissue_rgb, (n, 3))
-        self._tissue.point_data["rgb"] = np.ascontiguousarray(rgb, np.uint8)
+        # the colours change only when nodes are added (a frame's rgb is a view of one growing
+        # table): uploading them every frame cost as much as the normals
+        key = (0, n) if frame.rgb is None else (frame.rgb.__array_interface__["data"][0], frame.rgb.shape)
+        if key != self._rgb_key or "rgb" not in self._tissue.point_data:
+            rgb = frame.rgb if frame.rgb is not None else np.broadcast_to(self.tissue_rgb, (n, 3))
+            self._tissue.point_data["rgb"] = np.ascontiguousarray(rgb, np.uint8)
+            self._rgb_key = key
         self._tissue.point_data.active_normals = vertex_normals(self._points, frame.boundary_faces)
         self._cut.point_data.active_normals = vertex_normals(self._points, frame.cut_faces)
         self._tissue.Modified()
