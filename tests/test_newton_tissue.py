@@ -95,3 +95,18 @@ def test_the_commands_take_a_solver(command):
 
     out = CliRunner().invoke(cli, [command, "--help"])
     assert out.exit_code == 0 and "--solver" in out.output
+
+
+def test_a_rebase_keeps_the_element_of_the_tissue():
+    """The element model built again at a rebase is the same element (ANP stays ANP, with its
+    deviatoric share), so a later stroke is relaxed with the element the run asked for."""
+    p, t = kuhn_box((6.0, 3.0, 3.0), (6, 3, 3))
+    model = TetModel.from_arrays(p, t, materials=Materials.from_rows([ROW]))
+    tis = ElasticTissue(model, blade_length=1.6, step_s=0.02, solver="newton", element="anp")
+    tis.em.deviatoric_smoothing = 0.7
+    for xb in np.linspace(-0.5, 3.0, 4):
+        tis.apply_cut(cut_step(tis.cm, [xb, 1.37, 3.5], [0.0, 0.0, 1.0]))
+    old_orig = tis.cm.tet_origins.copy()
+    old_of_new = tis.cm.rebase()
+    tis.rebase(old_of_new, old_orig[old_of_new])
+    assert tis.em.element == "anp" and tis.em.deviatoric_smoothing == 0.7

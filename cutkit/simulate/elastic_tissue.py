@@ -563,6 +563,7 @@ class ElasticTissue(TissueBase):
         em.damping[:] = old.damping
         em.fixed[:] = old.fixed
         em.colour[:] = old.colour  # the same tets on the same nodes: the colouring stays valid
+        em.element, em.deviatoric_smoothing = old.element, old.deviatoric_smoothing
         em.lay_out_rows()
         self.em = em
         self._newton = self._newton_solver()

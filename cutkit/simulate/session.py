@@ -220,7 +220,7 @@ class Session:
         self.cut_before["new_tets"] = self.new_tets
         self.cut_before["rebases"] += 1
         self.pairs_before = cut_pairs(cm, self.pairs_before)
-        old_orig = cm._tet_orig[:cm.n_tets_total].copy()
+        old_orig = cm.tet_origins.copy()
         old_of_new = cm.rebase()
         self.tis.rebase(old_of_new, old_orig[old_of_new])
         self.contact.rebase()
