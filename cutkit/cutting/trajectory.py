@@ -153,7 +153,7 @@ def _check_unit(v, name, where, tol):
         raise TrajectoryError(
             f"{where}: vector {name} has length {length:.6g}, expected 1 within {tol:g}"
         )
-    warnings.warn(f"{where}: vector {name} has length {length:.9g}; normalised", stacklevel=4)
+    warnings.warn(f"{where}: vector {name} has length {length:.9g}; normalised", stacklevel=5)
     return v / length
 
 
@@ -215,49 +215,10 @@ def read_trajectory(
         fields = [f.strip() for f in next(csv.reader([stripped]))]
         if header is None:
             header = fields
-            missing = [c for c in COLUMNS if c not in header]
-            extra = [c for c in header if c not in COLUMNS]
-            dup = sorted({c for c in header if header.count(c) > 1})
-            if missing or extra or dup:
-                parts = []
-                if missing:
-                    parts.append("missing " + ", ".join(missing))
-                if extra:
-                    parts.append("unknown " + ", ".join(extra))
-                if dup:
-                    parts.append("repeated " + ", ".join(dup))
-                raise TrajectoryError(
-                    f"{where}: header must name the columns {','.join(COLUMNS)} ({'; '.join(parts)})"
-                )
-            cols = [header.index(c) for c in COLUMNS]
+            cols = _header_columns(header, where)
             continue
-        if len(fields) != len(COLUMNS):
-            raise TrajectoryError(f"{where}: expected {len(COLUMNS)} values, got {len(fields)}")
-        try:
-            values = [float(fields[c]) for c in cols]
-        except ValueError:
-            bad = next(fields[c] for c in cols if not _is_float(fields[c]))
-            raise TrajectoryError(f"{where}: not a number: {bad!r}") from None
-        for name, v in zip(COLUMNS, values):
-            if not math.isfinite(v):
-                raise TrajectoryError(f"{where}: {name} is not finite ({v})")
-        t = values[0]
-        if not t > prev_t:
-            raise TrajectoryError(f"{where}: t = {t:g} does not increase (previous row t = {prev_t:g})")
-        prev_t = t
-        tip = np.array(values[1:4])
-        a = _check_unit(np.array(values[4:7]), "a", where, normalize_tolerance)
-        n = _check_unit(np.array(values[7:10]), "n", where, normalize_tolerance)
-        dot = float(np.dot(a, n))
-        if abs(dot) > ORTHO_EXACT:
-            if abs(dot) > ortho_tolerance:
-                raise TrajectoryError(
-                    f"{where}: a and n are not perpendicular (a.n = {dot:.6g}, tolerance {ortho_tolerance:g})"
-                )
-            warnings.warn(f"{where}: a.n = {dot:.3g}; n re-orthogonalised", stacklevel=2)
-            n = n - dot * a
-            n /= np.linalg.norm(n)
-        rows.append((t, tip, a, n))
+        rows.append(_parse_row(fields, cols, where, prev_t, normalize_tolerance, ortho_tolerance))
+        prev_t = rows[-1][0]
     if header is None:
         raise TrajectoryError(f"{path}: no header line (expected {','.join(COLUMNS)})")
     if not rows:
@@ -270,6 +231,56 @@ def read_trajectory(
         blade_length=float(blade_length),
         blade_breadth=float(blade_breadth),
     )
+
+
+def _header_columns(header: list, where: str) -> list:
+    """Index in ``header`` of each of :data:`COLUMNS`; one line naming what is wrong otherwise."""
+    missing = [c for c in COLUMNS if c not in header]
+    extra = [c for c in header if c not in COLUMNS]
+    dup = sorted({c for c in header if header.count(c) > 1})
+    if missing or extra or dup:
+        parts = []
+        if missing:
+            parts.append("missing " + ", ".join(missing))
+        if extra:
+            parts.append("unknown " + ", ".join(extra))
+        if dup:
+            parts.append("repeated " + ", ".join(dup))
+        raise TrajectoryError(
+            f"{where}: header must name the columns {','.join(COLUMNS)} ({'; '.join(parts)})"
+        )
+    return [header.index(c) for c in COLUMNS]
+
+
+def _parse_row(fields: list, cols: list, where: str, prev_t: float, normalize_tolerance: float,
+               ortho_tolerance: float) -> tuple:
+    """One checked row: (t, tip (3,), a (3,), n (3,)) with a and n unit and perpendicular."""
+    if len(fields) != len(COLUMNS):
+        raise TrajectoryError(f"{where}: expected {len(COLUMNS)} values, got {len(fields)}")
+    try:
+        values = [float(fields[c]) for c in cols]
+    except ValueError:
+        bad = next(fields[c] for c in cols if not _is_float(fields[c]))
+        raise TrajectoryError(f"{where}: not a number: {bad!r}") from None
+    for name, v in zip(COLUMNS, values):
+        if not math.isfinite(v):
+            raise TrajectoryError(f"{where}: {name} is not finite ({v})")
+    t = values[0]
+    if not t > prev_t:
+        raise TrajectoryError(f"{where}: t = {t:g} does not increase (previous row t = {prev_t:g})")
+    tip = np.array(values[1:4])
+    a = _check_unit(np.array(values[4:7]), "a", where, normalize_tolerance)
+    n = _check_unit(np.array(values[7:10]), "n", where, normalize_tolerance)
+    dot = float(np.dot(a, n))
+    if abs(dot) > ORTHO_EXACT:
+        if abs(dot) > ortho_tolerance:
+            raise TrajectoryError(
+                f"{where}: a and n are not perpendicular (a.n = {dot:.6g}, tolerance {ortho_tolerance:g})"
+            )
+        warnings.warn(f"{where}: a.n = {dot:.3g}; n re-orthogonalised", stacklevel=3)
+        n = n - dot * a
+        n /= np.linalg.norm(n)
+    return t, tip, a, n
 
 
 def _is_float(s: str) -> bool:
