@@ -205,6 +205,45 @@ def _xyz(v) -> str:
     return ",".join(f"{float(x):g}" for x in np.asarray(v).reshape(-1))
 
 
+def _ends_and_inward(params: Incision, model):
+    """Start and end (3,) float64 (on the model's surface when a model is given) and the inward direction (3,)."""
+    start = np.asarray(params.start, np.float64)
+    end = np.asarray(params.end, np.float64)
+    inward = None if params.inward is None else np.asarray(params.inward, np.float64)
+    if inward is not None and not (np.all(np.isfinite(inward)) and np.linalg.norm(inward) > 0):
+        raise InputError(f"incision: inward must be a non-zero direction, got {_xyz(inward)}")
+    if model is not None:
+        given = {"start": start, "end": end}
+        start, n_start = closest_boundary_point(model, start)
+        end, n_end = closest_boundary_point(model, end)
+        pts = np.asarray(model.points, np.float64)
+        lo, hi = pts.min(axis=0), pts.max(axis=0)
+        far = FAR_FROM_SURFACE_FRACTION * float(np.linalg.norm(hi - lo))
+        for name, on in (("start", start), ("end", end)):
+            dist = float(np.linalg.norm(given[name] - on))
+            if dist > far:
+                raise InputError(f"incision: {name} {_xyz(given[name])} is {dist:.0f} mm from the model's surface "
+                                 f"(the model spans {', '.join(f'{a:g}..{b:g}' for a, b in zip(lo, hi))} mm in "
+                                 "x, y, z); give points on or near its skin")
+        if inward is None:
+            inward = n_start + n_end
+    if inward is None:
+        raise InputError("incision: inward direction needed (give inward, or a model to take it from)")
+    return start, end, inward
+
+
+def _with_tremor(params: Incision, t, tip, a0, tau):
+    """The tip (k, 3) float64 with the hand's tremor added: two sines, along a0 x tau and along a0."""
+    rng = np.random.default_rng(int(params.seed))
+    f = float(params.tremor_frequency) * (1.0 + rng.uniform(-0.1, 0.1, 2))
+    phase = rng.uniform(0.0, 2.0 * math.pi, 2)
+    across = np.cross(a0, tau)
+    tip = tip + float(params.tremor_amplitude) * (
+        np.sin(2 * math.pi * f[0] * t + phase[0])[:, None] * across
+        + np.sin(2 * math.pi * f[1] * t + phase[1])[:, None] * a0)
+    return tip
+
+
 def incision(params: Incision, model=None) -> Trajectory:
     """The blade trajectory of an incision.
 
@@ -228,28 +267,7 @@ def incision(params: Incision, model=None) -> Trajectory:
         Bad parameters, or no inward direction (neither ``inward`` nor a model).
     """
     params.check()
-    start = np.asarray(params.start, np.float64)
-    end = np.asarray(params.end, np.float64)
-    inward = None if params.inward is None else np.asarray(params.inward, np.float64)
-    if inward is not None and not (np.all(np.isfinite(inward)) and np.linalg.norm(inward) > 0):
-        raise InputError(f"incision: inward must be a non-zero direction, got {_xyz(inward)}")
-    if model is not None:
-        given = {"start": start, "end": end}
-        start, n_start = closest_boundary_point(model, start)
-        end, n_end = closest_boundary_point(model, end)
-        pts = np.asarray(model.points, np.float64)
-        lo, hi = pts.min(axis=0), pts.max(axis=0)
-        far = FAR_FROM_SURFACE_FRACTION * float(np.linalg.norm(hi - lo))
-        for name, on in (("start", start), ("end", end)):
-            dist = float(np.linalg.norm(given[name] - on))
-            if dist > far:
-                raise InputError(f"incision: {name} {_xyz(given[name])} is {dist:.0f} mm from the model's surface "
-                                 f"(the model spans {', '.join(f'{a:g}..{b:g}' for a, b in zip(lo, hi))} mm in "
-                                 "x, y, z); give points on or near its skin")
-        if inward is None:
-            inward = n_start + n_end
-    if inward is None:
-        raise InputError("incision: inward direction needed (give inward, or a model to take it from)")
+    start, end, inward = _ends_and_inward(params, model)
     chord = end - start
     length = float(np.linalg.norm(chord))
     if length == 0:
@@ -302,13 +320,7 @@ def incision(params: Incision, model=None) -> Trajectory:
     tip = np.where(t[:, None] <= press, (1.0 - w_press) * p_out + w_press * p_in, q + reach * a)
 
     if params.tremor_amplitude > 0:
-        rng = np.random.default_rng(int(params.seed))
-        f = float(params.tremor_frequency) * (1.0 + rng.uniform(-0.1, 0.1, 2))
-        phase = rng.uniform(0.0, 2.0 * math.pi, 2)
-        across = np.cross(a0, tau)
-        tip = tip + float(params.tremor_amplitude) * (
-            np.sin(2 * math.pi * f[0] * t + phase[0])[:, None] * across
-            + np.sin(2 * math.pi * f[1] * t + phase[1])[:, None] * a0)
+        tip = _with_tremor(params, t, tip, a0, tau)
 
     return Trajectory(t=t, tip=tip, a=a, n=n, blade_length=float(params.blade_length),
                       blade_breadth=float(params.blade_breadth))
