@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import importlib
 import importlib.util
+import os
 import signal
 import sys
 import threading
@@ -25,8 +26,26 @@ class Terminated(KeyboardInterrupt):
     """SIGTERM, raised on the main thread: it takes every path Ctrl-C takes (recordings are closed)."""
 
 
+#: How long after a SIGTERM dropped in a finalizer it is sent again, s.
+RESEND_DELAY_S = 0.01
+
+
 def _on_sigterm(signum, frame):
     raise Terminated()
+
+
+def _deliver_again(unraisable, previous_hook):
+    """``sys.unraisablehook`` while SIGTERM is handled: a :class:`Terminated` raised while Python
+    ran a finalizer (``__del__``, a weakref callback) is printed and dropped there, so the run
+    would go on; send the signal again instead, from another thread a moment later (sent at
+    once, the handler would run still inside the hook), to be raised where the main thread is
+    then; if that is a finalizer again, this hook sends it once more."""
+    if isinstance(unraisable.exc_value, Terminated):
+        resend = threading.Timer(RESEND_DELAY_S, os.kill, args=(os.getpid(), signal.SIGTERM))
+        resend.daemon = True
+        resend.start()
+        return
+    previous_hook(unraisable)
 
 
 class _TableGroup(click.Group):
@@ -51,8 +70,10 @@ class _TableGroup(click.Group):
 
     def invoke(self, ctx):
         previous = None
+        previous_hook = sys.unraisablehook
         if threading.current_thread() is threading.main_thread():
             previous = signal.signal(signal.SIGTERM, _on_sigterm)
+            sys.unraisablehook = lambda unraisable: _deliver_again(unraisable, previous_hook)
         try:
             return super().invoke(ctx)
         except CutkitError as err:
@@ -68,6 +89,7 @@ class _TableGroup(click.Group):
         finally:
             if previous is not None:
                 signal.signal(signal.SIGTERM, previous)
+                sys.unraisablehook = previous_hook
 
 
 def _set_threads(ctx, param, value):

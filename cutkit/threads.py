@@ -13,6 +13,7 @@ environment variable ``CUTKIT_THREADS``.
 
 from __future__ import annotations
 
+import contextlib
 import os
 
 from cutkit.errors import InputError
@@ -166,3 +167,22 @@ def configure_threads(n: int | None = None) -> int:
     threads = max(1, min(int(asked), int(numba.config.NUMBA_NUM_THREADS)))
     numba.set_num_threads(threads)
     return threads
+
+
+@contextlib.contextmanager
+def one_blas_thread():
+    """Run the block with BLAS (OpenBLAS, MKL) on one thread.
+
+    A threaded BLAS splits a dot product or a norm over its threads and adds
+    the parts in an order that depends on how many there are, so the same
+    solve gives different last bits on machines with different core counts,
+    and a convergence test on those sums can then take another iteration.
+    The solvers whose steps depend on such sums (projected Newton's
+    conjugate gradients and residual norms) run inside this, so what they
+    compute does not depend on the machine's cores (``tests/test_threads.py``).
+    """
+    import scipy.linalg  # noqa: F401  scipy's own BLAS, loaded now so that the limit reaches it too
+    from threadpoolctl import threadpool_limits
+
+    with threadpool_limits(limits=1, user_api="blas"):
+        yield

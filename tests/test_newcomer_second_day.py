@@ -6,6 +6,7 @@ import os
 import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -321,6 +322,33 @@ def test_sigterm_is_raised_as_an_interrupt(monkeypatch):
     before = signal.getsignal(signal.SIGTERM)
     assert main_module.main(["term"]) == 143
     assert signal.getsignal(signal.SIGTERM) == before
+
+
+
+def test_sigterm_dropped_in_a_finalizer_is_sent_again(monkeypatch):
+    """A SIGTERM that lands while Python runs a ``__del__`` has its Terminated printed and dropped
+    there; the command line sends the signal again, so the command still ends with 143."""
+    import click
+
+    from cutkit.cli import main as main_module
+
+    class Finalized:
+        def __del__(self):
+            os.kill(os.getpid(), signal.SIGTERM)
+            for _ in range(1000):  # the handler runs here, inside the finalizer
+                pass
+
+    @click.command("term")
+    def term():
+        Finalized()  # dropped at once: its __del__ runs now
+        for _ in range(5000):  # the signal sent again arrives in here
+            time.sleep(0.001)
+        raise AssertionError("SIGTERM was lost in the finalizer")
+
+    monkeypatch.setattr(main_module._TableGroup, "get_command", lambda self, ctx, name: term)
+    hook = sys.unraisablehook
+    assert main_module.main(["term"]) == 143
+    assert sys.unraisablehook is hook
 
 
 # ---- 9. user text is never rich markup

@@ -296,3 +296,22 @@ def test_an_unknown_preconditioner_is_refused(deformed):
     em, _ = deformed
     with pytest.raises(InputError, match="preconditioner must be one of"):
         NewtonSolver(em, preconditioner="ilu")
+
+
+def test_a_static_solve_is_the_same_to_the_bit_whatever_blas_threads_the_process_has():
+    """Above 10,000 dofs the solve runs conjugate gradients, whose dot products and norms a
+    threaded BLAS sums in an order set by its thread count; the solver runs BLAS on one thread
+    (cutkit.threads.one_blas_thread), so a 2-core and a 1-core process give the same iterates."""
+    from threadpoolctl import threadpool_limits
+
+    p, t = kuhn_box((20.0, 14.0, 14.0), (20, 14, 14))  # 4,725 nodes: 13,500 free dofs, solved by CG
+    runs = []
+    for blas_threads in (2, 1):
+        em = build_element_model(model_of(p, t, prestrain=0.1))
+        em.fixed[p[:, 2] == 0] = True
+        x = p.copy()
+        with threadpool_limits(limits=blas_threads, user_api="blas"):
+            info = newton_static(em, x, rtol=1e-8)
+        runs.append((x, info.iterations))
+    assert runs[0][1] == runs[1][1] > 0
+    assert np.array_equal(runs[0][0], runs[1][0])

@@ -46,6 +46,7 @@ from cutkit.relax import _elastic_kernels as KE
 from cutkit.relax import _newton_kernels as KN
 from cutkit.relax import anp
 from cutkit.relax.elastic import ElementModel, ElementState
+from cutkit.threads import one_blas_thread
 from cutkit.relax.settle import rigid_modes
 from cutkit.relax.vbd import DEFAULT_ATOL_N, SolveInfo, _node_terms, elastic_energy, elastic_forces
 
@@ -284,6 +285,12 @@ class NewtonSolver:
         SolveInfo
             ``iterations`` Newton iterations, ``residual`` the true final residual norm.
         """
+        with one_blas_thread():  # the same sums, hence the same iterates, on every machine
+            return self._solve(x, terms, atol=atol, max_iterations=max_iterations, stop=stop)
+
+    def _solve(self, x: np.ndarray, terms: KE.NodeTerms, *, atol: float, max_iterations: int,
+               stop) -> SolveInfo:
+        """:meth:`solve` with BLAS already on one thread."""
         em = self.em
         free = ~terms.fixed & (em.adj_degree > 0)[:, None]
         problem = _Potential(em, terms, free, self._elements())
@@ -663,6 +670,7 @@ def newton_static(em: ElementModel, positions, f_ext=None, gravity=None, *, rtol
     solver = solver or NewtonSolver(em)
     terms = _free_terms(em, positions, None, f_ext, gravity)
     free = ~terms.fixed & (em.adj_degree > 0)[:, None]
-    r0 = float(np.linalg.norm(_Potential(em, terms, free, solver._elements()).residual(positions)))
+    with one_blas_thread():
+        r0 = float(np.linalg.norm(_Potential(em, terms, free, solver._elements()).residual(positions)))
     info = solver.solve(positions, terms, atol=max(float(atol), float(rtol) * r0), max_iterations=int(max_iterations))
     return info

@@ -27,6 +27,7 @@ from pathlib import Path
 
 from cutkit.simulate.live_loop import LiveLoop
 from cutkit.simulate.live_parts import KEEP_ALIVE_S, MAX_CATCH_UP_TICKS, MirroredForceModel, RelaxThread, TickMeter
+from cutkit.threads import one_blas_thread
 
 __all__ = ["KEEP_ALIVE_S", "MAX_CATCH_UP_TICKS", "MirroredForceModel", "RelaxThread", "TickMeter", "run_live"]
 
@@ -66,6 +67,15 @@ def run_live(model, source, views, out_dir, opt=None, *, max_seconds: float | No
     summary : dict
         What ``summary.json`` holds: the simulate keys and ``live`` (rates, latency).
     """
+    with one_blas_thread():  # the same sums on every machine: docs/relaxation.md
+        return _run_live(model, source, views, out_dir, opt, max_seconds=max_seconds, fps=fps, idle_end_s=idle_end_s,
+                         stop=stop, model_path=model_path, on_frame=on_frame, until_idle_s=until_idle_s,
+                         on_start=on_start)
+
+
+def _run_live(model, source, views, out_dir, opt, *, max_seconds, fps, idle_end_s, stop, model_path, on_frame,
+              until_idle_s, on_start) -> dict:
+    """:func:`run_live` with BLAS on one thread."""
     loop = LiveLoop(model, source, views, Path(out_dir), opt, fps=fps, model_path=model_path)
     return loop.run(max_seconds=max_seconds, idle_end_s=idle_end_s, stop=stop, on_frame=on_frame,
                     until_idle_s=until_idle_s, on_start=on_start)

@@ -33,6 +33,7 @@ import numpy as np
 from cutkit.errors import InputError
 from cutkit.model.tetmodel import MATERIAL_MODELS
 from cutkit.simulate.tissues import SETTLE_MAX_SWEEPS, cut_model, make_tissue  # noqa: F401 (public here too)
+from cutkit.threads import one_blas_thread
 
 #: The haptic step, s: the force model runs at 1 kHz whatever else happens (section 6).
 HAPTIC_DT = 1e-3
@@ -197,6 +198,12 @@ def simulate(model, trajectory, out_dir, options: SimulateOptions | None = None,
     summary : dict
         What ``summary.json`` holds.
     """
+    with one_blas_thread():  # the same sums on every machine: docs/relaxation.md
+        return _simulate(model, trajectory, out_dir, options, progress, model_path)
+
+
+def _simulate(model, trajectory, out_dir, options, progress, model_path) -> dict:
+    """:func:`simulate` with BLAS on one thread."""
     from cutkit.simulate.session import Session
 
     opt = options or SimulateOptions()
