@@ -23,6 +23,7 @@ import numpy as np
 
 from cutkit.relax.elastic import ElementModel
 from cutkit.relax.vbd import SolveInfo, elastic_energy, elastic_forces
+from cutkit.threads import one_blas_thread
 
 #: Relative tolerance of each inner linear solve (inexact Newton: the outer
 #: iteration corrects what the inner one leaves).
@@ -73,6 +74,13 @@ def rigid_modes(x: np.ndarray) -> np.ndarray:
 def settle_static(em: ElementModel, x: np.ndarray, f_ext=None, *, rtol: float = 1e-3, atol: float = 0.0,
                   max_iterations: int = 50) -> SolveInfo:
     """Bring ``x`` (n, 3) to static equilibrium in place; ``iterations`` counts Newton steps."""
+    with one_blas_thread():  # the same sums on every machine: docs/relaxation.md
+        return _settle_static(em, x, f_ext, rtol=rtol, atol=atol, max_iterations=max_iterations)
+
+
+def _settle_static(em: ElementModel, x: np.ndarray, f_ext, *, rtol: float, atol: float,
+                   max_iterations: int) -> SolveInfo:
+    """:func:`settle_static` with BLAS on one thread."""
     import pyamg
     import scipy.sparse.linalg as spla
 
