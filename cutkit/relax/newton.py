@@ -189,7 +189,6 @@ class NewtonSolver:
         project : int
             0: exact element Hessians; 1: negative eigenvalues clamped to 0.
         """
-        import scipy.sparse as sp
 
         pat = self.pattern()
         data = np.empty(pat.indices.shape[0])
@@ -197,12 +196,7 @@ class NewtonSolver:
             anp.assemble_anp_hessian(self.em, x, pat, int(project), data)
         else:
             KN.assemble_hessian(x, self._elements(), pat, int(project), data)
-        add = np.repeat(np.asarray(diagonal_add, np.float64), 3)
-        if not np.any(add > 0):
-            add = STATIC_SHIFT * np.abs(data[pat.diagonal])
-        KN.constrain(pat, ~free.ravel(), add, data)
-        n3 = 3 * self.em.n_nodes
-        return sp.csr_matrix((data, pat.indices, pat.indptr), shape=(n3, n3))
+        return self._constrained(data, free, diagonal_add)
 
     def _solve_linear(self, A, r: np.ndarray, x: np.ndarray, free: np.ndarray):
         """d with A d = r, or None where a Cholesky factorisation finds A not positive definite
@@ -369,8 +363,6 @@ class NewtonSolver:
         -------
         (3n, 3n) scipy CSR float64
         """
-        import scipy.sparse as sp
-
         if self.em.element == "anp":  # a node's pressure couples its whole patch: assemble it all
             return self.matrix(x, sub, diagonal_add, mode)
         pat, el = self.pattern(), self._elements()
@@ -379,10 +371,18 @@ class NewtonSolver:
         data = np.empty(pat.indices.shape[0])
         KN.assemble_hessian(x, part, pat._replace(element_blocks=np.ascontiguousarray(pat.element_blocks[ids])),
                             int(mode), data)
+        return self._constrained(data, sub, diagonal_add)
+
+    def _constrained(self, data: np.ndarray, free: np.ndarray, diagonal_add: np.ndarray):
+        """The CSR matrix of assembled Hessian ``data`` on the pattern, with ``diagonal_add`` (n,) on
+        the diagonal (or the static shift where it is all zero) and the held rows made identity."""
+        import scipy.sparse as sp
+
+        pat = self.pattern()
         add = np.repeat(np.asarray(diagonal_add, np.float64), 3)
         if not np.any(add > 0):
             add = STATIC_SHIFT * np.abs(data[pat.diagonal])
-        KN.constrain(pat, ~sub.ravel(), add, data)
+        KN.constrain(pat, ~free.ravel(), add, data)
         n3 = 3 * self.em.n_nodes
         return sp.csr_matrix((data, pat.indices, pat.indptr), shape=(n3, n3))
 
