@@ -20,10 +20,7 @@ import click
 from cutkit import __version__
 from cutkit.cli.commands import COMMANDS
 from cutkit.errors import CutkitError
-
-
-class Terminated(KeyboardInterrupt):
-    """SIGTERM, raised on the main thread: it takes every path Ctrl-C takes (recordings are closed)."""
+from cutkit.interrupts import Terminated, request_stop
 
 
 #: How long after a SIGTERM dropped in a finalizer it is sent again, s.
@@ -31,7 +28,14 @@ RESEND_DELAY_S = 0.01
 
 
 def _on_sigterm(signum, frame):
-    raise Terminated()
+    # a run loop stops at its next safe point (cutkit.interrupts); anything else stops here
+    if not request_stop(Terminated):
+        raise Terminated()
+
+
+def _on_sigint(signum, frame):
+    if not request_stop(KeyboardInterrupt):
+        raise KeyboardInterrupt()
 
 
 def _deliver_again(unraisable, previous_hook):
@@ -72,7 +76,7 @@ class _TableGroup(click.Group):
         previous = None
         previous_hook = sys.unraisablehook
         if threading.current_thread() is threading.main_thread():
-            previous = signal.signal(signal.SIGTERM, _on_sigterm)
+            previous = signal.signal(signal.SIGTERM, _on_sigterm), signal.signal(signal.SIGINT, _on_sigint)
             sys.unraisablehook = lambda unraisable: _deliver_again(unraisable, previous_hook)
         try:
             return super().invoke(ctx)
@@ -88,7 +92,8 @@ class _TableGroup(click.Group):
             ctx.exit(130)
         finally:
             if previous is not None:
-                signal.signal(signal.SIGTERM, previous)
+                signal.signal(signal.SIGTERM, previous[0])
+                signal.signal(signal.SIGINT, previous[1])
                 sys.unraisablehook = previous_hook
 
 

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
+from cutkit.interrupts import check_stop, safe_points
 from cutkit.scalpel import FREE
 from cutkit.simulate.live_parts import MAX_CATCH_UP_TICKS, MirroredForceModel, RelaxThread, TickMeter
 from cutkit.simulate.live_rebase import CATCH_UP_BUDGET_S, BackgroundRebase, StillPicture
@@ -161,11 +162,19 @@ class LiveLoop:
         self.relax.start()
         self.interrupted = False
         self.on_frame = on_frame
+        # Ctrl-C and SIGTERM stop the loop between two passes; one that comes while the
+        # recording is written waits until it is whole (cutkit.interrupts)
+        with safe_points():
+            return self._run_and_record(max_seconds, idle_end_s, stop or threading.Event(), on_frame,
+                                        until_idle_s, on_start)
+
+    def _run_and_record(self, max_seconds, idle_end_s, stop, on_frame, until_idle_s, on_start) -> dict:
+        """The loop, then the recording whatever ended the loop; the loop's errors after it."""
         stopped_by = None
         try:
             if on_start is not None:
                 on_start()
-            self._loop(max_seconds, idle_end_s, stop or threading.Event(), on_frame, until_idle_s)
+            self._loop(max_seconds, idle_end_s, stop, on_frame, until_idle_s)
         except KeyboardInterrupt as exc:  # Ctrl-C, or SIGTERM as the command line raises it
             self.interrupted = True
             stopped_by = exc
@@ -198,6 +207,7 @@ class LiveLoop:
         next_geo = next_frame = next_tick = 0.0
         finished_at = None
         while not stop.is_set():
+            check_stop()  # the safe point: no tick, cut or frame is half done here
             now = self.now()
             if max_seconds is not None and now >= max_seconds:
                 break

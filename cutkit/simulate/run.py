@@ -31,6 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from cutkit.errors import InputError
+from cutkit.interrupts import check_stop, safe_points
 from cutkit.model.tetmodel import MATERIAL_MODELS
 from cutkit.simulate.tissues import SETTLE_MAX_SWEEPS, cut_model, make_tissue  # noqa: F401 (public here too)
 from cutkit.threads import one_blas_thread
@@ -224,14 +225,17 @@ def _simulate(model, trajectory, out_dir, options, progress, model_path) -> dict
         session.out = session.scalpel.out
         realtime = True  # the service runs on its own clock
     replay = _Replay(session, trajectory, out_dir, opt, realtime)
-    try:
-        replay.run(progress)
-    except KeyboardInterrupt:
-        replay.interrupted = True
-        raise
-    finally:
-        summary = replay.finish(model_path)
-    return _complete(session, replay, summary, out_dir, opt)
+    # Ctrl-C and SIGTERM stop the replay between two ticks; one that comes while the
+    # recording is written waits until it is whole (cutkit.interrupts)
+    with safe_points():
+        try:
+            replay.run(progress)
+        except KeyboardInterrupt:
+            replay.interrupted = True
+            raise
+        finally:
+            summary = replay.finish(model_path)
+        return _complete(session, replay, summary, out_dir, opt)
 
 
 def _refuse_a_blade_put_inside(model, trajectory, blade_length: float) -> None:
@@ -268,33 +272,38 @@ class _Replay:
         self.loop_wall = 0.0
 
     def run(self, progress) -> None:
+        loop0 = time.perf_counter()
+        try:
+            self._ticks(progress, loop0)
+        finally:
+            self.loop_wall = time.perf_counter() - loop0
+
+    def _ticks(self, progress, loop0: float) -> None:
+        """Per 1 ms tick: pose, force, record; every geometry period the cut and relaxation; frames."""
         s, traj, opt = self.session, self.trajectory, self.opt
         t_start, frame_period = self.t_start, 1.0 / opt.fps
         next_frame = t_start
-        loop0 = time.perf_counter()
-        try:
-            for k in range(self.n_ticks + 1):
-                t = t_start + k * HAPTIC_DT
-                if self.realtime:
-                    delay = loop0 + (t - t_start) - time.perf_counter()
-                    if delay > 0:
-                        time.sleep(delay)
-                tip, a, n = traj.pose_at(t)
-                out = s.haptic_tick(tip, a, n)
-                self.forces.add(t, s.code, out, tip, s.scalpel.proxy)
-                if k % self.geo_every:
-                    continue
-                s.relax_to(s.geometry_update(), t - t_start)
-                if self.opening_at_traj_end is None and t >= self.t_traj_end - 1e-9:
-                    o = s.opening()
-                    self.opening_at_traj_end = float(o.mean()) if o.size else 0.0
-                if opt.frames and (t >= next_frame - 1e-9 or k == self.n_ticks):
-                    self.frames.show(t)
-                    next_frame += frame_period * max(1, int(np.floor((t - next_frame) / frame_period + 1e-9)) + 1)
-                if progress is not None:
-                    progress(t - t_start, self.t_end - t_start)
-        finally:
-            self.loop_wall = time.perf_counter() - loop0
+        for k in range(self.n_ticks + 1):
+            check_stop()  # the safe point: every array of the session and the recorders is whole here
+            t = t_start + k * HAPTIC_DT
+            if self.realtime:
+                delay = loop0 + (t - t_start) - time.perf_counter()
+                if delay > 0:
+                    time.sleep(delay)
+            tip, a, n = traj.pose_at(t)
+            out = s.haptic_tick(tip, a, n)
+            self.forces.add(t, s.code, out, tip, s.scalpel.proxy)
+            if k % self.geo_every:
+                continue
+            s.relax_to(s.geometry_update(), t - t_start)
+            if self.opening_at_traj_end is None and t >= self.t_traj_end - 1e-9:
+                o = s.opening()
+                self.opening_at_traj_end = float(o.mean()) if o.size else 0.0
+            if opt.frames and (t >= next_frame - 1e-9 or k == self.n_ticks):
+                self.frames.show(t)
+                next_frame += frame_period * max(1, int(np.floor((t - next_frame) / frame_period + 1e-9)) + 1)
+            if progress is not None:
+                progress(t - t_start, self.t_end - t_start)
 
     def finish(self, model_path) -> dict:
         """Close the recorders, write forces.csv; the summary (written here when interrupted)."""
