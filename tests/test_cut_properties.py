@@ -109,7 +109,7 @@ def run_path(cm, poses, v0, check=True, end_strokes=False, on_stroke_end=None):
     return swept
 
 
-@settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=120, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(st.sampled_from(sorted(MESHES)), st.sampled_from(KINDS), st.sampled_from([0.0, 0.1, 0.3, 1.0]),
        st.integers(0, 2**31 - 1), st.sampled_from([2.5, 10.0]))
 def test_every_step_is_a_clean_mesh(name, kind, tremor, seed, blade_length):
@@ -243,7 +243,7 @@ def test_crossing_strokes_stay_clean(name, through, tremor, seed):
 
 
 @pytest.mark.slow
-@settings(max_examples=6, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=3, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(st.sampled_from(["straight", "curved", "tremor", "reversal", "crossing", "guillotine"]),
        st.integers(0, 2**31 - 1))
 def test_knee_sized_block(kind, seed):

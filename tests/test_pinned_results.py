@@ -124,7 +124,7 @@ def write_pins(names, tmp: Path, knee_folder: Path | None) -> None:
 
 
 def _params():
-    return [pytest.param(name, marks=[pytest.mark.slow] if knee else [], id=name)
+    return [pytest.param(name, marks=[pytest.mark.slow, pytest.mark.knee] if knee else [], id=name)
             for name, (knee, _) in CASES.items()]
 
 
