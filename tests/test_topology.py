@@ -76,6 +76,18 @@ def test_boundary_faces_outward_and_match_twin():
     assert enclosed == pytest.approx(signed_volumes(points, tets).sum())
 
 
+def test_face_topology_is_the_three_functions_in_one_pass():
+    from cutkit.mesh.topology import face_topology
+
+    _, tets = shuffled_box((3, 2, 2), 7)
+    topo = face_topology(tets)
+    faces, tet_faces, face_tets = unique_faces(tets)
+    bf, bt = boundary_faces(tets)
+    for got, want in ((topo.faces, faces), (topo.tet_faces, tet_faces), (topo.face_tets, face_tets),
+                      (topo.neighbors, tet_neighbors(tets)), (topo.boundary_faces, bf), (topo.boundary_face_tet, bt)):
+        assert got.dtype == want.dtype and np.array_equal(got, want)
+
+
 def test_face_convention_outward_single_tet():
     points = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], float)
     tet = np.arange(4)

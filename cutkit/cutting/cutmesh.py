@@ -27,7 +27,7 @@ import numpy as np
 
 from cutkit.errors import InputError
 from cutkit.mesh.geometry import TET_EDGES, min_volume
-from cutkit.mesh.topology import unique_edges, unique_faces, tet_neighbors
+from cutkit.mesh.topology import face_topology, unique_edges
 from cutkit.cutting import subdivision as S
 from cutkit.cutting import _kernels_step as K
 from cutkit.cutting.crumbs import init_crumbs
@@ -83,8 +83,12 @@ class CutMesh:
         self.n_orig_points = n0
         self.orig_tets = tets
         self.edges, self.tet_edges = unique_edges(tets)
-        self.faces, self.tet_faces, self.face_tets = unique_faces(tets)
-        self.neighbors = tet_neighbors(tets)
+        topo = face_topology(tets)
+        self.faces, self.tet_faces, self.face_tets, self.neighbors = (topo.faces, topo.tet_faces, topo.face_tets,
+                                                                      topo.neighbors)
+        # the original tets' boundary, outward (surface collision, live views): one truth until the rebase
+        self.orig_boundary_faces, self.orig_boundary_face_tet = topo.boundary_faces, topo.boundary_face_tet
+        self.orig_boundary_faces.flags.writeable = self.orig_boundary_face_tet.flags.writeable = False
         # edge -> tets ring (CSR), built once
         flat = self.tet_edges.ravel()
         order = np.argsort(flat, kind="stable")

@@ -116,8 +116,7 @@ def surface_bvh(cm: CutMesh, crack: bool = False):
     bvh = getattr(cm, key, None)
     if bvh is None:
         from cutkit.collision import SurfaceBVH
-        from cutkit.mesh.topology import boundary_faces
-        faces, face_tet = boundary_faces(cm.orig_tets)
+        faces, face_tet = cm.orig_boundary_faces, cm.orig_boundary_face_tet
         if crack:
             keep = [tuple(f) in cm.cut_faces_before for f in np.sort(faces, axis=1).tolist()]
             faces, face_tet = faces[keep], face_tet[keep]

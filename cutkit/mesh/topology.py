@@ -14,6 +14,8 @@ their smallest vertex (a counting sort) and sorting each small bucket.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
 from cutkit.errors import MeshError
@@ -27,6 +29,8 @@ __all__ = [
     "unique_faces",
     "tet_neighbors",
     "boundary_faces",
+    "face_topology",
+    "FaceTopology",
     "node_to_tets",
 ]
 
@@ -125,6 +129,45 @@ def tet_neighbors(tets):
     return _k.neighbors_from_faces(tet_faces, face_tets)
 
 
+class FaceTopology(NamedTuple):
+    """Every face relation of a tet mesh, from one pass over its faces (:func:`face_topology`)."""
+
+    faces: np.ndarray  #: (f, 3) int64, as :func:`unique_faces`
+    tet_faces: np.ndarray  #: (m, 4) int64, as :func:`unique_faces`
+    face_tets: np.ndarray  #: (f, 2) int64, as :func:`unique_faces`
+    neighbors: np.ndarray  #: (m, 4) int64, as :func:`tet_neighbors`
+    boundary_faces: np.ndarray  #: (b, 3) int64, as :func:`boundary_faces`
+    boundary_face_tet: np.ndarray  #: (b,) int64, as :func:`boundary_faces`
+
+
+def face_topology(tets) -> FaceTopology:
+    """:func:`unique_faces`, :func:`tet_neighbors` and :func:`boundary_faces` at the cost of one.
+
+    Parameters
+    ----------
+    tets : (m, 4) int
+        Positively oriented tets.
+
+    Returns
+    -------
+    FaceTopology
+        The same arrays, equal to the last bit, as the three functions give.
+    """
+    tets = _check_tets(tets)
+    faces, tet_faces, face_tets, count = _faces(tets)
+    neighbors = _k.neighbors_from_faces(tet_faces, face_tets)
+    bfaces, face_tet = _boundary(tets, tet_faces, count)
+    return FaceTopology(faces, tet_faces, face_tets, neighbors, bfaces, face_tet)
+
+
+def _boundary(tets, tet_faces, count):
+    """Boundary faces (used by one tet), in their tets' order, oriented by :data:`TET_FACES`."""
+    local = np.flatnonzero(count[tet_faces.ravel()] == 1)
+    face_tet = local // 4
+    faces = tets[face_tet[:, None], TET_FACES[local % 4]]
+    return np.ascontiguousarray(faces), face_tet
+
+
 def boundary_faces(tets):
     """Faces used by exactly one tet, oriented outward.
 
@@ -143,10 +186,7 @@ def boundary_faces(tets):
     """
     tets = _check_tets(tets)
     _, tet_faces, _, count = _faces(tets)
-    local = np.flatnonzero(count[tet_faces.ravel()] == 1)
-    face_tet = local // 4
-    faces = tets[face_tet[:, None], TET_FACES[local % 4]]
-    return np.ascontiguousarray(faces), face_tet
+    return _boundary(tets, tet_faces, count)
 
 
 def node_to_tets(tets, n_points):

@@ -80,10 +80,9 @@ class OuterBoundary:
         earlier strokes' cut surface; every node is an original node now.
         """
         from cutkit.cutting.rebase import cut_surface_mask
-        from cutkit.mesh.topology import boundary_faces
 
         cm = self.cm
-        faces, face_tet = boundary_faces(cm.orig_tets)
+        faces, face_tet = cm.orig_boundary_faces, cm.orig_boundary_face_tet
         outer = ~cut_surface_mask(cm, faces)
         self.faces, self.face_tet = faces[outer], face_tet[outer]
         self.n0 = cm.n_orig_points

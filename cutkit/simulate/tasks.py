@@ -154,11 +154,10 @@ class ContactTask:
         every node (``n0``) is an original node.
         """
         from cutkit.collision import SurfaceBVH
-        from cutkit.mesh.topology import boundary_faces
 
         cm = self.tis.cm
         self.n0 = cm.n_orig_points
-        self.faces, self.face_tet = boundary_faces(cm.orig_tets)
+        self.faces, self.face_tet = cm.orig_boundary_faces, cm.orig_boundary_face_tet
         self.bvh = SurfaceBVH.build(self.tis.positions[:self.n0].copy(), self.faces)
         self.row_of_tet = self.materials.row_of(cm.labels)
 
