@@ -199,3 +199,17 @@ def make_room_twin(start, degree, capacity, slots, corners, used, slack):
     start[short] = new_start
     capacity[short] = cap
     return start, capacity, out, end
+
+
+def copy_rows_twin(start, degree, slots, nodes, new_start, size):
+    """A fresh pool of ``size`` slots holding the row of each ``nodes[i]`` at ``new_start[i]``:
+    gather the old slots, scatter them (``slots``: name -> array, as in make_room_twin)."""
+    deg = degree[nodes].astype(np.int64)
+    src = np.concatenate([np.arange(start[v], start[v] + d) for v, d in zip(nodes, deg)] + [np.zeros(0, np.int64)])
+    dst = np.concatenate([np.arange(s, s + d) for s, d in zip(new_start, deg)] + [np.zeros(0, np.int64)])
+    out = {}
+    for name, old in slots.items():
+        new = np.zeros((size,) + old.shape[1:], old.dtype)
+        new[dst] = old[src]
+        out[name] = new
+    return out

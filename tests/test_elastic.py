@@ -369,6 +369,32 @@ def test_node_term_rows_match_the_twin():
     assert got[7].tolist() == [0.0] * 9
 
 
+def test_copy_rows_matches_the_twin():
+    """Rows copied into a fresh pool in another order (the rebase's layout): the kernel's slots are NumPy's."""
+    from cutkit.relax import _adjacency_kernels as KA
+    from cutkit.relax._elastic_kernels import Adjacency
+
+    rng = np.random.default_rng(5)
+    n = 15
+    degree = rng.integers(0, 5, n).astype(np.int32)
+    capacity = degree.astype(np.int64) + rng.integers(0, 3, n)
+    start = np.concatenate([[0], np.cumsum(capacity)[:-1]]).astype(np.int64)
+    pool = int(capacity.sum())
+    slots = {"tets": rng.integers(0, 99, pool).astype(np.int32), "corner": rng.integers(0, 4, pool).astype(np.int8),
+             "opposite": rng.integers(0, 99, (pool, 3)).astype(np.int32), "terms": rng.normal(size=(pool, 6))}
+    nodes = rng.permutation(n)[:11].astype(np.int64)  # some rows are dropped
+    new_cap = degree[nodes].astype(np.int64) + 2
+    new_start = np.concatenate([[0], np.cumsum(new_cap)[:-1]]).astype(np.int64)
+    size = int(new_cap.sum()) + 5
+    want = T.copy_rows_twin(start, degree, slots, nodes, new_start, size)
+    names = ("tets", "corner", "opposite", "terms")
+    fresh = {k: np.zeros((size,) + slots[k].shape[1:], slots[k].dtype) for k in names}
+    KA.copy_rows(Adjacency(start, degree, *(slots[k] for k in names)),
+                 Adjacency(start, degree, *(fresh[k] for k in names)), nodes, new_start)
+    for k in names:
+        np.testing.assert_array_equal(fresh[k], want[k])
+
+
 def test_make_room_matches_the_twin():
     """Rows moved to the pool's end for the slots new tets need: the kernel's starts, room and
     slots are NumPy's; a pool too small is left as it was and the end asked for is returned."""

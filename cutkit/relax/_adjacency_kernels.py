@@ -88,6 +88,26 @@ def _copy_slot(adj, a, b):
 
 
 @njit(cache=True, nogil=True)
+def copy_rows(adj, pool, nodes, start):
+    """The row of each node ``nodes[i]`` of ``adj``'s pool into ``pool``'s slots from ``start[i]``.
+
+    ``pool`` is an :class:`~cutkit.relax._elastic_kernels.Adjacency` over other arrays than
+    ``adj``'s (its ``start`` and ``degree`` are not read): a copy slot by slot, without the
+    index arrays and gathered temporaries a NumPy fancy-index copy makes.
+    """
+    for i in range(nodes.shape[0]):
+        v = nodes[i]
+        a, b = adj.start[v], start[i]
+        for k in range(adj.degree[v]):
+            pool.tets[b + k] = adj.tets[a + k]
+            pool.corner[b + k] = adj.corner[a + k]
+            for m in range(3):
+                pool.opposite[b + k, m] = adj.opposite[a + k, m]
+            for m in range(adj.terms.shape[1]):
+                pool.terms[b + k, m] = adj.terms[a + k, m]
+
+
+@njit(cache=True, nogil=True)
 def _runs(a):
     """The distinct values of sorted ``a`` (k,) and how often each occurs: (u,), (u,) int64."""
     values = np.empty(a.shape[0], np.int64)

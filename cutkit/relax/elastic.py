@@ -42,6 +42,8 @@ ADJACENCY_SLACK = 8
 #: Pool slots kept spare beyond those the elements and the rows' slack take, as a fraction:
 #: cuts move rows to the pool's end, and growing the pool copies it (a stall in a live session).
 ADJACENCY_POOL_SPARE = 0.25
+#: The arrays of the adjacency pool, slot by slot, in the field order of ``Adjacency`` after its start and degree.
+ADJACENCY_POOL = ("adj_tets", "adj_corner", "adj_opposite", "adj_terms")
 #: Fewer tets than this get their rest shapes on the calling thread (a cut step's new tets):
 #: below it, waking the thread pool costs more than the arithmetic it shares out.
 PARALLEL_MIN_TETS = 2048
@@ -303,24 +305,34 @@ class ElementModel:
         start = np.concatenate([[0], np.cumsum(cap)[:-1]]).astype(np.int64)
         used = int(cap.sum())
         # every row moves, into a fresh pool
-        self._move_rows(order, start, cap, max(self.adj_tets.shape[0], int((1.0 + ADJACENCY_POOL_SPARE) * used)),
-                        fresh=True)
+        self._fresh_pool(order, start, cap, max(self.adj_tets.shape[0], int((1.0 + ADJACENCY_POOL_SPARE) * used)))
         self.adj_used = used
 
-    def _move_rows(self, nodes, start, cap, size: int, fresh: bool = False) -> None:
+    def _move_rows(self, nodes, start, cap, size: int) -> None:
         """Give ``nodes`` the rows at ``start`` with room ``cap``, their slots carried over, in a pool
-        of ``size`` slots (grown by copying the slots in use, or ``fresh``: nothing else kept)."""
+        of ``size`` slots (grown by copying the slots in use)."""
         deg = self.adj_degree[nodes].astype(np.int64)
         src = np.repeat(self.adj_start[nodes], deg) + _ranges(deg)
         dst = np.repeat(start, deg) + _ranges(deg)
-        for name in ("adj_tets", "adj_corner", "adj_opposite", "adj_terms"):
+        for name in ADJACENCY_POOL:
             old = getattr(self, name)
             new = old
-            if fresh or size != old.shape[0]:
+            if size != old.shape[0]:
                 new = np.zeros((size,) + old.shape[1:], old.dtype)
-                if not fresh:
-                    new[:self.adj_used] = old[:self.adj_used]
+                new[:self.adj_used] = old[:self.adj_used]
             new[dst] = old[src]
+            setattr(self, name, new)
+        self.adj_start[nodes] = start
+        self.adj_capacity[nodes] = cap
+
+    def _fresh_pool(self, nodes, start, cap, size: int) -> None:
+        """A pool of ``size`` slots holding only the rows of ``nodes`` (k,) int64, each at ``start`` (k,)
+        int64 with room ``cap`` (k,) int64; the old pool is dropped."""
+        pool = {name: np.zeros((size,) + getattr(self, name).shape[1:], getattr(self, name).dtype)
+                for name in ADJACENCY_POOL}
+        KA.copy_rows(self.adjacency, K.Adjacency(self.adj_start, self.adj_degree, *pool.values()),
+                     np.ascontiguousarray(nodes, np.int64), np.ascontiguousarray(start, np.int64))
+        for name, new in pool.items():
             setattr(self, name, new)
         self.adj_start[nodes] = start
         self.adj_capacity[nodes] = cap
