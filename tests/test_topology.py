@@ -88,6 +88,17 @@ def test_face_topology_is_the_three_functions_in_one_pass():
         assert got.dtype == want.dtype and np.array_equal(got, want)
 
 
+def test_edge_and_node_incidence_list_each_tet_once_in_order():
+    from cutkit.mesh.topology import edge_to_tets
+
+    _, tets = shuffled_box((3, 2, 3), 9)
+    edges, tet_edges = unique_edges(tets)
+    for table, n, (off, idx) in ((tet_edges, len(edges), edge_to_tets(tet_edges, len(edges))),
+                                 (tets, int(tets.max()) + 1, node_to_tets(tets, int(tets.max()) + 1))):
+        for v in range(n):
+            assert idx[off[v]:off[v + 1]].tolist() == np.flatnonzero((table == v).any(axis=1)).tolist()
+
+
 def test_face_convention_outward_single_tet():
     points = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], float)
     tet = np.arange(4)

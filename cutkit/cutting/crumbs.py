@@ -18,6 +18,7 @@ from __future__ import annotations
 import numpy as np
 
 from cutkit.cutting import _kernels_crumbs as KC
+from cutkit.mesh.topology import node_to_tets
 
 #: A piece cut loose with a rest volume at most this fraction of the model's is a crumb and is
 #: removed (the measure of issue 30: a body this small carries no useful physics).
@@ -27,10 +28,7 @@ CRUMB_VOLUME_FRACTION = 1e-3
 def init_crumbs(cm):
     """Crumb bookkeeping of a fresh :class:`~cutkit.cutting.cutmesh.CutMesh` (original tets only)."""
     n0, m0 = cm.n_orig_points, cm.orig_tets.shape[0]
-    flat = cm.orig_tets.ravel()
-    cm.node_tet_idx = np.argsort(flat, kind="stable") // 4
-    cm.node_tet_off = np.zeros(n0 + 1, np.int64)
-    np.cumsum(np.bincount(flat, minlength=n0), out=cm.node_tet_off[1:])
+    cm.node_tet_off, cm.node_tet_idx = node_to_tets(cm.orig_tets, n0)
     cm.sub_start = np.zeros(m0, np.int64)
     cm.sub_count = np.zeros(m0, np.int64)
     X = cm._X[:n0]

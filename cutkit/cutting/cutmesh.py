@@ -27,7 +27,7 @@ import numpy as np
 
 from cutkit.errors import InputError
 from cutkit.mesh.geometry import TET_EDGES, min_volume
-from cutkit.mesh.topology import face_topology, unique_edges
+from cutkit.mesh.topology import edge_to_tets, face_topology, unique_edges
 from cutkit.cutting import subdivision as S
 from cutkit.cutting import _kernels_step as K
 from cutkit.cutting.crumbs import init_crumbs
@@ -90,11 +90,7 @@ class CutMesh:
         self.orig_boundary_faces, self.orig_boundary_face_tet = topo.boundary_faces, topo.boundary_face_tet
         self.orig_boundary_faces.flags.writeable = self.orig_boundary_face_tet.flags.writeable = False
         # edge -> tets ring (CSR), built once
-        flat = self.tet_edges.ravel()
-        order = np.argsort(flat, kind="stable")
-        self.edge_tet_idx = order // 6
-        self.edge_tet_off = np.zeros(self.edges.shape[0] + 1, np.int64)
-        np.cumsum(np.bincount(flat, minlength=self.edges.shape[0]), out=self.edge_tet_off[1:])
+        self.edge_tet_off, self.edge_tet_idx = edge_to_tets(self.tet_edges, self.edges.shape[0])
         # face -> its 3 global edges
         self.face_edges = np.zeros((self.faces.shape[0], 3), np.int64)
         self.face_edges[self.tet_faces.ravel()] = self.tet_edges[:, S.FACE_EDGES].reshape(-1, 3)

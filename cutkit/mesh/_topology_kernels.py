@@ -130,18 +130,18 @@ def neighbors_from_faces(tet_faces, face_tets):
 
 @njit(cache=True, nogil=True)
 def csr_counts(tets, n_points):
-    """Offsets (n+1,) int64 and indices of the node -> tet incidence (tets ascending per node)."""
-    m = tets.shape[0]
+    """Offsets (n+1,) int64 and indices of the node -> row incidence of a (m, w) table (rows ascending per node)."""
+    m, w = tets.shape
     offsets = np.zeros(n_points + 1, np.int64)
     for t in range(m):
-        for j in range(4):
+        for j in range(w):
             offsets[tets[t, j] + 1] += 1
     for v in range(n_points):
         offsets[v + 1] += offsets[v]
     fill = offsets[:-1].copy()
-    indices = np.empty(4 * m, np.int64)
+    indices = np.empty(w * m, np.int64)
     for t in range(m):
-        for j in range(4):
+        for j in range(w):
             v = tets[t, j]
             indices[fill[v]] = t
             fill[v] += 1

@@ -32,6 +32,7 @@ __all__ = [
     "face_topology",
     "FaceTopology",
     "node_to_tets",
+    "edge_to_tets",
 ]
 
 
@@ -206,3 +207,21 @@ def node_to_tets(tets, n_points):
     n_points = int(n_points)
     tets = _check_tets(tets, n_points)
     return _k.csr_counts(tets, n_points)
+
+
+def edge_to_tets(tet_edges, n_edges):
+    """Edge -> tet incidence in compressed sparse row form.
+
+    Parameters
+    ----------
+    tet_edges : (m, 6) int64
+        Edge ids of each tet (:func:`unique_edges`).
+    n_edges : int
+
+    Returns
+    -------
+    offsets : (n_edges + 1,) int64
+    indices : (6 m,) int64
+        Tets of edge e are ``indices[offsets[e]:offsets[e + 1]]``, ascending.
+    """
+    return _k.csr_counts(np.ascontiguousarray(tet_edges, np.int64), int(n_edges))
