@@ -20,8 +20,6 @@ def pytest_configure(config):
         # a worker's environment says COLUMNS=80; the commands' output is piped in the tests,
         # where tables are printed whole (cutkit.cli._ui), as in a run without workers
         os.environ.pop("COLUMNS", None)
-    if hasattr(config.option, "loadscopereorder"):
-        config.option.loadscopereorder = False  # the order of pytest_collection_modifyitems stands
     workers = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1"))
     if workers > 1:
         import numba
@@ -30,13 +28,13 @@ def pytest_configure(config):
 
 
 def pytest_collection_modifyitems(config, items):
-    """xdist groups (one per test file with module fixtures), and an order that keeps both workers busy.
+    """xdist groups (one per test file with module fixtures); the demo knee's single tests last.
 
-    The demo knee takes a worker about a minute to build (more while numba compiles), and every
-    test that reads it waits for it: the file that builds it runs first, then the heavy tests that
-    do not need it, then the other knee tests, then the quick ones, which even out the workers'
-    ends.  xdist keeps this order (its reordering by group size is switched off in
-    :func:`pytest_configure`)."""
+    xdist hands out the groups first, largest first, then the single tests in
+    this order.  The first group that reads the demo knee builds it (about a
+    minute on two cores, longer while numba compiles); a single test that
+    read it early would hold the other worker waiting for that build, so the
+    single tests that read it come after all the others."""
     module_fixtures = {}
     for item in items:
         if item.path not in module_fixtures:
@@ -44,22 +42,11 @@ def pytest_collection_modifyitems(config, items):
         if module_fixtures[item.path]:
             item.add_marker(pytest.mark.xdist_group(item.path.name))
 
-    # a group runs as one unit on one worker, placed where its first test is: it ranks as a whole
-    knee_groups = {item.path for item in items if module_fixtures[item.path] and "demo_knee" in item.fixturenames}
+    def knee_single(item):
+        knee = "demo_knee" in item.fixturenames or item.get_closest_marker("knee") is not None
+        return knee and not module_fixtures[item.path]
 
-    def rank(item):
-        knee = "demo_knee" in item.fixturenames or item.path in knee_groups or item.get_closest_marker("knee")
-        if knee and item.path.name == KNEE_FIRST:
-            return 0
-        if knee:
-            return 2
-        return 1 if module_fixtures[item.path] or item.get_closest_marker("slow") else 3
-
-    items.sort(key=rank)  # stable: each rank keeps the files' order
-
-
-#: The knee test file run first: its module fixture builds the demo knee, then simulates on it.
-KNEE_FIRST = "test_knee_tissue.py"
+    items.sort(key=knee_single)  # stable: the rest keeps the files' order
 
 
 @pytest.fixture(autouse=True)
