@@ -175,16 +175,15 @@ def uncut_reason(cm, e):
 def crossed_edges(p, edges, swept):
     """Original edges (set of ids into ``edges`` (m, 2)) over positions ``p`` (n, 3) met strictly inside by
     one of the ``swept`` triangles (each three (3,) points): the slow reference."""
-    from _twins_cut import segment_triangle
+    from _twins_cut import segment_triangle_many
 
     out = set()
+    a, b = p[edges[:, 0]], p[edges[:, 1]]
+    lo_e, hi_e = np.minimum(a, b), np.maximum(a, b)
     for tri in swept:
         tri = [np.asarray(q, float) for q in tri]
         lo, hi = np.min(tri, axis=0), np.max(tri, axis=0)
-        a, b = p[edges[:, 0]], p[edges[:, 1]]
-        near = np.all((np.minimum(a, b) <= hi) & (np.maximum(a, b) >= lo), axis=1)
-        for e in np.flatnonzero(near):
-            s = segment_triangle(p[edges[e, 0]], p[edges[e, 1]], *tri)
-            if ORACLE_EPS <= s <= 1 - ORACLE_EPS:
-                out.add(int(e))
+        near = np.flatnonzero(np.all((lo_e <= hi) & (hi_e >= lo), axis=1))
+        s = segment_triangle_many(a[near], b[near], *tri)
+        out.update(near[(ORACLE_EPS <= s) & (s <= 1 - ORACLE_EPS)].tolist())
     return out

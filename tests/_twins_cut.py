@@ -488,6 +488,28 @@ def segment_triangle(p0, p1, a, b, c):
     return t
 
 
+def segment_triangle_many(p0, p1, a, b, c):
+    """:func:`segment_triangle` for k segments ``p0``, ``p1`` (k, 3) against one triangle: (k,) s or -1.
+
+    The same Moeller-Trumbore steps, each on all segments at once (a segment
+    that fails a test keeps -1 whatever the later tests give).
+    """
+    d = p1 - p0
+    e1, e2 = b - a, c - a
+    h = np.cross(d, e2)
+    det = h @ e1
+    scale = np.linalg.norm(e1) * np.linalg.norm(e2) * np.linalg.norm(d, axis=1) + 1e-300
+    ok = np.abs(det) > SEG_TRI_EPS * scale
+    inv = 1.0 / np.where(ok, det, 1.0)
+    s = p0 - a
+    u = np.einsum("ij,ij->i", s, h) * inv
+    q = np.cross(s, e1)
+    v = np.einsum("ij,ij->i", d, q) * inv
+    t = (q @ e2) * inv
+    ok &= (u >= 0.0) & (u <= 1.0) & (v >= 0.0) & (u + v <= 1.0) & (t >= 0.0) & (t <= 1.0)
+    return np.where(ok, t, -1.0)
+
+
 def barycentric(x, tet_points):
     """Barycentric coordinates (4,) of x in the tetrahedron (4, 3)."""
     p0 = tet_points[0]

@@ -368,3 +368,20 @@ def test_subdivision_kernels_match_twins_along_cut_paths(monkeypatch):
                         assert as_list(cm, o, *got) == face_triangles_twin(cm, o, mask)
                         calls["faces"] += 1
     assert calls["made"] > 50 and calls["refused"] > 0 and calls["faces"] > 1000
+
+
+def test_the_vectorised_oracle_is_the_scalar_one():
+    """The thousand-path oracle's segment/triangle test, all edges at once, classifies every segment as the
+    scalar twin does (in-plane segments and segments from a triangle corner included)."""
+    from _twins_cut import segment_triangle, segment_triangle_many
+
+    rng = np.random.default_rng(1)
+    for _ in range(20):
+        a, b, c = rng.normal(size=(3, 3))
+        p0, p1 = rng.normal(size=(2, 200, 3))
+        p1[:20] = p0[:20] + (b - a) * rng.normal(size=(20, 1))  # parallel to the triangle's plane
+        p0[20:30] = a
+        got = segment_triangle_many(p0, p1, a, b, c)
+        want = np.array([segment_triangle(x, y, a, b, c) for x, y in zip(p0, p1)])
+        assert np.array_equal(got < 0, want < 0)
+        np.testing.assert_allclose(got, want, rtol=0, atol=1e-12)
