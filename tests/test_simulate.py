@@ -326,11 +326,11 @@ def test_element_model_run_has_no_inverted_tet_and_springs_stay_available(run, t
 def _slab_run(d, *extra):
     write_model(d / "slab.h5", slab())
     traj = straight_incision([6.0, 0.0, 8.3], [26.0, 0.0, 8.3], inward=[0, 1, 0], depth=5.0, approach=3.0,
-                             press_time=0.2, cut_time=0.4, rate=100)
+                             press_time=0.1, cut_time=0.25, rate=100)
     write_trajectory(d / "cut.csv", traj)
     out = d / ("out" + "_".join(extra))
     assert main(["simulate", str(d / "slab.h5"), "--trajectory", str(d / "cut.csv"), "-o", str(out),
-                 "--hold", "0.2", *extra]) == 0
+                 "--hold", "0.1", *extra]) == 0
     return json.loads((out / "summary.json").read_text()), read_model(out / "model.h5")
 
 
