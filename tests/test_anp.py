@@ -34,20 +34,48 @@ def wobbled(p, scale=0.05, seed=0):
     return p + scale * np.random.default_rng(seed).standard_normal(p.shape)
 
 
+def hold_bottom(p, em):
+    """Hold the nodes of z = 0 in all directions (they then carry no volume constraint) and one
+    more node in x only (which still does); the held mask (n,)."""
+    em.fixed[p[:, 2] < 1e-9] = True
+    em.fixed[np.flatnonzero(p[:, 2] > 1e-9)[0], 0] = True
+    return em.fixed.all(axis=1)
+
+
+@pytest.mark.parametrize("held", [False, True])
 @pytest.mark.parametrize("smoothing", [0.0, 0.7])
-def test_kernels_match_their_numpy_twins(smoothing):
+def test_kernels_match_their_numpy_twins(smoothing, held):
     p, _, em = model(smoothing=smoothing)
+    mask = hold_bottom(p, em) if held else None
     x = wobbled(p, 0.08)
     # squash one tet into the barrier band (J < 0.1) so its terms count too
     t0 = em.tets[0]
     x[t0[3]] = x[t0[0]] + 0.05 * (x[t0[3]] - x[t0[0]])
-    assert anp.anp_energy(em, x) == pytest.approx(T.energy(x, *arrays(em), smoothing), rel=1e-12)
-    np.testing.assert_allclose(anp.anp_forces(em, x), T.forces(x, *arrays(em), smoothing), rtol=1e-10, atol=1e-14)
+    assert anp.anp_energy(em, x) == pytest.approx(T.energy(x, *arrays(em), smoothing, mask), rel=1e-12)
+    np.testing.assert_allclose(anp.anp_forces(em, x), T.forces(x, *arrays(em), smoothing, mask),
+                               rtol=1e-10, atol=1e-14)
 
 
+def test_held_nodes_carry_no_volume_constraint():
+    """A tet's volume goes to its free corners in equal parts; the free nodal volumes still add up
+    to the volume of every tet with a free corner."""
+    p, t, em = model()
+    held = hold_bottom(p, em)
+    nodal = anp.nodal_terms(em)
+    assert np.all(nodal.pressure_volume[held] == 0.0) and np.all(nodal.pressure_volume[~held] > 0.0)
+    some_free = (~held[t]).any(axis=1)
+    assert nodal.pressure_volume.sum() == pytest.approx(em.volume[:em.n_elements][some_free].sum(), rel=1e-13)
+    np.testing.assert_allclose(nodal.share, T.shares(t, held), rtol=0, atol=0)
+    em.fixed[:] = False  # nothing held: the quarter split of Bonet & Burton
+    np.testing.assert_array_equal(anp.nodal_terms(em).share, 0.25)
+
+
+@pytest.mark.parametrize("held", [False, True])
 @pytest.mark.parametrize("smoothing", [0.0, 0.7])
-def test_gradient_and_hessian_match_finite_differences(smoothing):
+def test_gradient_and_hessian_match_finite_differences(smoothing, held):
     p, _, em = model(smoothing=smoothing)
+    if held:
+        hold_bottom(p, em)
     x = wobbled(p)
     f = anp.anp_forces(em, x)
     H = anp.anp_hessian(em, x, project=0).toarray()

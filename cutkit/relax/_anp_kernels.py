@@ -40,9 +40,13 @@ from cutkit.relax._newton_kernels import _cofactor, _deformation, _levi
 #: Per node: natural volume V_a (n,), bulk weight kv_a (n,) (N mm: sum V_e K_e / 4),
 #: the tets around it ``node_ptr`` (n + 1,) int64 / ``node_tets`` (4m,) int64 with their corners
 #: ``node_corner`` (4m,) int64, the shear weight (n,) (N mm: sum V_e mu_e / 4) and the share
-#: alpha (float, 0..1) of the deviatoric energy carried by the nodes' smoothed deformation.
+#: alpha (float, 0..1) of the deviatoric energy carried by the nodes' smoothed deformation,
+#: ``share`` (m, 4): the share of each element's volume its corner's nodal volume takes in the
+#: volumetric term (1/4, or 1/k over its k free corners where some are held, 0 on held corners)
+#: and ``pressure_volume`` (n,) = sum share V_e, the V_a of the volumetric term (``bulk`` uses the
+#: same shares).  ``volume`` stays the quarter sums: the smoothed deformation's weights.
 NodalTerms = namedtuple("NodalTerms", ["volume", "bulk", "node_ptr", "node_tets", "node_corner", "shear",
-                                       "smoothing"])
+                                       "smoothing", "share", "pressure_volume"])
 
 
 @njit(cache=True, nogil=True)
@@ -66,12 +70,12 @@ def nodal_pressures(el, J, nodal, pi):
     n = nodal.volume.shape[0]
     v = np.zeros(n)
     for t in range(el.tets.shape[0]):
-        q = 0.25 * el.volume[t] * J[t]
+        q = el.volume[t] * J[t]
         for a in range(4):
-            v[el.tets[t, a]] += q
+            v[el.tets[t, a]] += nodal.share[t, a] * q
     energy = 0.0
     for a in range(n):
-        Va = nodal.volume[a]
+        Va = nodal.pressure_volume[a]
         if Va <= 0.0:
             pi[a] = 0.0
             continue
@@ -113,8 +117,12 @@ def energy(x, el, nodal):
 
 
 @njit(cache=True, nogil=True)
-def _element_pressure(el, t, pi):
-    return 0.25 * (pi[el.tets[t, 0]] + pi[el.tets[t, 1]] + pi[el.tets[t, 2]] + pi[el.tets[t, 3]])
+def _element_pressure(el, nodal, t, pi):
+    """p_e = sum_a share_ea pi_a: the mean of the four nodal pressures where no corner is held."""
+    p = 0.0
+    for a in range(4):
+        p += nodal.share[t, a] * pi[el.tets[t, a]]
+    return p
 
 
 @njit(cache=True, nogil=True)
@@ -136,7 +144,7 @@ def forces(x, el, nodal, out):
         _deformation(x, el, t, B, F)
         Jt = _cofactor(F, C)
         mu = (1.0 - nodal.smoothing) * el.mu[t]
-        s = mu / 3.0 * (Jt - 1.0) - mu + barrier(Jt, el.lam[t] + el.mu[t])[1] + _element_pressure(el, t, pi)
+        s = mu / 3.0 * (Jt - 1.0) - mu + barrier(Jt, el.lam[t] + el.mu[t])[1] + _element_pressure(el, nodal, t, pi)
         for j in range(4):
             i = el.tets[t, j]
             for r in range(3):
@@ -227,7 +235,7 @@ def _nodal_gradients(x, el, nodal, a, local, patch, g):
         t = nodal.node_tets[q]
         _deformation(x, el, t, B, F)
         _cofactor(F, C)
-        w = 0.25 * el.volume[t]
+        w = nodal.share[t, nodal.node_corner[q]] * el.volume[t]
         for j in range(4):
             i = el.tets[t, j]
             if local[i] < 0:
@@ -261,7 +269,7 @@ def assemble_hessian(x, el, nodal, pattern, project, data):
     for t in range(m):
         if el.volume[t] <= 0.0:
             continue
-        element_hessian(x, el, t, _element_pressure(el, t, pi), 1.0 - nodal.smoothing, project, H)
+        element_hessian(x, el, t, _element_pressure(el, nodal, t, pi), 1.0 - nodal.smoothing, project, H)
         for a in range(4):
             for b in range(4):
                 Hb[:, :] = H[3 * a:3 * a + 3, 3 * b:3 * b + 3]
@@ -273,7 +281,7 @@ def assemble_hessian(x, el, nodal, pattern, project, data):
     patch = np.empty(4 * most, np.int64)
     g = np.empty((4 * most, 3))
     for a in range(n):
-        Va = nodal.volume[a]
+        Va = nodal.pressure_volume[a]
         if Va <= 0.0:
             continue
         c = nodal.bulk[a] / (Va * Va)
