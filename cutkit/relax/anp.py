@@ -45,9 +45,9 @@ from cutkit.relax import _newton_kernels as KN
 ELEMENTS = ("nh", "anp")
 
 #: The share alpha of the deviatoric energy on the nodes (``deviatoric_smoothing``) that meets
-#: 5 % of a refined P2 reference on the cantilever at nu 0.3-0.49 and on the bonded block at
-#: nu 0.3-0.45 on the once-refined meshes (docs/relaxation.md; benchmarks/anp_deviatoric_blend.py
-#: scans alpha, benchmarks/element_locking.py --smoothing measures it).
+#: 5 % of a refined P2 reference on the cantilever and the bonded block at nu 0.3-0.49 on the
+#: once-refined meshes (docs/relaxation.md; benchmarks/anp_deviatoric_blend.py scans alpha,
+#: benchmarks/element_locking.py --smoothing measures it).
 ANP_SMOOTHING = 0.7
 
 
