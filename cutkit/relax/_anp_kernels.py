@@ -6,9 +6,10 @@ The stored energy is split into a part per element and a volumetric part per nod
     W = sum_e V_e (psi_dev(F_e) + b(J_e)) + sum_a kv_a / 2 (J_a - 1)^2
     psi_dev = mu/2 (tr F^T F - 3) - mu (J - 1) + mu/6 (J - 1)^2
 
-with J_a = v_a / V_a the nodal volume ratio (v_a, V_a: a quarter of the current and
-natural volumes of the tets around node a summed), kv_a the sum over them of a quarter
-of V_e K_e (K = lam + 2 mu / 3, the bulk modulus) and b the element barrier of
+with J_a = v_a / V_a the nodal volume ratio (v_a, V_a: the shares w_ea of the current and
+natural volumes of the tets around node a summed; w_ea = 1/4, or 1/k over a tet's k corners
+not held and 0 on held ones, ``NodalTerms.share``), kv_a the sum over them of w_ea V_e K_e
+(K = lam + 2 mu / 3, the bulk modulus) and b the element barrier of
 :mod:`cutkit.relax._elastic_kernels` (modulus lam + mu, as there).  psi_dev is the stable
 neo-Hookean energy (Smith et al. 2018) with lam replaced by -2 mu / 3: its rest-stability
 term -mu (J - 1) stays, and its small-strain limit is mu |dev eps|^2, so the sum has
@@ -16,11 +17,11 @@ the small-strain limit mu |dev eps|^2 + K / 2 (tr eps)^2: linear elasticity with
 material's E and nu, the volumetric part carried by the nodes.
 
 With the nodal pressure pi_a = dU_a / dv_a = kv_a (J_a - 1) / V_a and the element's
-average p_e = (1/4) sum_{a in e} pi_a (the "average nodal pressure"),
+average p_e = sum_{a in e} w_ea pi_a (the "average nodal pressure"),
 
     dW/dx = sum_e V_e [ mu F + (mu/3 (J - 1) - mu + b'(J) + p_e) cof F ] : dF/dx
     d2W/dx2 = sum_e V_e dF^T [ mu I + (mu/3 + b'') cof (x) cof + (...) d2J/dF2 ] dF
-              + sum_a (kv_a / V_a^2) g_a g_a^T,   g_a = dv_a/dx = sum_{e ni a} V_e/4 cof(F_e) b_j
+              + sum_a (kv_a / V_a^2) g_a g_a^T,   g_a = dv_a/dx = sum_{e ni a} w_ea V_e cof(F_e) b_j
 
 The nodal terms couple every pair of nodes of a node's patch: the wider stencil.  The
 element term is projected (negative eigenvalues clamped) where asked; the nodal terms
