@@ -1,6 +1,7 @@
 """Small-strain study: ANP with part of the deviatoric energy moved to the nodes, against refined P2.
 
 Usage: python benchmarks/anp_deviatoric_blend.py [--sizes 1,2] [--nus 0.3,0.45,0.49] [--alphas 0,0.5,0.6,0.7] [--ref 3]
+       [--quarter-everywhere]
 
 The linear (small-strain) limit of the ANP tetrahedron (:mod:`cutkit.relax.anp`) with the
 element's deviatoric energy blended with a node-based smoothed one, the alpha-FEM / selective
@@ -9,8 +10,9 @@ Nguyen-Thoi, Liu et al. 2009, "Selective smoothed finite element method"):
 
     W = (1 - alpha) sum_e V_e mu |dev eps_e|^2 + sum_a V_a [alpha mu |dev eps_a|^2 + K_a / 2 (tr eps_a)^2]
 
-with eps_a = sum_{e ni a} (V_e / 4) eps_e / V_a the node's smoothed strain (the volumetric term
-is exactly ANP's: J_a - 1 = tr eps_a to first order).  alpha = 0 is ANP; alpha = 1 is the
+with eps_a = sum_{e ni a} (V_e / 4) eps_e / V_a the node's smoothed strain; the volumetric term
+is exactly ANP's (J_a - 1 = tr eps_a to first order), on the nodes not held, with each tet's
+volume shared among its free corners (:func:`cutkit.relax.anp.pressure_shares`).  alpha = 0 is ANP; alpha = 1 is the
 selective node-based smoothed FEM, which is over-soft (NS-FEM's spurious low-energy modes).
 The nodal term has the same two-ring stencil as ANP's volumetric one.
 
@@ -36,6 +38,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from element_locking import BLOCK, CANTILEVER, E, STRAIN, TRACTION, face_loads, mesh  # noqa: E402
 from _fem_reference import p2_block_reaction, p2_cantilever  # noqa: E402
 
+from cutkit.relax.anp import pressure_shares  # noqa: E402
+
+#: [True]: held nodes carry no volume constraint (the runtime's rule); ``--quarter-everywhere``
+#: sets [False]: every node does, with the quarter split of Bonet & Burton 1998.
+HOLD_CONSTRAINS = [True]
 #: vec(I) and the deviatoric projector on 3x3 tensors flattened row-major.
 VEC_I = np.eye(3).ravel()
 DEV = np.eye(9) - np.outer(VEC_I, VEC_I) / 3.0
@@ -57,8 +64,9 @@ def strain_operators(p, t):
     return vol, S
 
 
-def stiffness(p, t, nu, alpha):
-    """The blended element's small-strain stiffness (3n, 3n) CSR, N/mm, for E and nu."""
+def stiffness(p, t, nu, alpha, held):
+    """The blended element's small-strain stiffness (3n, 3n) CSR, N/mm, for E and nu; ``held`` (n,)
+    bool: the nodes held in all directions, which carry no volume constraint (``pressure_shares``)."""
     n, m = p.shape[0], t.shape[0]
     mu, K = E / (2.0 * (1.0 + nu)), E / (3.0 * (1.0 - 2.0 * nu))
     vol, S = strain_operators(p, t)
@@ -71,9 +79,15 @@ def stiffness(p, t, nu, alpha):
     corner = t.ravel()
     A = sp.csr_matrix((np.repeat(vol / 4.0, 4) / Va[corner], (corner, np.repeat(np.arange(m), 4))), shape=(n, m))
     Sn = sp.kron(A, sp.identity(9)) @ Se
-    nodal = alpha * 2.0 * mu * DEV + K * np.outer(VEC_I, VEC_I)
-    Kn = Sn.T @ sp.kron(sp.diags(Va), sp.csr_matrix(nodal)) @ Sn
-    return (Ke + Kn).tocsr()
+    Kn = Sn.T @ sp.kron(sp.diags(Va), sp.csr_matrix(alpha * 2.0 * mu * DEV)) @ Sn
+    # the volumetric term on the free nodes: eps_a = sum_e w_ea V_e eps_e / V_a, V_a = sum_e w_ea V_e
+    q = (pressure_shares(t, vol, held) * vol[:, None]).ravel()
+    Vp = np.bincount(corner, q, minlength=n)
+    Ap = sp.csr_matrix((q / np.where(Vp[corner] > 0, Vp[corner], 1.0), (corner, np.repeat(np.arange(m), 4))),
+                       shape=(n, m))
+    Sp = sp.kron(Ap, sp.identity(9)) @ Se
+    Kv = Sp.T @ sp.kron(sp.diags(Vp), sp.csr_matrix(K * np.outer(VEC_I, VEC_I))) @ Sp
+    return (Ke + Kn + Kv).tocsr()
 
 
 def solve(Kmat, fixed_dofs, u_fixed, f):
@@ -87,7 +101,7 @@ def solve(Kmat, fixed_dofs, u_fixed, f):
 
 
 def cantilever(p, t, nu, alpha):
-    Kmat = stiffness(p, t, nu, alpha)
+    Kmat = stiffness(p, t, nu, alpha, (p[:, 0] < 1e-9) & HOLD_CONSTRAINS[0])
     clamped = np.flatnonzero(p[:, 0] < 1e-9)
     fixed = (3 * clamped[:, None] + np.arange(3)).ravel()
     lz = face_loads(p, t, 0, CANTILEVER[0], TRACTION)
@@ -98,8 +112,8 @@ def cantilever(p, t, nu, alpha):
 
 
 def block(p, t, nu, alpha):
-    Kmat = stiffness(p, t, nu, alpha)
     top = p[:, 2] > BLOCK[2] - 1e-9
+    Kmat = stiffness(p, t, nu, alpha, ((p[:, 2] < 1e-9) | top) & HOLD_CONSTRAINS[0])
     held = np.flatnonzero((p[:, 2] < 1e-9) | top)
     fixed = (3 * held[:, None] + np.arange(3)).ravel()
     uf = np.zeros(fixed.size)
@@ -115,7 +129,10 @@ def main(argv=None) -> int:
     ap.add_argument("--nus", default="0.3,0.45,0.49")
     ap.add_argument("--alphas", default="0,0.5,0.6,0.7")
     ap.add_argument("--ref", type=int, default=3)
+    ap.add_argument("--quarter-everywhere", action="store_true",
+                    help="held nodes keep their volume constraint (plain Bonet & Burton nodal volumes)")
     a = ap.parse_args(argv)
+    HOLD_CONSTRAINS[0] = not a.quarter_everywhere
     rs, alphas = a.ref, [float(v) for v in a.alphas.split(",")]
     out = {"reference": f"scikit-fem P2, structured, {rs}x base cells", "results": []}
     for nu in (float(v) for v in a.nus.split(",")):

@@ -5,20 +5,31 @@ import numpy as np
 from _twins_elastic import barrier, deformation_gradients
 
 
-def _nodal(x, tets, Dminv, volume, mu, lam, n):
-    """Nodal rest volumes V_a, bulk weights kv_a = sum V K / 4 and volume ratios J_a (n,)."""
+def shares(tets, held):
+    """Each corner's share of its tet's volume: 1/4, or 1/k over the k corners not held (0 held)."""
+    w = np.zeros(tets.shape)
+    for e in range(tets.shape[0]):
+        free = [a for a in range(4) if not held[tets[e, a]]]
+        for a in free:
+            w[e, a] = 1.0 / len(free)
+    return w
+
+
+def _nodal(x, tets, Dminv, volume, mu, lam, n, held=None):
+    """Nodal rest volumes V_a, bulk weights kv_a = sum w V K and volume ratios J_a (n,), w the shares."""
     F = deformation_gradients(x, tets, Dminv)
     J = np.linalg.det(F)
     K = lam + 2.0 * mu / 3.0
+    w = shares(tets, np.zeros(n, bool) if held is None else held)
     V_a = np.zeros(n)
     v_a = np.zeros(n)
     kv_a = np.zeros(n)
     for a in range(4):
-        np.add.at(V_a, tets[:, a], volume / 4)
-        np.add.at(v_a, tets[:, a], volume * J / 4)
-        np.add.at(kv_a, tets[:, a], volume * K / 4)
+        np.add.at(V_a, tets[:, a], w[:, a] * volume)
+        np.add.at(v_a, tets[:, a], w[:, a] * volume * J)
+        np.add.at(kv_a, tets[:, a], w[:, a] * volume * K)
     J_a = np.divide(v_a, V_a, out=np.ones(n), where=V_a > 0)
-    return F, J, V_a, kv_a, J_a
+    return F, J, V_a, kv_a, J_a, w
 
 
 def _unit_deviatoric(F):
@@ -44,11 +55,11 @@ def _smoothed(F, tets, volume, mu, n):
     return Fs, G_a, V_a
 
 
-def energy(x, tets, Dminv, volume, mu, lam, smoothing=0.0):
+def energy(x, tets, Dminv, volume, mu, lam, smoothing=0.0, held=None):
     """sum_e V [(1 - alpha) mu (|F|^2 - 3)/2 - ... + b(J)] + sum_a kv_a/2 (J_a - 1)^2 + alpha sum_a G_a psi(Fs_a)."""
     live = volume > 0
     tets, Dminv, volume, mu, lam = tets[live], Dminv[live], volume[live], mu[live], lam[live]
-    F, J, V_a, kv_a, J_a = _nodal(x, tets, Dminv, volume, mu, lam, x.shape[0])
+    F, J, V_a, kv_a, J_a, _ = _nodal(x, tets, Dminv, volume, mu, lam, x.shape[0], held)
     ic = np.einsum("mij,mij->m", F, F)
     keep = (1.0 - smoothing) * mu
     psi = 0.5 * keep * (ic - 3.0) - keep * (J - 1.0) + keep / 6.0 * (J - 1.0) ** 2 + barrier(J, lam + mu)[0]
@@ -57,14 +68,14 @@ def energy(x, tets, Dminv, volume, mu, lam, smoothing=0.0):
                  + smoothing * np.sum(G_a * _unit_deviatoric(Fs)[0]))
 
 
-def forces(x, tets, Dminv, volume, mu, lam, smoothing=0.0):
+def forces(x, tets, Dminv, volume, mu, lam, smoothing=0.0, held=None):
     """-dW/dx (n, 3): P = mu F + (mu/3 (J - 1) - mu + b'(J) + p_e) cof F, p_e the mean nodal pressure."""
     live = volume > 0
     tets, Dminv, volume, mu, lam = tets[live], Dminv[live], volume[live], mu[live], lam[live]
     n = x.shape[0]
-    F, J, V_a, kv_a, J_a = _nodal(x, tets, Dminv, volume, mu, lam, n)
+    F, J, V_a, kv_a, J_a, w = _nodal(x, tets, Dminv, volume, mu, lam, n, held)
     pi = np.divide(kv_a * (J_a - 1.0), V_a, out=np.zeros(n), where=V_a > 0)
-    p_e = pi[tets].mean(axis=1)
+    p_e = (w * pi[tets]).sum(axis=1)
     cof = J[:, None, None] * np.transpose(np.linalg.inv(F), (0, 2, 1))
     keep = (1.0 - smoothing) * mu
     s = keep / 3.0 * (J - 1.0) - keep + barrier(J, lam + mu)[1] + p_e

@@ -34,20 +34,48 @@ def wobbled(p, scale=0.05, seed=0):
     return p + scale * np.random.default_rng(seed).standard_normal(p.shape)
 
 
+def hold_bottom(p, em):
+    """Hold the nodes of z = 0 in all directions (they then carry no volume constraint) and one
+    more node in x only (which still does); the held mask (n,)."""
+    em.fixed[p[:, 2] < 1e-9] = True
+    em.fixed[np.flatnonzero(p[:, 2] > 1e-9)[0], 0] = True
+    return em.fixed.all(axis=1)
+
+
+@pytest.mark.parametrize("held", [False, True])
 @pytest.mark.parametrize("smoothing", [0.0, 0.7])
-def test_kernels_match_their_numpy_twins(smoothing):
+def test_kernels_match_their_numpy_twins(smoothing, held):
     p, _, em = model(smoothing=smoothing)
+    mask = hold_bottom(p, em) if held else None
     x = wobbled(p, 0.08)
     # squash one tet into the barrier band (J < 0.1) so its terms count too
     t0 = em.tets[0]
     x[t0[3]] = x[t0[0]] + 0.05 * (x[t0[3]] - x[t0[0]])
-    assert anp.anp_energy(em, x) == pytest.approx(T.energy(x, *arrays(em), smoothing), rel=1e-12)
-    np.testing.assert_allclose(anp.anp_forces(em, x), T.forces(x, *arrays(em), smoothing), rtol=1e-10, atol=1e-14)
+    assert anp.anp_energy(em, x) == pytest.approx(T.energy(x, *arrays(em), smoothing, mask), rel=1e-12)
+    np.testing.assert_allclose(anp.anp_forces(em, x), T.forces(x, *arrays(em), smoothing, mask),
+                               rtol=1e-10, atol=1e-14)
 
 
+def test_held_nodes_carry_no_volume_constraint():
+    """A tet's volume goes to its free corners in equal parts; the free nodal volumes still add up
+    to the volume of every tet with a free corner."""
+    p, t, em = model()
+    held = hold_bottom(p, em)
+    nodal = anp.nodal_terms(em)
+    assert np.all(nodal.pressure_volume[held] == 0.0) and np.all(nodal.pressure_volume[~held] > 0.0)
+    some_free = (~held[t]).any(axis=1)
+    assert nodal.pressure_volume.sum() == pytest.approx(em.volume[:em.n_elements][some_free].sum(), rel=1e-13)
+    np.testing.assert_allclose(nodal.share, T.shares(t, held), rtol=0, atol=0)
+    em.fixed[:] = False  # nothing held: the quarter split of Bonet & Burton
+    np.testing.assert_array_equal(anp.nodal_terms(em).share, 0.25)
+
+
+@pytest.mark.parametrize("held", [False, True])
 @pytest.mark.parametrize("smoothing", [0.0, 0.7])
-def test_gradient_and_hessian_match_finite_differences(smoothing):
+def test_gradient_and_hessian_match_finite_differences(smoothing, held):
     p, _, em = model(smoothing=smoothing)
+    if held:
+        hold_bottom(p, em)
     x = wobbled(p)
     f = anp.anp_forces(em, x)
     H = anp.anp_hessian(em, x, project=0).toarray()
@@ -242,9 +270,7 @@ def test_the_tissue_cuts_with_anp_and_inverts_no_tet(smoothing):
     assert signed_volumes(tis.positions, tis.cm.tets).min() > 0
 
 
-def _locking_ratios(nu, kind):
-    """cutkit's cantilever deflection and block force over the P2 reference at 2x the cells, for
-    each element, on the base meshes of benchmarks/element_locking.py."""
+def _locking_benchmark():
     import importlib.util
     from pathlib import Path
 
@@ -252,22 +278,28 @@ def _locking_ratios(nu, kind):
     spec = importlib.util.spec_from_file_location("element_locking", path)
     B = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(B)
+    return B
+
+
+def _locking_ratios(nu, kind, size=1, ref=2, elements=("nh", "anp", f"anp:{anp.ANP_SMOOTHING}")):
+    """cutkit's cantilever deflection and block force over the P2 reference at ``ref`` times the
+    base cells, for each element, on the meshes of benchmarks/element_locking.py at ``size``."""
     from _fem_reference import p2_block_reaction, p2_cantilever
 
-    ref_c = p2_cantilever(B.CANTILEVER, (20, 4, 4), E, nu, B.TRACTION)
-    ref_b = p2_block_reaction(B.BLOCK, (8, 8, 4), E, nu, B.STRAIN)
-    pc, tc = B.mesh(kind, B.CANTILEVER, (10, 2, 2))
-    pb, tb = B.mesh(kind, B.BLOCK, (4, 4, 2))
-    return {e: (B.cantilever(pc, tc, nu, e) / ref_c, B.block(pb, tb, nu, e) / ref_b)
-            for e in ("nh", "anp", f"anp:{anp.ANP_SMOOTHING}")}
+    B = _locking_benchmark()
+    ref_c = p2_cantilever(B.CANTILEVER, (10 * ref, 2 * ref, 2 * ref), E, nu, B.TRACTION)
+    ref_b = p2_block_reaction(B.BLOCK, (4 * ref, 4 * ref, 2 * ref), E, nu, B.STRAIN)
+    pc, tc = B.mesh(kind, B.CANTILEVER, (10 * size, 2 * size, 2 * size))
+    pb, tb = B.mesh(kind, B.BLOCK, (4 * size, 4 * size, 2 * size))
+    return {e: (B.cantilever(pc, tc, nu, e) / ref_c, B.block(pb, tb, nu, e) / ref_b) for e in elements}
 
 
 @pytest.mark.parametrize("kind", ["kuhn", "delaunay"])
 def test_anp_locks_far_less_than_p1_against_a_p2_reference(kind):
     """Against quadratic tets (scikit-fem P2, linear elasticity, refined mesh): at nu 0.3 ANP is
     no worse than P1; at 0.45 and 0.49, where P1's cantilever is 32-87 % off and its block's
-    force 52-324 % too high, ANP's error is at most 70 % of P1's.  (At these ~100 nodes
-    neither meets 5 %: benchmarks/element_locking.py has the refinement.)"""
+    force 52-324 % too high, ANP's error is at most 70 % of P1's, and with the nodes' deviatoric
+    share within 5 % (benchmarks/element_locking.py has the refinement)."""
     for nu in (0.3, 0.45, 0.49):
         r = _locking_ratios(nu, kind)
         for q in range(2):
@@ -277,8 +309,22 @@ def test_anp_locks_far_less_than_p1_against_a_p2_reference(kind):
             # and the cantilever within 5 % already at these ~100 nodes up to nu 0.45
             err_s = abs(r[f"anp:{anp.ANP_SMOOTHING}"][q] - 1.0)
             assert err_s <= min(err_anp, err_nh), (nu, q, r)
-            if q == 0 and nu <= 0.45:
-                assert err_s <= 0.05, (nu, r)
+            # within 5 % already at these ~100 nodes, except the nu 0.49 cantilever (10-15 % stiff
+            # here, within 5 % once refined: test_within_five_percent_of_p2_once_refined)
+            if q == 1 or nu <= 0.45:
+                assert err_s <= 0.05, (nu, q, r)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("kind", ["kuhn", "delaunay"])
+def test_within_five_percent_of_p2_once_refined(kind):
+    """Issue 32's bound: on the once-refined meshes (size 2, ~500 nodes) ANP with the nodes'
+    deviatoric share is within 5 % of P2 (3x the base cells) on the cantilever and the bonded
+    block at nu 0.49, where P1 is 47-69 % (cantilever) and 85-105 % (block) off.  The faster
+    test_anp_locks_far_less_than_p1_against_a_p2_reference covers nu 0.3-0.45 and the block."""
+    r = _locking_ratios(0.49, kind, size=2, ref=3, elements=(f"anp:{anp.ANP_SMOOTHING}",))
+    for q in range(2):
+        assert abs(r[f"anp:{anp.ANP_SMOOTHING}"][q] - 1.0) <= 0.05, (q, r)
 
 
 def test_simulate_takes_the_element():

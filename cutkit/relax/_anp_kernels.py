@@ -6,9 +6,10 @@ The stored energy is split into a part per element and a volumetric part per nod
     W = sum_e V_e (psi_dev(F_e) + b(J_e)) + sum_a kv_a / 2 (J_a - 1)^2
     psi_dev = mu/2 (tr F^T F - 3) - mu (J - 1) + mu/6 (J - 1)^2
 
-with J_a = v_a / V_a the nodal volume ratio (v_a, V_a: a quarter of the current and
-natural volumes of the tets around node a summed), kv_a the sum over them of a quarter
-of V_e K_e (K = lam + 2 mu / 3, the bulk modulus) and b the element barrier of
+with J_a = v_a / V_a the nodal volume ratio (v_a, V_a: the shares w_ea of the current and
+natural volumes of the tets around node a summed; w_ea = 1/4, or 1/k over a tet's k corners
+not held and 0 on held ones, ``NodalTerms.share``), kv_a the sum over them of w_ea V_e K_e
+(K = lam + 2 mu / 3, the bulk modulus) and b the element barrier of
 :mod:`cutkit.relax._elastic_kernels` (modulus lam + mu, as there).  psi_dev is the stable
 neo-Hookean energy (Smith et al. 2018) with lam replaced by -2 mu / 3: its rest-stability
 term -mu (J - 1) stays, and its small-strain limit is mu |dev eps|^2, so the sum has
@@ -16,11 +17,11 @@ the small-strain limit mu |dev eps|^2 + K / 2 (tr eps)^2: linear elasticity with
 material's E and nu, the volumetric part carried by the nodes.
 
 With the nodal pressure pi_a = dU_a / dv_a = kv_a (J_a - 1) / V_a and the element's
-average p_e = (1/4) sum_{a in e} pi_a (the "average nodal pressure"),
+average p_e = sum_{a in e} w_ea pi_a (the "average nodal pressure"),
 
     dW/dx = sum_e V_e [ mu F + (mu/3 (J - 1) - mu + b'(J) + p_e) cof F ] : dF/dx
     d2W/dx2 = sum_e V_e dF^T [ mu I + (mu/3 + b'') cof (x) cof + (...) d2J/dF2 ] dF
-              + sum_a (kv_a / V_a^2) g_a g_a^T,   g_a = dv_a/dx = sum_{e ni a} V_e/4 cof(F_e) b_j
+              + sum_a (kv_a / V_a^2) g_a g_a^T,   g_a = dv_a/dx = sum_{e ni a} w_ea V_e cof(F_e) b_j
 
 The nodal terms couple every pair of nodes of a node's patch: the wider stencil.  The
 element term is projected (negative eigenvalues clamped) where asked; the nodal terms
@@ -40,9 +41,13 @@ from cutkit.relax._newton_kernels import _cofactor, _deformation, _levi
 #: Per node: natural volume V_a (n,), bulk weight kv_a (n,) (N mm: sum V_e K_e / 4),
 #: the tets around it ``node_ptr`` (n + 1,) int64 / ``node_tets`` (4m,) int64 with their corners
 #: ``node_corner`` (4m,) int64, the shear weight (n,) (N mm: sum V_e mu_e / 4) and the share
-#: alpha (float, 0..1) of the deviatoric energy carried by the nodes' smoothed deformation.
+#: alpha (float, 0..1) of the deviatoric energy carried by the nodes' smoothed deformation,
+#: ``share`` (m, 4): the share of each element's volume its corner's nodal volume takes in the
+#: volumetric term (1/4, or 1/k over its k free corners where some are held, 0 on held corners)
+#: and ``pressure_volume`` (n,) = sum share V_e, the V_a of the volumetric term (``bulk`` uses the
+#: same shares).  ``volume`` stays the quarter sums: the smoothed deformation's weights.
 NodalTerms = namedtuple("NodalTerms", ["volume", "bulk", "node_ptr", "node_tets", "node_corner", "shear",
-                                       "smoothing"])
+                                       "smoothing", "share", "pressure_volume"])
 
 
 @njit(cache=True, nogil=True)
@@ -66,12 +71,12 @@ def nodal_pressures(el, J, nodal, pi):
     n = nodal.volume.shape[0]
     v = np.zeros(n)
     for t in range(el.tets.shape[0]):
-        q = 0.25 * el.volume[t] * J[t]
+        q = el.volume[t] * J[t]
         for a in range(4):
-            v[el.tets[t, a]] += q
+            v[el.tets[t, a]] += nodal.share[t, a] * q
     energy = 0.0
     for a in range(n):
-        Va = nodal.volume[a]
+        Va = nodal.pressure_volume[a]
         if Va <= 0.0:
             pi[a] = 0.0
             continue
@@ -113,8 +118,12 @@ def energy(x, el, nodal):
 
 
 @njit(cache=True, nogil=True)
-def _element_pressure(el, t, pi):
-    return 0.25 * (pi[el.tets[t, 0]] + pi[el.tets[t, 1]] + pi[el.tets[t, 2]] + pi[el.tets[t, 3]])
+def _element_pressure(el, nodal, t, pi):
+    """p_e = sum_a share_ea pi_a: the mean of the four nodal pressures where no corner is held."""
+    p = 0.0
+    for a in range(4):
+        p += nodal.share[t, a] * pi[el.tets[t, a]]
+    return p
 
 
 @njit(cache=True, nogil=True)
@@ -136,7 +145,7 @@ def forces(x, el, nodal, out):
         _deformation(x, el, t, B, F)
         Jt = _cofactor(F, C)
         mu = (1.0 - nodal.smoothing) * el.mu[t]
-        s = mu / 3.0 * (Jt - 1.0) - mu + barrier(Jt, el.lam[t] + el.mu[t])[1] + _element_pressure(el, t, pi)
+        s = mu / 3.0 * (Jt - 1.0) - mu + barrier(Jt, el.lam[t] + el.mu[t])[1] + _element_pressure(el, nodal, t, pi)
         for j in range(4):
             i = el.tets[t, j]
             for r in range(3):
@@ -227,7 +236,7 @@ def _nodal_gradients(x, el, nodal, a, local, patch, g):
         t = nodal.node_tets[q]
         _deformation(x, el, t, B, F)
         _cofactor(F, C)
-        w = 0.25 * el.volume[t]
+        w = nodal.share[t, nodal.node_corner[q]] * el.volume[t]
         for j in range(4):
             i = el.tets[t, j]
             if local[i] < 0:
@@ -261,7 +270,7 @@ def assemble_hessian(x, el, nodal, pattern, project, data):
     for t in range(m):
         if el.volume[t] <= 0.0:
             continue
-        element_hessian(x, el, t, _element_pressure(el, t, pi), 1.0 - nodal.smoothing, project, H)
+        element_hessian(x, el, t, _element_pressure(el, nodal, t, pi), 1.0 - nodal.smoothing, project, H)
         for a in range(4):
             for b in range(4):
                 Hb[:, :] = H[3 * a:3 * a + 3, 3 * b:3 * b + 3]
@@ -273,7 +282,7 @@ def assemble_hessian(x, el, nodal, pattern, project, data):
     patch = np.empty(4 * most, np.int64)
     g = np.empty((4 * most, 3))
     for a in range(n):
-        Va = nodal.volume[a]
+        Va = nodal.pressure_volume[a]
         if Va <= 0.0:
             continue
         c = nodal.bulk[a] / (Va * Va)

@@ -10,6 +10,9 @@ energy to the nodes, where it depends on the nodal volume ratio
     J_a = (sum of current tet volumes around a / 4) / (the same at rest),
 
 one constraint per node instead of one per element (about five times fewer).
+Nodes held in all three directions carry none: their elements' volume goes to
+the free corners (:func:`pressure_shares`), else the constraints of a bonded
+face lock the block near it (docs/relaxation.md).
 The energy, its split and its derivatives are in :mod:`cutkit.relax._anp_kernels`.
 
 That removes the volumetric locking but leaves the linear tet's stiffness in
@@ -42,9 +45,9 @@ from cutkit.relax import _newton_kernels as KN
 ELEMENTS = ("nh", "anp")
 
 #: The share alpha of the deviatoric energy on the nodes (``deviatoric_smoothing``) that meets
-#: 5 % of a refined P2 reference on the cantilever at nu 0.3-0.49 and on the bonded block at
-#: nu 0.3-0.45 on the once-refined meshes (docs/relaxation.md; benchmarks/anp_deviatoric_blend.py
-#: scans alpha, benchmarks/element_locking.py --smoothing measures it).
+#: 5 % of a refined P2 reference on the cantilever and the bonded block at nu 0.3-0.49 on the
+#: once-refined meshes (docs/relaxation.md; benchmarks/anp_deviatoric_blend.py scans alpha,
+#: benchmarks/element_locking.py --smoothing measures it).
 ANP_SMOOTHING = 0.7
 
 
@@ -73,24 +76,58 @@ def nodal_terms(em, el: KE.Elements | None = None) -> KP.NodalTerms:
     Returns
     -------
     NodalTerms
-        ``volume`` (n,) mm^3 = sum V_e / 4, ``bulk`` (n,) N mm = sum V_e K_e / 4 with
+        ``volume`` (n,) mm^3 = sum V_e / 4, ``bulk`` (n,) N mm = sum share V_e K_e with
         K = lam + 2 mu / 3, the node-to-tet lists of the active tets, ``shear`` (n,) N mm =
-        sum V_e mu_e / 4 and ``smoothing`` = ``em.deviatoric_smoothing``.
+        sum V_e mu_e / 4, ``smoothing`` = ``em.deviatoric_smoothing``, ``share`` (m, 4)
+        (:func:`pressure_shares`) and ``pressure_volume`` (n,) mm^3 = sum share V_e.
     """
     el = active_elements(em) if el is None else el
     n = em.n_nodes
     live = np.flatnonzero(el.volume > 0.0)
     corners = el.tets[live].ravel()
     quarter = np.repeat(0.25 * el.volume[live], 4)
+    share = pressure_shares(el.tets, el.volume, np.asarray(em.fixed, bool).reshape(n, -1).all(axis=1))
+    shared = share[live].ravel() * np.repeat(el.volume[live], 4)
     bulk = np.repeat(el.lam[live] + 2.0 * el.mu[live] / 3.0, 4)
     order = np.argsort(corners, kind="stable")
     ptr = np.zeros(n + 1, np.int64)
     ptr[1:] = np.cumsum(np.bincount(corners, minlength=n))
     shear = np.repeat(el.mu[live], 4)
-    return KP.NodalTerms(np.bincount(corners, quarter, minlength=n), np.bincount(corners, quarter * bulk, minlength=n),
+    return KP.NodalTerms(np.bincount(corners, quarter, minlength=n), np.bincount(corners, shared * bulk, minlength=n),
                          ptr, np.ascontiguousarray(np.repeat(live, 4)[order]),
                          np.ascontiguousarray(np.tile(np.arange(4), live.size)[order]),
-                         np.bincount(corners, quarter * shear, minlength=n), float(em.deviatoric_smoothing))
+                         np.bincount(corners, quarter * shear, minlength=n), float(em.deviatoric_smoothing),
+                         share, np.bincount(corners, shared, minlength=n))
+
+
+def pressure_shares(tets, volume, held) -> np.ndarray:
+    """The share of each element's volume that each corner's nodal volume takes (volumetric term).
+
+    A node whose displacement is prescribed (held in all three directions) carries no volume
+    constraint: each element's volume goes to its free corners in equal parts, 1/4 each where
+    none is held.  A held node's nodal volume constraint would add a constraint on the free
+    nodes' motion without adding an equation, lowering the constraint ratio (equations per
+    volume constraint; Hughes, *The Finite Element Method*, 1987, sec. 4.3) on the held faces,
+    where the bonded block locks (docs/relaxation.md, "Element choice").
+
+    Parameters
+    ----------
+    tets : (m, 4) int64
+    volume : (m,) float64
+        0: inactive (share 0).
+    held : (n,) bool
+        Nodes held in all three directions.
+
+    Returns
+    -------
+    (m, 4) float64
+        Rows sum to 1 for active elements with a free corner, else 0.
+    """
+    free = ~np.asarray(held, bool)[np.asarray(tets, np.int64)]
+    count = free.sum(axis=1)
+    share = np.where(free, 1.0 / np.maximum(count, 1)[:, None], 0.0)
+    share[np.asarray(volume) <= 0.0] = 0.0
+    return np.ascontiguousarray(share)
 
 
 def anp_energy(em, positions) -> float:
