@@ -347,6 +347,25 @@ def test_simulate_takes_the_element():
                       solver="vbd", element="anp")
 
 
+
+def test_a_run_takes_the_smoothing_that_meets_the_bound_unless_told():
+    """`--element anp` is ANP with ANP_SMOOTHING (the share the locking tests hold to 5 %); the share is
+    the run's to choose, and only with ANP."""
+    from cutkit.simulate import SimulateOptions
+    from cutkit.simulate.tissues import make_tissue
+
+    p, t = kuhn_box(np.ones(3), (1, 1, 1))
+    m = TetModel.from_arrays(p, t, materials=solid(0.45))
+    for given, want in ((None, anp.ANP_SMOOTHING), (0.0, 0.0), (0.3, 0.3)):
+        tis = make_tissue(m, "neohookean", SimulateOptions(element="anp", deviatoric_smoothing=given), 1.0)
+        assert tis.em.element == "anp" and tis.em.deviatoric_smoothing == want
+    assert make_tissue(m, "neohookean", SimulateOptions(), 1.0).em.deviatoric_smoothing == 0.0
+    with pytest.raises(InputError, match="needs element anp"):
+        SimulateOptions(deviatoric_smoothing=0.5).check()
+    with pytest.raises(InputError, match=r"must lie in \[0, 1\), got 1.0"):
+        SimulateOptions(element="anp", deviatoric_smoothing=1.0).check()
+
+
 def test_a_kept_newton_solver_follows_the_element():
     from cutkit.relax.newton import NewtonSolver
 

@@ -97,6 +97,9 @@ class ElasticTissue(TissueBase):
     element : str
         ``"nh"`` (stable neo-Hookean linear tets) or ``"anp"`` (average nodal
         pressure tetrahedron, :mod:`cutkit.relax.anp`; newton only).
+    deviatoric_smoothing : float or None
+        ANP's deviatoric share on the nodes; None:
+        :data:`~cutkit.relax.anp.ANP_SMOOTHING`.
 
     Attributes
     ----------
@@ -108,9 +111,9 @@ class ElasticTissue(TissueBase):
     def __init__(self, model, *, blade_length: float, step_s: float, centre_nodes: bool = False,
                  poisson_ratio: float | None = None, step_rtol: float = STEP_RTOL,
                  step_max_iterations: int = STEP_MAX_ITERATIONS, solver: str = DEFAULT_SOLVER,
-                 element: str = "nh"):
+                 element: str = "nh", deviatoric_smoothing: float | None = None):
         from cutkit.errors import InputError
-        from cutkit.relax.anp import check_element
+        from cutkit.relax.anp import ANP_SMOOTHING, check_element
 
         if solver not in SOLVERS:
             raise InputError(f"solver must be one of {', '.join(SOLVERS)}, not {solver!r}")
@@ -136,6 +139,8 @@ class ElasticTissue(TissueBase):
         self.bc_fixed = fixed_nodes_mask(model)
         em.fixed[:] = self.bc_fixed[:, None]
         em.element = element
+        if element == "anp":  # ANP with the nodes' deviatoric share that meets the locking bound, unless told
+            em.deviatoric_smoothing = ANP_SMOOTHING if deviatoric_smoothing is None else float(deviatoric_smoothing)
         em.recolour()
         em.lay_out_rows()
         self.state: ElementState = initial_element_state(model)

@@ -110,6 +110,11 @@ class SimulateOptions:
         The element model's tetrahedron: ``"nh"`` (stable neo-Hookean linear
         tets) or ``"anp"`` (average nodal pressure, :mod:`cutkit.relax.anp`;
         solved by ``"newton"``, which it selects where no solver is named).
+    deviatoric_smoothing : float or None
+        With ``element="anp"``: the share alpha of the deviatoric energy
+        smoothed over the nodes (:mod:`cutkit.relax.anp`); None takes
+        :data:`cutkit.relax.anp.ANP_SMOOTHING` (0.7, the share that meets the
+        5 % bound against quadratic tets, docs/relaxation.md), 0 is plain ANP.
     """
 
     fps: float = 30.0
@@ -133,6 +138,7 @@ class SimulateOptions:
     solver: str | None = None
     scalpel: str = "paper"
     element: str = "nh"
+    deviatoric_smoothing: float | None = None
 
     def check(self) -> None:
         for name in ("fps", "geometry_rate_hz", "dt0", "tolerance_fraction"):
@@ -166,6 +172,12 @@ class SimulateOptions:
             raise InputError(f"element must be nh or anp, not {self.element!r}")
         if self.element == "anp" and self.solver == "vbd":
             raise InputError("element anp is solved by the newton solver only, not vbd")
+        if self.deviatoric_smoothing is not None:
+            a = float(self.deviatoric_smoothing)
+            if self.element != "anp":
+                raise InputError("deviatoric smoothing needs element anp")
+            if not (np.isfinite(a) and 0.0 <= a < 1.0):
+                raise InputError(f"deviatoric smoothing must lie in [0, 1), got {self.deviatoric_smoothing}")
         if not 1 <= int(self.n_lists) <= 12:
             raise InputError(f"n-lists must lie in 1..12, got {self.n_lists}")
         if self.haptics is not None:

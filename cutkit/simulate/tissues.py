@@ -30,7 +30,7 @@ def make_tissue(model, material_model: str, opt, blade_length: float) -> TissueP
     return ElasticTissue(model, blade_length=blade_length, step_s=1.0 / opt.geometry_rate_hz,
                          centre_nodes=opt.centre_nodes,
                          solver=opt.solver or ("newton" if opt.element == "anp" else DEFAULT_SOLVER),
-                         element=opt.element)
+                         element=opt.element, deviatoric_smoothing=opt.deviatoric_smoothing)
 
 
 
