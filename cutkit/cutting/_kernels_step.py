@@ -183,6 +183,53 @@ def _face_bary(x, fv, px, py, pz, out, row):
 
 
 @njit(cache=True, nogil=True)
+def _edge_events(o, tv, edge_par, tet_edges, edges, edge_t, ev_id, ev_val, n_ev):
+    """EV_EDGE events of tet ``o``: each of its uncut edges (``edge_t`` NaN) that the swept
+    surface meets (``edge_par >= 0``, along the local edge), from ``n_ev`` on.
+
+    Returns
+    -------
+    (touched, n_ev) : (bool, int)
+        Whether the swept surface meets any of its edges (cut or not), and the new event count.
+    """
+    touched = False
+    k = 0
+    for i in range(4):
+        for j in range(i + 1, 4):
+            if edge_par[k] >= 0.0:
+                touched = True
+                e = tet_edges[o, k]
+                if np.isnan(edge_t[e]):
+                    ev_id[n_ev, 0] = EV_EDGE
+                    ev_id[n_ev, 1] = e
+                    ev_val[n_ev, 0] = edge_par[k] if tv[i] == edges[e, 0] else 1.0 - edge_par[k]
+                    ev_val[n_ev, 1] = 0.0
+                    ev_val[n_ev, 2] = 0.0
+                    n_ev += 1
+            k += 1
+    return touched, n_ev
+
+
+@njit(cache=True, nogil=True)
+def _face_events(x, o, face_par, tet_faces, faces, blade, ev_id, ev_val, n_ev):
+    """EV_FACE events of active tet ``o``: each face the blade crosses (``face_par >= 0``, along
+    the blade from its back), with the crossing's barycentric coordinates on the face; the
+    crossings move the crack front (notch nodes F).  Returns the new event count."""
+    q0, p1 = blade[0], blade[1]
+    for lf in range(4):
+        fp = face_par[lf]
+        if fp < 0.0:
+            continue
+        f = tet_faces[o, lf]
+        ev_id[n_ev, 0] = EV_FACE
+        ev_id[n_ev, 1] = f
+        _face_bary(x, faces[f], q0[0] + fp * (p1[0] - q0[0]), q0[1] + fp * (p1[1] - q0[1]),
+                   q0[2] + fp * (p1[2] - q0[2]), ev_val, n_ev)
+        n_ev += 1
+    return n_ev
+
+
+@njit(cache=True, nogil=True)
 def sweep(x, tets, neighbors, tet_edges, tet_faces, edges, faces, edge_t, stamp, step,
           swept, blade, p0, stack, active, ev_id, ev_val, counts):
     """Local traversal of one step (markSwapFace, paper 4.2) and its events.
@@ -238,21 +285,7 @@ def sweep(x, tets, neighbors, tet_edges, tet_faces, edges, faces, edge_t, stamp,
         stamp[o] = step
         tv = tets[o]
         tet_sweep(x, tv, swept, blade, edge_par, face_par)
-        touched = False
-        k = 0
-        for i in range(4):
-            for j in range(i + 1, 4):
-                if edge_par[k] >= 0.0:
-                    touched = True
-                    e = tet_edges[o, k]
-                    if np.isnan(edge_t[e]):
-                        ev_id[n_ev, 0] = EV_EDGE
-                        ev_id[n_ev, 1] = e
-                        ev_val[n_ev, 0] = edge_par[k] if tv[i] == edges[e, 0] else 1.0 - edge_par[k]
-                        ev_val[n_ev, 1] = 0.0
-                        ev_val[n_ev, 2] = 0.0
-                        n_ev += 1
-                k += 1
+        touched, n_ev = _edge_events(o, tv, edge_par, tet_edges, edges, edge_t, ev_id, ev_val, n_ev)
         if not touched:
             touched = segment_meets_tet(q0, p1, x, tv) or segment_meets_tet(p0, p1, x, tv)
         if not touched:
@@ -260,16 +293,7 @@ def sweep(x, tets, neighbors, tet_edges, tet_faces, edges, faces, edge_t, stamp,
         active[n_active] = o
         n_active += 1
         # blade crossings of this tet's faces move the crack front (notch nodes F)
-        for lf in range(4):
-            fp = face_par[lf]
-            if fp < 0.0:
-                continue
-            f = tet_faces[o, lf]
-            ev_id[n_ev, 0] = EV_FACE
-            ev_id[n_ev, 1] = f
-            _face_bary(x, faces[f], q0[0] + fp * (p1[0] - q0[0]), q0[1] + fp * (p1[1] - q0[1]),
-                       q0[2] + fp * (p1[2] - q0[2]), ev_val, n_ev)
-            n_ev += 1
+        n_ev = _face_events(x, o, face_par, tet_faces, faces, blade, ev_id, ev_val, n_ev)
         for lf in range(4):
             nb = neighbors[o, lf]
             if nb >= 0 and stamp[nb] != step:
