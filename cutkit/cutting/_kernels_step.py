@@ -28,6 +28,14 @@ from cutkit.mesh.geometry import TET_EDGES, segment_meets_tet, tet_dihedrals
 WALK_EPS = 1e-12
 #: Event kinds returned by :func:`sweep`.
 EV_EDGE, EV_FACE = 0, 1
+#: The mesh tables :func:`sweep` walks: the original tets' (m, 4) corners and neighbours, (m, 6) edges and
+#: (m, 4) faces; the global (ne, 2) edges and (nf, 3) faces (int64); each edge's cut parameter (ne,) float64.
+SweepMesh = namedtuple("SweepMesh", ["tets", "neighbors", "tet_edges", "tet_faces", "edges", "faces", "edge_t"])
+#: One step's blade for :func:`sweep`: the two swept triangles (2, 3, 3), the blade segment (2, 3) (back
+#: Q1, tip P1) and the previous tip P0 (3,), float64.
+SweepBlade = namedtuple("SweepBlade", ["swept", "blade", "p0"])
+#: The caller's buffers of :func:`sweep` (see its parameters).
+SweepBuffers = namedtuple("SweepBuffers", ["stack", "active", "ev_id", "ev_val", "counts"])
 
 
 @njit(cache=True, nogil=True)
@@ -230,8 +238,7 @@ def _face_events(x, o, face_par, tet_faces, faces, blade, ev_id, ev_val, n_ev):
 
 
 @njit(cache=True, nogil=True)
-def sweep(x, tets, neighbors, tet_edges, tet_faces, edges, faces, edge_t, stamp, step,
-          swept, blade, p0, stack, active, ev_id, ev_val, counts):
+def sweep(x, mesh, stamp, step, cut, buf):
     """Local traversal of one step (markSwapFace, paper 4.2) and its events.
 
     Tets are popped from ``stack`` (last-in first-out; the caller pushes
@@ -250,14 +257,17 @@ def sweep(x, tets, neighbors, tet_edges, tet_faces, edges, faces, edge_t, stamp,
     Parameters
     ----------
     x : (n, 3) float64  node positions
-    tets, neighbors, tet_edges, tet_faces : (m, 4|6) int64  original mesh tables
-    edges : (ne, 2) int64;  faces : (nf, 3) int64  global edges and faces
-    edge_t : (ne,) float64  cut parameter, NaN when uncut
+    mesh : SweepMesh
+        tets, neighbors, tet_edges, tet_faces : (m, 4|6) int64  original mesh tables;
+        edges : (ne, 2) int64;  faces : (nf, 3) int64  global edges and faces;
+        edge_t : (ne,) float64  cut parameter, NaN when uncut
     stamp : (m,) int64  visit stamps (modified)
     step : int  this step's stamp
-    swept : (2, 3, 3) float64  the two swept triangles
-    blade : (2, 3) float64  blade segment (back Q1, tip P1)
-    p0 : (3,) float64  previous tip P0
+    cut : SweepBlade
+        swept : (2, 3, 3) float64  the two swept triangles;
+        blade : (2, 3) float64  blade segment (back Q1, tip P1);
+        p0 : (3,) float64  previous tip P0
+    buf : SweepBuffers, the arrays below
     stack : (cs,) int64  tets to visit, ``stack[:counts[0]]``
     active : (ca,) int64  written: active tets in visit order, ``active[:counts[1]]``
     ev_id : (ce, 2) int64  written: (kind EV_EDGE | EV_FACE, global edge | face), ``[:counts[2]]``
@@ -269,6 +279,10 @@ def sweep(x, tets, neighbors, tet_edges, tet_faces, edges, faces, edge_t, stamp,
     -------
     bool  True when done; False when a buffer must grow (then call again)
     """
+    tets, neighbors, tet_edges, tet_faces = mesh.tets, mesh.neighbors, mesh.tet_edges, mesh.tet_faces
+    edges, faces, edge_t = mesh.edges, mesh.faces, mesh.edge_t
+    blade, p0 = cut.blade, cut.p0
+    stack, active, ev_id, ev_val, counts = buf.stack, buf.active, buf.ev_id, buf.ev_val, buf.counts
     n_stack, n_active, n_ev = counts[0], counts[1], counts[2]
     edge_par = np.empty(6)
     face_par = np.empty(4)
@@ -284,7 +298,7 @@ def sweep(x, tets, neighbors, tet_edges, tet_faces, edges, faces, edge_t, stamp,
             continue
         stamp[o] = step
         tv = tets[o]
-        tet_sweep(x, tv, swept, blade, edge_par, face_par)
+        tet_sweep(x, tv, cut.swept, blade, edge_par, face_par)
         touched, n_ev = _edge_events(o, tv, edge_par, tet_edges, edges, edge_t, ev_id, ev_val, n_ev)
         if not touched:
             touched = segment_meets_tet(q0, p1, x, tv) or segment_meets_tet(p0, p1, x, tv)
