@@ -133,15 +133,14 @@ def _spring_forces(k, p, adj_offsets, adj_nodes, adj_rest, adj_stiffness, secant
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _store_node(k, x0, x1, x2, v0, v1, v2, time, x_out, v_out, stamp_out):
-    """Write node k's position, velocity and time stamp."""
+def _store_node(x_out, v_out, k, x0, x1, x2, v0, v1, v2):
+    """Write node k's position and velocity."""
     x_out[k, 0] = x0
     x_out[k, 1] = x1
     x_out[k, 2] = x2
     v_out[k, 0] = v0
     v_out[k, 1] = v1
     v_out[k, 2] = v2
-    stamp_out[k] = time
 
 
 @njit(cache=True, parallel=True, nogil=True, fastmath=FASTMATH)
@@ -181,7 +180,8 @@ def relax_nodes(nodes, target_time, now, out, in_place, c_spring, graph, loads, 
         vk1 = v[k, 1]
         vk2 = v[k, 2]
         if h <= 0.0:
-            _store_node(k, xk0, xk1, xk2, vk0, vk1, vk2, stamp[k], x_out, v_out, stamp_out)
+            _store_node(x_out, v_out, k, xk0, xk1, xk2, vk0, vk1, vk2)
+            stamp_out[k] = stamp[k]
             continue
         m = mass[k]
         if precomputed:
@@ -208,7 +208,8 @@ def relax_nodes(nodes, target_time, now, out, in_place, c_spring, graph, loads, 
         nx0 = xk0 + h * nv0
         nx1 = xk1 + h * nv1
         nx2 = xk2 + h * nv2
-        _store_node(k, nx0, nx1, nx2, nv0, nv1, nv2, target_time, x_out, v_out, stamp_out)
+        _store_node(x_out, v_out, k, nx0, nx1, nx2, nv0, nv1, nv2)
+        stamp_out[k] = target_time
         if in_place:
             p[k, 0] = nx0
             p[k, 1] = nx1
