@@ -85,7 +85,7 @@ def crack_advance(t_a, crack, depth, params):
 
 
 @njit(cache=True)
-def fracture_step(params, proxy, velocity, code, crack, plane, control, f_sim, out):
+def fracture_step(params, proxy, velocity, code, crack, entry, normal, control, f_sim, out):
     """Advance the fracture scalpel by one time step.
 
     Parameters
@@ -97,7 +97,7 @@ def fracture_step(params, proxy, velocity, code, crack, plane, control, f_sim, o
         FREE, STATIC (loading), CUTTING (the crack advanced) or WITHDRAWING.
     crack : (1,) float64, in/out
         Crack length c from the entry point along a, mm.
-    plane : tuple of two (3,) float64
+    entry, normal : (3,) float64
         Entry point P_e and unit blade plane normal b.
     control : tuple of three (3,) float64
         Device tip, a and n (``Control``).
@@ -105,7 +105,6 @@ def fracture_step(params, proxy, velocity, code, crack, plane, control, f_sim, o
         External force from the tissue simulation, N.
     out : (N_OUT,) float64, out
     """
-    entry, normal = plane
     tip, a_in, n_in = control
     if free_blade(code, proxy, velocity, tip, a_in, n_in, out):
         return

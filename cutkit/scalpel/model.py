@@ -280,8 +280,8 @@ def step(params: np.ndarray, state: ScalpelState, control: Control, f_sim: np.nd
         model or the fracture model.
     """
     if params[K.P_MODEL] == K.FRACTURE:
-        FK.fracture_step(params, state.proxy, state.velocity, state.code, state.crack, (state.entry, state.normal),
-                         (control.tip, control.a, control.n), f_sim, out)
+        FK.fracture_step(params, state.proxy, state.velocity, state.code, state.crack, state.entry,
+                         state.normal, (control.tip, control.a, control.n), f_sim, out)
         return
     K.scalpel_step(params, state.proxy, state.velocity, state.code, state.entry, state.normal,
                    (control.tip, control.a, control.n), f_sim, out)
