@@ -150,7 +150,7 @@ def blade_frame(normal, a_in, n_in):
 
 
 @njit(cache=True)
-def scalpel_step(params, proxy, velocity, code, entry, normal, control, f_sim, out):
+def scalpel_step(params, proxy, velocity, code, entry, normal, tip, a_in, n_in, f_sim, out):
     """Advance the scalpel proxy by one time step.
 
     Parameters
@@ -166,15 +166,15 @@ def scalpel_step(params, proxy, velocity, code, entry, normal, control, f_sim, o
         Entry point P_e, mm; a point of the blade plane.
     normal : (3,) float64
         Unit normal b of the blade plane.
-    control : ((3,), (3,), (3,)) float64
-        The device: tip (mm), blade direction a (the way the sharp edge
-        faces) and the in-plane direction n along the blade, the last two
-        need not be exactly unit.
+    tip : (3,) float64
+        Device tip, mm.
+    a_in, n_in : (3,) float64
+        Device blade direction a (the way the sharp edge faces) and the
+        in-plane direction n along the blade, need not be exactly unit.
     f_sim : (3,) float64
         External force from the tissue simulation, N.
     out : (N_OUT,) float64, out
     """
-    tip, a_in, n_in = control
     if free_blade(code, proxy, velocity, tip, a_in, n_in, out):
         return
     # a: the device's a projected into the blade plane, n = b x a (6.1)

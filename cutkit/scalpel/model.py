@@ -284,4 +284,4 @@ def step(params: np.ndarray, state: ScalpelState, control: Control, f_sim: np.nd
                          state.normal, (control.tip, control.a, control.n), f_sim, out)
         return
     K.scalpel_step(params, state.proxy, state.velocity, state.code, state.entry, state.normal,
-                   (control.tip, control.a, control.n), f_sim, out)
+                   control.tip, control.a, control.n, f_sim, out)
