@@ -12,27 +12,12 @@ count.
 from __future__ import annotations
 
 import numpy as np
-from collections import namedtuple
-
 from numba import njit, prange
 
 #: Integrator modes of :func:`relax_nodes` (see docs/relaxation.md).
 MODE_AXIAL = 0  # eq. (6), implicit stiffness k_jk per spring (the default)
 MODE_SECANT = 1  # eq. (6) as printed, implicit stiffness max(E_jk, 0)
 MODE_EXPLICIT = 2  # symplectic Euler (no prediction, no implicit stiffness)
-
-#: What :func:`relax_nodes` reads of the state: positions, velocities (n, 3), time stamps (n,) and the
-#: positions p (n, 3) predicted by eq. (7), float64.
-NodeNow = namedtuple("NodeNow", ["x", "v", "stamp", "p"])
-#: What :func:`relax_nodes` writes: positions, velocities (n, 3), time stamps (n,) float64, the
-#: acceleration window (n, w) float64 and the update counts (n,) int64.
-NodeUpdate = namedtuple("NodeUpdate", ["x_out", "v_out", "stamp_out", "accel_window", "n_updates"])
-#: The spring graph in CSR form (:func:`spring_csr`: offsets (n + 1,), neighbour nodes and springs,
-#: rest lengths and stiffnesses per entry) and each node's summed stiffness (n,).
-SpringGraph = namedtuple("SpringGraph", ["adj_offsets", "adj_nodes", "adj_springs", "adj_rest", "adj_stiffness",
-                                         "node_stiffness"])
-#: Per-node masses, damping (n,) and external forces (n, 3), and gravity (3,), float64.
-NodeLoads = namedtuple("NodeLoads", ["mass", "damping", "f_ext", "gravity"])
 
 #: Reassociation, contraction and reciprocal approximations only (no
 #: "no-NaN" assumptions): lets LLVM vectorise the spring loop; still the
@@ -144,7 +129,9 @@ def _store_node(x_out, v_out, k, x0, x1, x2, v0, v1, v2):
 
 
 @njit(cache=True, parallel=True, nogil=True, fastmath=FASTMATH)
-def relax_nodes(nodes, target_time, now, out, in_place, c_spring, graph, loads, mode):
+def relax_nodes(nodes, target_time, x, v, stamp, p, x_out, v_out, stamp_out, in_place, c_spring, accel_window,
+                n_updates, adj_offsets, adj_nodes, adj_springs, adj_rest, adj_stiffness, node_stiffness, mass,
+                damping, f_ext, gravity, mode):
     """Advance every node of ``nodes`` from its own time stamp to ``target_time``.
 
     The step of node k is ``target_time - stamp[k]`` (section 5.2, last
@@ -156,17 +143,7 @@ def relax_nodes(nodes, target_time, now, out, in_place, c_spring, graph, loads, 
     ``c_spring`` (s,) holds :func:`spring_coefficients` of ``p`` (Jacobi
     sweeps) or is empty (then each node computes its springs' coefficients).
     ``node_stiffness[k]`` is the sum of k_jk over the node's springs.
-
-    ``now`` (:data:`NodeNow`) is read; ``out`` (:data:`NodeUpdate`, whose positions, velocities
-    and stamps may alias ``now``'s) is written for ``nodes``; ``graph`` (:data:`SpringGraph`)
-    and ``loads`` (:data:`NodeLoads`); ``mode`` is MODE_AXIAL, MODE_SECANT or MODE_EXPLICIT.
     """
-    x, v, stamp, p = now.x, now.v, now.stamp, now.p
-    x_out, v_out, stamp_out = out.x_out, out.v_out, out.stamp_out
-    accel_window, n_updates = out.accel_window, out.n_updates
-    adj_offsets, adj_nodes, adj_springs = graph.adj_offsets, graph.adj_nodes, graph.adj_springs
-    adj_rest, adj_stiffness, node_stiffness = graph.adj_rest, graph.adj_stiffness, graph.node_stiffness
-    mass, damping, f_ext, gravity = loads.mass, loads.damping, loads.f_ext, loads.gravity
     window = accel_window.shape[1]
     precomputed = c_spring.shape[0] > 0
     secant = mode == MODE_SECANT

@@ -109,18 +109,16 @@ def advance_nodes(
     if vt is not None:
         # the advanced nodes' rows of these get the volume terms added (scratch kept by the term)
         f_node, k_node = vt.scratch(n)
-    graph = K.SpringGraph(model.adj_offsets, model.adj_nodes, model.adj_springs, model.adj_rest,
-                          model.adj_stiffness, k_node)
-    loads = K.NodeLoads(model.masses, model.damping, f_node, gravity)
-    now = K.NodeNow(x, v, ts, p)
+    args = (state.accel_window, state.n_updates, model.adj_offsets, model.adj_nodes, model.adj_springs,
+            model.adj_rest, model.adj_stiffness, k_node, model.masses, model.damping, f_node,
+            gravity, mode)
     if classes is not None:
         for cls in classes:
             if vt is not None:
                 # Gauss-Seidel: this class sees the new positions of the classes before it
                 add_volume_forces(cls, p, vt.tets, vt.tet_offsets, vt.node_tets, vt.rest_volume,
                                   vt.bulk, f_ext, model.node_stiffness, f_node, k_node)
-            out = K.NodeUpdate(x, v, ts, state.accel_window, state.n_updates)
-            K.relax_nodes(cls, target_time, now, out, True, _NO_COEFFICIENTS, graph, loads, mode)
+            K.relax_nodes(cls, target_time, x, v, ts, p, x, v, ts, True, _NO_COEFFICIENTS, *args)
         return
     if vt is not None:
         add_volume_forces(nodes, p, vt.tets, vt.tet_offsets, vt.node_tets, vt.rest_volume,
@@ -132,8 +130,7 @@ def advance_nodes(
     else:
         c = _NO_COEFFICIENTS
     x_new, v_new, ts_new = x.copy(), v.copy(), ts.copy()
-    out = K.NodeUpdate(x_new, v_new, ts_new, state.accel_window, state.n_updates)
-    K.relax_nodes(nodes, target_time, now, out, False, c, graph, loads, mode)
+    K.relax_nodes(nodes, target_time, x, v, ts, p, x_new, v_new, ts_new, False, c, *args)
     state.positions, state.velocities, state.time_stamps = x_new, v_new, ts_new
 
 
