@@ -92,8 +92,8 @@ def _sweep_resumed(cm, edge_t, stamp, step, seeds, swept, blade, p0):
     seeds = list(dict.fromkeys(seeds.tolist()))
     bufs = [np.array(seeds + [0] * 4, np.int64), np.empty(1, np.int64), np.empty((10, 2), np.int64), np.empty((10, 3))]
     counts = np.array([len(seeds), 0, 0])
-    while not KS.sweep(cm._x, cm.orig_tets, cm.neighbors, cm.tet_edges, cm.tet_faces, cm.edges, cm.faces, edge_t,
-                       stamp, step, swept, blade, p0, *bufs, counts):
+    mesh = KS.SweepMesh(cm.orig_tets, cm.neighbors, cm.tet_edges, cm.tet_faces, cm.edges, cm.faces, edge_t)
+    while not KS.sweep(cm._x, mesh, stamp, step, KS.SweepBlade(swept, blade, p0), KS.SweepBuffers(*bufs, counts)):
         bufs = [np.concatenate([b, np.empty_like(b)]) for b in bufs]
     return bufs[1][:counts[1]], bufs[2][:counts[2]], bufs[3][:counts[2]]
 

@@ -38,6 +38,99 @@ def _put(tris, corner, face, k, a, b, c, owner, lf):
     return k + 1
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _face_cut_edges(mask, lf):
+    """How many of local face ``lf``'s edges ``mask`` cuts, its first cut and first uncut edge (-1: none)."""
+    n_cut = 0
+    first_cut = -1
+    first_uncut = -1
+    for j in range(3):
+        if mask >> FACE_EDGES[lf, j] & 1:
+            n_cut += 1
+            first_cut = j if first_cut < 0 else first_cut
+        elif first_uncut < 0:
+            first_uncut = j
+    return n_cut, first_cut, first_uncut
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _face_vertices(ct, o, lf):
+    """Local face ``lf``'s local corners (outward cyclic order) and their global vertices."""
+    lc = TET_FACES[lf]
+    return lc, (ct.orig_tets[o, lc[0]], ct.orig_tets[o, lc[1]], ct.orig_tets[o, lc[2]])
+
+
+@njit(cache=True, nogil=True)
+def _face_three_cuts(ct, o, lf, out, k):
+    """Fig. 2 pattern of a face with three cut edges: each corner's quad round its own copy of the
+    centre node C (copy i: the face's vertex of i-th smallest global id, so both tets sharing the
+    face pick the same copies).  Appends to ``out`` from row ``k``; returns the new count."""
+    tris, corner, face = out
+    lc, gv = _face_vertices(ct, o, lf)
+    f = ct.tet_faces[o, lf]
+    for j in range(3):
+        p, q, r = gv[j], gv[(j + 1) % 3], gv[(j + 2) % 3]
+        C = ct.face_node[f, (p > q) + (p > r)]
+        e_pq = ct.tet_edges[o, FACE_EDGES[lf, j]]
+        e_rp = ct.tet_edges[o, FACE_EDGES[lf, (j + 2) % 3]]
+        k = _put(tris, corner, face, k, p, _edge_copy(ct, e_pq, p), C, lc[j], lf)
+        k = _put(tris, corner, face, k, p, C, _edge_copy(ct, e_rp, p), lc[j], lf)
+    return k
+
+
+@njit(cache=True, nogil=True)
+def _face_notch(ct, o, lf, j, out, k):
+    """Fig. 2b pattern of a face whose only cut edge is its ``j``-th: four triangles round the face
+    node F.  Appends to ``out`` from row ``k``; returns the new count."""
+    tris, corner, face = out
+    lc, gv = _face_vertices(ct, o, lf)
+    p, q, r = gv[j], gv[(j + 1) % 3], gv[(j + 2) % 3]
+    cp, cq, cr = lc[j], lc[(j + 1) % 3], lc[(j + 2) % 3]
+    e = ct.tet_edges[o, FACE_EDGES[lf, j]]
+    F = ct.face_node[ct.tet_faces[o, lf], 0]
+    k = _put(tris, corner, face, k, p, _edge_copy(ct, e, p), F, cp, lf)
+    k = _put(tris, corner, face, k, _edge_copy(ct, e, q), q, F, cq, lf)
+    k = _put(tris, corner, face, k, q, r, F, cq, lf)
+    k = _put(tris, corner, face, k, r, p, F, cr, lf)
+    return k
+
+
+@njit(cache=True, nogil=True)
+def _face_two_cuts(ct, o, lf, ju, centre_nodes, out, k):
+    """Fig. 2c pattern of a face whose only uncut edge is its ``ju``-th (the lone vertex p is on both
+    cut edges): p's triangle and the quad split by its diagonal, or with ``centre_nodes`` five
+    triangles round the centre node's two copies.  Appends to ``out`` from row ``k``; returns the
+    new count."""
+    tris, corner, face = out
+    lc, gv = _face_vertices(ct, o, lf)
+    f = ct.tet_faces[o, lf]
+    q, r, p = gv[ju], gv[(ju + 1) % 3], gv[(ju + 2) % 3]
+    cq, cr, cp = lc[ju], lc[(ju + 1) % 3], lc[(ju + 2) % 3]
+    e1 = ct.tet_edges[o, FACE_EDGES[lf, (ju + 2) % 3]]  # edge (p, q)
+    e2 = ct.tet_edges[o, FACE_EDGES[lf, (ju + 1) % 3]]  # edge (r, p)
+    if centre_nodes:
+        Cl, Cp = ct.face_node[f, 0], ct.face_node[f, 1]
+        k = _put(tris, corner, face, k, Cl, p, _edge_copy(ct, e1, p), cp, lf)
+        k = _put(tris, corner, face, k, Cl, _edge_copy(ct, e2, p), p, cp, lf)
+        k = _put(tris, corner, face, k, Cp, _edge_copy(ct, e1, q), q, cq, lf)
+        k = _put(tris, corner, face, k, Cp, q, r, cq, lf)
+        k = _put(tris, corner, face, k, Cp, r, _edge_copy(ct, e2, r), cr, lf)
+        return k
+    k = _put(tris, corner, face, k, p, _edge_copy(ct, e1, p), _edge_copy(ct, e2, p), cp, lf)
+    E1, E2 = _edge_copy(ct, e1, q), _edge_copy(ct, e2, r)
+    d = ct.face_diag[f]  # the vertex the quad's diagonal passes through
+    if d < 0:  # not fixed yet: the vertex of smaller global id (of its representative, so
+        # a coincident copy of the face along an earlier cut takes the same diagonal)
+        d = q if ct.node_rep[q] < ct.node_rep[r] else r
+    if d == q:
+        k = _put(tris, corner, face, k, E1, q, E2, cq, lf)
+        k = _put(tris, corner, face, k, q, r, E2, cq, lf)
+    else:
+        k = _put(tris, corner, face, k, E1, q, r, cq, lf)
+        k = _put(tris, corner, face, k, E1, r, E2, cr, lf)
+    return k
+
+
 @njit(cache=True, nogil=True)
 def face_triangles(ct, o, mask, centre_nodes):
     """The Fig. 2 triangles of the four faces of original tet ``o``, outward.
@@ -69,69 +162,20 @@ def face_triangles(ct, o, mask, centre_nodes):
     tris = np.empty((MAX_FACE_TRIANGLES, 3), np.int64)
     corner = np.empty(MAX_FACE_TRIANGLES, np.int64)
     face = np.empty(MAX_FACE_TRIANGLES, np.int64)
+    out = (tris, corner, face)
     k = 0
     for lf in range(4):
         lc = TET_FACES[lf]  # local corners in outward cyclic order
-        g0, g1, g2 = ct.orig_tets[o, lc[0]], ct.orig_tets[o, lc[1]], ct.orig_tets[o, lc[2]]
-        gv = (g0, g1, g2)
-        n_cut = 0
-        first_cut = -1
-        first_uncut = -1
-        for j in range(3):
-            if mask >> FACE_EDGES[lf, j] & 1:
-                n_cut += 1
-                first_cut = j if first_cut < 0 else first_cut
-            elif first_uncut < 0:
-                first_uncut = j
-        f = ct.tet_faces[o, lf]
+        n_cut, first_cut, first_uncut = _face_cut_edges(mask, lf)
         if n_cut == 0:
-            k = _put(tris, corner, face, k, g0, g1, g2, lc[0], lf)
+            g = ct.orig_tets[o]
+            k = _put(tris, corner, face, k, g[lc[0]], g[lc[1]], g[lc[2]], lc[0], lf)
         elif n_cut == 3:
-            # each corner's quad round its own copy of the centre node C (copy i: the face's vertex
-            # of i-th smallest global id, so both tets sharing the face pick the same copies)
-            for j in range(3):
-                p, q, r = gv[j], gv[(j + 1) % 3], gv[(j + 2) % 3]
-                C = ct.face_node[f, (p > q) + (p > r)]
-                e_pq = ct.tet_edges[o, FACE_EDGES[lf, j]]
-                e_rp = ct.tet_edges[o, FACE_EDGES[lf, (j + 2) % 3]]
-                k = _put(tris, corner, face, k, p, _edge_copy(ct, e_pq, p), C, lc[j], lf)
-                k = _put(tris, corner, face, k, p, C, _edge_copy(ct, e_rp, p), lc[j], lf)
+            k = _face_three_cuts(ct, o, lf, out, k)
         elif n_cut == 1:
-            j = first_cut
-            p, q, r = gv[j], gv[(j + 1) % 3], gv[(j + 2) % 3]
-            cp, cq, cr = lc[j], lc[(j + 1) % 3], lc[(j + 2) % 3]
-            e = ct.tet_edges[o, FACE_EDGES[lf, j]]
-            F = ct.face_node[f, 0]
-            k = _put(tris, corner, face, k, p, _edge_copy(ct, e, p), F, cp, lf)
-            k = _put(tris, corner, face, k, _edge_copy(ct, e, q), q, F, cq, lf)
-            k = _put(tris, corner, face, k, q, r, F, cq, lf)
-            k = _put(tris, corner, face, k, r, p, F, cr, lf)
-        else:  # two cut edges: the lone vertex p is on both
-            ju = first_uncut
-            q, r, p = gv[ju], gv[(ju + 1) % 3], gv[(ju + 2) % 3]
-            cq, cr, cp = lc[ju], lc[(ju + 1) % 3], lc[(ju + 2) % 3]
-            e1 = ct.tet_edges[o, FACE_EDGES[lf, (ju + 2) % 3]]  # edge (p, q)
-            e2 = ct.tet_edges[o, FACE_EDGES[lf, (ju + 1) % 3]]  # edge (r, p)
-            if centre_nodes:
-                Cl, Cp = ct.face_node[f, 0], ct.face_node[f, 1]
-                k = _put(tris, corner, face, k, Cl, p, _edge_copy(ct, e1, p), cp, lf)
-                k = _put(tris, corner, face, k, Cl, _edge_copy(ct, e2, p), p, cp, lf)
-                k = _put(tris, corner, face, k, Cp, _edge_copy(ct, e1, q), q, cq, lf)
-                k = _put(tris, corner, face, k, Cp, q, r, cq, lf)
-                k = _put(tris, corner, face, k, Cp, r, _edge_copy(ct, e2, r), cr, lf)
-            else:
-                k = _put(tris, corner, face, k, p, _edge_copy(ct, e1, p), _edge_copy(ct, e2, p), cp, lf)
-                E1, E2 = _edge_copy(ct, e1, q), _edge_copy(ct, e2, r)
-                d = ct.face_diag[f]  # the vertex the quad's diagonal passes through
-                if d < 0:  # not fixed yet: the vertex of smaller global id (of its representative, so
-                    # a coincident copy of the face along an earlier cut takes the same diagonal)
-                    d = q if ct.node_rep[q] < ct.node_rep[r] else r
-                if d == q:
-                    k = _put(tris, corner, face, k, E1, q, E2, cq, lf)
-                    k = _put(tris, corner, face, k, q, r, E2, cq, lf)
-                else:
-                    k = _put(tris, corner, face, k, E1, q, r, cq, lf)
-                    k = _put(tris, corner, face, k, E1, r, E2, cr, lf)
+            k = _face_notch(ct, o, lf, first_cut, out, k)
+        else:
+            k = _face_two_cuts(ct, o, lf, first_uncut, centre_nodes, out, k)
     return tris[:k], corner[:k], face[:k]
 
 
@@ -320,6 +364,61 @@ def _allowed_apexes(corners, tris, tri_side, tri_face, group):
 
 
 @njit(cache=True, nogil=True)
+def _loop_nodes(loop_keys, copy_keys, copy_nodes, n_copy):
+    """The cut polygon's node of each loop key on each side, (2, L) int64."""
+    L = loop_keys.shape[0]
+    node_of = np.empty((2, L), np.int64)
+    for s in range(2):
+        for i in range(L):
+            node_of[s, i] = copy_nodes[s, _find(copy_keys[s], n_copy[s], loop_keys[i])]
+    return node_of
+
+
+@njit(cache=True, nogil=True)
+def _candidate_cones(corners, ok, group, tris, tri_side, tri_face, node_of, n_apexes):
+    """Every candidate cone of a compact split: for each fan rotation r, side s and allowed apex,
+    the cone of the side's face triangles and of the cut polygon fanned from loop node r.
+
+    Returns
+    -------
+    (flat, starts, rotation, side) : (p, 4), (c + 1,), (c,), (c,) int64
+        The candidates' tets one after another (candidate i is ``flat[starts[i]:starts[i + 1]]``),
+        and each candidate's rotation and side.
+    """
+    k = tris.shape[0]
+    L = node_of.shape[1]
+    fan = max(L - 2, 0)
+    n_cand = L * n_apexes
+    starts = np.zeros(n_cand + 1, np.int64)
+    rotation = np.empty(n_cand, np.int64)
+    side = np.empty(n_cand, np.int64)
+    flat = np.empty((L * (4 * k + 2 * 4 * fan), 4), np.int64)
+    c = 0
+    p = 0
+    for r in range(L):
+        for s in range(2):
+            for ia in range(4):
+                if not ok[ia] or group[ia] != s:
+                    continue
+                apex = corners[ia]
+                for t in range(k):  # the cone of the side's face triangles ...
+                    if tri_side[t] == s and tri_face[t] == ia:
+                        flat[p, 0], flat[p, 1], flat[p, 2], flat[p, 3] = tris[t, 0], tris[t, 2], tris[t, 1], apex
+                        p += 1
+                for i in range(1, L - 1):  # ... and of the fan from loop node r (side 1 sees it flipped)
+                    n0, n1, n2 = node_of[s, r], node_of[s, (r + i) % L], node_of[s, (r + i + 1) % L]
+                    if s == 0:
+                        flat[p, 0], flat[p, 1], flat[p, 2], flat[p, 3] = n0, n2, n1, apex
+                    else:
+                        flat[p, 0], flat[p, 1], flat[p, 2], flat[p, 3] = n0, n1, n2, apex
+                    p += 1
+                rotation[c], side[c] = r, s
+                c += 1
+                starts[c] = p
+    return flat[:p], starts, rotation, side
+
+
+@njit(cache=True, nogil=True)
 def compact_split(ct, x, o, tris, tri_corner, tri_face, group, vol_min):
     """The best compact split of original tet ``o`` (:func:`cutkit.cutting.splits.compact_split`).
 
@@ -361,40 +460,10 @@ def compact_split(ct, x, o, tris, tri_corner, tri_face, group, vol_min):
         n_apex[group[ia]] += ok[ia]
     if n_apex[0] == 0 or n_apex[1] == 0:
         return none, 0.0
-    fan = max(L - 2, 0)
-    # the cut polygon's node of each key on each side
-    node_of = np.empty((2, L), np.int64)
-    for s in range(2):
-        for i in range(L):
-            node_of[s, i] = copy_nodes[s, _find(copy_keys[s], n_copy[s], loop_keys[i])]
-    n_cand = L * (n_apex[0] + n_apex[1])
-    starts = np.zeros(n_cand + 1, np.int64)
-    rotation = np.empty(n_cand, np.int64)
-    side = np.empty(n_cand, np.int64)
-    flat = np.empty((L * (4 * k + 2 * 4 * fan), 4), np.int64)
-    c = 0
-    p = 0
-    for r in range(L):
-        for s in range(2):
-            for ia in range(4):
-                if not ok[ia] or group[ia] != s:
-                    continue
-                apex = corners[ia]
-                for t in range(k):  # the cone of the side's face triangles ...
-                    if tri_side[t] == s and tri_face[t] == ia:
-                        flat[p, 0], flat[p, 1], flat[p, 2], flat[p, 3] = tris[t, 0], tris[t, 2], tris[t, 1], apex
-                        p += 1
-                for i in range(1, L - 1):  # ... and of the fan from loop node r (side 1 sees it flipped)
-                    n0, n1, n2 = node_of[s, r], node_of[s, (r + i) % L], node_of[s, (r + i + 1) % L]
-                    if s == 0:
-                        flat[p, 0], flat[p, 1], flat[p, 2], flat[p, 3] = n0, n2, n1, apex
-                    else:
-                        flat[p, 0], flat[p, 1], flat[p, 2], flat[p, 3] = n0, n1, n2, apex
-                    p += 1
-                rotation[c], side[c] = r, s
-                c += 1
-                starts[c] = p
-    p0, p1, angle = best_compact_split(x, flat[:p], starts, rotation, side, L, vol_min)
+    node_of = _loop_nodes(loop_keys, copy_keys, copy_nodes, n_copy)
+    flat, starts, rotation, side = _candidate_cones(corners, ok, group, tris, tri_side, tri_face,
+                                                    node_of, n_apex[0] + n_apex[1])
+    p0, p1, angle = best_compact_split(x, flat, starts, rotation, side, L, vol_min)
     if p0 < 0:
         return none, 0.0
     n0 = starts[p0 + 1] - starts[p0]

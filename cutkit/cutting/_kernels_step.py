@@ -28,6 +28,14 @@ from cutkit.mesh.geometry import TET_EDGES, segment_meets_tet, tet_dihedrals
 WALK_EPS = 1e-12
 #: Event kinds returned by :func:`sweep`.
 EV_EDGE, EV_FACE = 0, 1
+#: The mesh tables :func:`sweep` walks: the original tets' (m, 4) corners and neighbours, (m, 6) edges and
+#: (m, 4) faces; the global (ne, 2) edges and (nf, 3) faces (int64); each edge's cut parameter (ne,) float64.
+SweepMesh = namedtuple("SweepMesh", ["tets", "neighbors", "tet_edges", "tet_faces", "edges", "faces", "edge_t"])
+#: One step's blade for :func:`sweep`: the two swept triangles (2, 3, 3), the blade segment (2, 3) (back
+#: Q1, tip P1) and the previous tip P0 (3,), float64.
+SweepBlade = namedtuple("SweepBlade", ["swept", "blade", "p0"])
+#: The caller's buffers of :func:`sweep` (see its parameters).
+SweepBuffers = namedtuple("SweepBuffers", ["stack", "active", "ev_id", "ev_val", "counts"])
 
 
 @njit(cache=True, nogil=True)
@@ -183,8 +191,54 @@ def _face_bary(x, fv, px, py, pz, out, row):
 
 
 @njit(cache=True, nogil=True)
-def sweep(x, tets, neighbors, tet_edges, tet_faces, edges, faces, edge_t, stamp, step,
-          swept, blade, p0, stack, active, ev_id, ev_val, counts):
+def _edge_events(o, tv, edge_par, tet_edges, edges, edge_t, ev_id, ev_val, n_ev):
+    """EV_EDGE events of tet ``o``: each of its uncut edges (``edge_t`` NaN) that the swept
+    surface meets (``edge_par >= 0``, along the local edge), from ``n_ev`` on.
+
+    Returns
+    -------
+    (touched, n_ev) : (bool, int)
+        Whether the swept surface meets any of its edges (cut or not), and the new event count.
+    """
+    touched = False
+    k = 0
+    for i in range(4):
+        for j in range(i + 1, 4):
+            if edge_par[k] >= 0.0:
+                touched = True
+                e = tet_edges[o, k]
+                if np.isnan(edge_t[e]):
+                    ev_id[n_ev, 0] = EV_EDGE
+                    ev_id[n_ev, 1] = e
+                    ev_val[n_ev, 0] = edge_par[k] if tv[i] == edges[e, 0] else 1.0 - edge_par[k]
+                    ev_val[n_ev, 1] = 0.0
+                    ev_val[n_ev, 2] = 0.0
+                    n_ev += 1
+            k += 1
+    return touched, n_ev
+
+
+@njit(cache=True, nogil=True)
+def _face_events(x, o, face_par, tet_faces, faces, blade, ev_id, ev_val, n_ev):
+    """EV_FACE events of active tet ``o``: each face the blade crosses (``face_par >= 0``, along
+    the blade from its back), with the crossing's barycentric coordinates on the face; the
+    crossings move the crack front (notch nodes F).  Returns the new event count."""
+    q0, p1 = blade[0], blade[1]
+    for lf in range(4):
+        fp = face_par[lf]
+        if fp < 0.0:
+            continue
+        f = tet_faces[o, lf]
+        ev_id[n_ev, 0] = EV_FACE
+        ev_id[n_ev, 1] = f
+        _face_bary(x, faces[f], q0[0] + fp * (p1[0] - q0[0]), q0[1] + fp * (p1[1] - q0[1]),
+                   q0[2] + fp * (p1[2] - q0[2]), ev_val, n_ev)
+        n_ev += 1
+    return n_ev
+
+
+@njit(cache=True, nogil=True)
+def sweep(x, mesh, stamp, step, cut, buf):
     """Local traversal of one step (markSwapFace, paper 4.2) and its events.
 
     Tets are popped from ``stack`` (last-in first-out; the caller pushes
@@ -203,14 +257,17 @@ def sweep(x, tets, neighbors, tet_edges, tet_faces, edges, faces, edge_t, stamp,
     Parameters
     ----------
     x : (n, 3) float64  node positions
-    tets, neighbors, tet_edges, tet_faces : (m, 4|6) int64  original mesh tables
-    edges : (ne, 2) int64;  faces : (nf, 3) int64  global edges and faces
-    edge_t : (ne,) float64  cut parameter, NaN when uncut
+    mesh : SweepMesh
+        tets, neighbors, tet_edges, tet_faces : (m, 4|6) int64  original mesh tables;
+        edges : (ne, 2) int64;  faces : (nf, 3) int64  global edges and faces;
+        edge_t : (ne,) float64  cut parameter, NaN when uncut
     stamp : (m,) int64  visit stamps (modified)
     step : int  this step's stamp
-    swept : (2, 3, 3) float64  the two swept triangles
-    blade : (2, 3) float64  blade segment (back Q1, tip P1)
-    p0 : (3,) float64  previous tip P0
+    cut : SweepBlade
+        swept : (2, 3, 3) float64  the two swept triangles;
+        blade : (2, 3) float64  blade segment (back Q1, tip P1);
+        p0 : (3,) float64  previous tip P0
+    buf : SweepBuffers, the arrays below
     stack : (cs,) int64  tets to visit, ``stack[:counts[0]]``
     active : (ca,) int64  written: active tets in visit order, ``active[:counts[1]]``
     ev_id : (ce, 2) int64  written: (kind EV_EDGE | EV_FACE, global edge | face), ``[:counts[2]]``
@@ -222,6 +279,10 @@ def sweep(x, tets, neighbors, tet_edges, tet_faces, edges, faces, edge_t, stamp,
     -------
     bool  True when done; False when a buffer must grow (then call again)
     """
+    tets, neighbors, tet_edges, tet_faces = mesh.tets, mesh.neighbors, mesh.tet_edges, mesh.tet_faces
+    edges, faces, edge_t = mesh.edges, mesh.faces, mesh.edge_t
+    blade, p0 = cut.blade, cut.p0
+    stack, active, ev_id, ev_val, counts = buf.stack, buf.active, buf.ev_id, buf.ev_val, buf.counts
     n_stack, n_active, n_ev = counts[0], counts[1], counts[2]
     edge_par = np.empty(6)
     face_par = np.empty(4)
@@ -237,22 +298,8 @@ def sweep(x, tets, neighbors, tet_edges, tet_faces, edges, faces, edge_t, stamp,
             continue
         stamp[o] = step
         tv = tets[o]
-        tet_sweep(x, tv, swept, blade, edge_par, face_par)
-        touched = False
-        k = 0
-        for i in range(4):
-            for j in range(i + 1, 4):
-                if edge_par[k] >= 0.0:
-                    touched = True
-                    e = tet_edges[o, k]
-                    if np.isnan(edge_t[e]):
-                        ev_id[n_ev, 0] = EV_EDGE
-                        ev_id[n_ev, 1] = e
-                        ev_val[n_ev, 0] = edge_par[k] if tv[i] == edges[e, 0] else 1.0 - edge_par[k]
-                        ev_val[n_ev, 1] = 0.0
-                        ev_val[n_ev, 2] = 0.0
-                        n_ev += 1
-                k += 1
+        tet_sweep(x, tv, cut.swept, blade, edge_par, face_par)
+        touched, n_ev = _edge_events(o, tv, edge_par, tet_edges, edges, edge_t, ev_id, ev_val, n_ev)
         if not touched:
             touched = segment_meets_tet(q0, p1, x, tv) or segment_meets_tet(p0, p1, x, tv)
         if not touched:
@@ -260,16 +307,7 @@ def sweep(x, tets, neighbors, tet_edges, tet_faces, edges, faces, edge_t, stamp,
         active[n_active] = o
         n_active += 1
         # blade crossings of this tet's faces move the crack front (notch nodes F)
-        for lf in range(4):
-            fp = face_par[lf]
-            if fp < 0.0:
-                continue
-            f = tet_faces[o, lf]
-            ev_id[n_ev, 0] = EV_FACE
-            ev_id[n_ev, 1] = f
-            _face_bary(x, faces[f], q0[0] + fp * (p1[0] - q0[0]), q0[1] + fp * (p1[1] - q0[1]),
-                       q0[2] + fp * (p1[2] - q0[2]), ev_val, n_ev)
-            n_ev += 1
+        n_ev = _face_events(x, o, face_par, tet_faces, faces, blade, ev_id, ev_val, n_ev)
         for lf in range(4):
             nb = neighbors[o, lf]
             if nb >= 0 and stamp[nb] != step:

@@ -163,9 +163,13 @@ def _sweep(cm, stamp, seeds, swept, blade, P0):
     buf["stack"][:len(seeds)] = seeds
     counts = buf["counts"]
     counts[:] = (len(seeds), 0, 0)
-    while not KS.sweep(cm._x, cm.orig_tets, cm.neighbors, cm.tet_edges, cm.tet_faces, cm.edges, cm.faces,
-                       cm.edge_t, cm.stamp, stamp, swept, blade, P0, buf["stack"], buf["active"],
-                       buf["ev_id"], buf["ev_val"], counts):
+    mesh = KS.SweepMesh(cm.orig_tets, cm.neighbors, cm.tet_edges, cm.tet_faces, cm.edges, cm.faces, cm.edge_t)
+    cut = KS.SweepBlade(swept, blade, P0)
+
+    def buffers():
+        return KS.SweepBuffers(buf["stack"], buf["active"], buf["ev_id"], buf["ev_val"], counts)
+
+    while not KS.sweep(cm._x, mesh, cm.stamp, stamp, cut, buffers()):
         for name in ("stack", "active", "ev_id", "ev_val"):  # grow, keep the progress
             old = buf[name]
             new = np.empty((2 * old.shape[0],) + old.shape[1:], old.dtype)

@@ -36,7 +36,7 @@ import numpy as np
 from numba import njit
 
 from cutkit.relax._elastic_kernels import barrier
-from cutkit.relax._newton_kernels import _cofactor, _deformation, _levi
+from cutkit.relax._newton_kernels import _cofactor, _deformation, add_det_hessian
 
 #: Per node: natural volume V_a (n,), bulk weight kv_a (n,) (N mm: sum V_e K_e / 4),
 #: the tets around it ``node_ptr`` (n + 1,) int64 / ``node_tets`` (4m,) int64 with their corners
@@ -189,14 +189,7 @@ def element_hessian(x, el, t, p_e, keep, project, H):
         for q in range(9):
             HF[p, q] = w * C[p // 3, p % 3] * C[q // 3, q % 3]
         HF[p, p] += mu
-    for i in range(3):  # s d2J/dF2 = s eps_ijk eps_abc F_kc
-        for j in range(3):
-            if i == j:
-                continue
-            for a in range(3):
-                for b in range(3):
-                    if a != b:
-                        HF[3 * i + a, 3 * j + b] += s * _levi(i, j) * _levi(a, b) * F[3 - i - j, 3 - a - b]
+    add_det_hessian(F, s, HF)  # s d2J/dF2 = s eps_ijk eps_abc F_kc
     if project != 0:
         _project(HF)
     V = el.volume[t]
@@ -224,6 +217,25 @@ def _add_block(pattern, i, j, H, data):
             data[base + 3 * r * deg + c] += H[r, c]
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _patch_slot(local, patch, rows, i, k):
+    """Give node i of a patch its local slot if it has none: ``local[i] = k``, ``patch[k] = i`` and
+    ``rows[k]`` zeroed.  Returns the patch size (k, or k + 1 when i is new)."""
+    if local[i] < 0:
+        local[i] = k
+        patch[k] = i
+        rows[k, :] = 0.0
+        k += 1
+    return k
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _clear_slots(local, patch, k):
+    """Reset ``local`` to -1 on the patch's k nodes."""
+    for q in range(k):
+        local[patch[q]] = -1
+
+
 @njit(cache=True, nogil=True)
 def _nodal_gradients(x, el, nodal, a, local, patch, g):
     """g_a = dv_a/dx over a's patch: fills patch (k,) and g (k, 3); returns k.
@@ -239,18 +251,13 @@ def _nodal_gradients(x, el, nodal, a, local, patch, g):
         w = nodal.share[t, nodal.node_corner[q]] * el.volume[t]
         for j in range(4):
             i = el.tets[t, j]
-            if local[i] < 0:
-                local[i] = k
-                patch[k] = i
-                g[k, :] = 0.0
-                k += 1
+            k = _patch_slot(local, patch, g, i, k)
             for r in range(3):
                 acc = 0.0
                 for c in range(3):
                     acc += C[r, c] * B[j, c]
                 g[local[i], r] += w * acc
-    for q in range(k):
-        local[patch[q]] = -1
+    _clear_slots(local, patch, k)
     return k
 
 
@@ -329,15 +336,10 @@ def _smoothed_deformation(x, el, nodal, a, local, patch, w, F):
                 F[r, cc] += c * Fe[r, cc]
         for j in range(4):
             i = el.tets[t, j]
-            if local[i] < 0:
-                local[i] = k
-                patch[k] = i
-                w[k, :] = 0.0
-                k += 1
+            k = _patch_slot(local, patch, w, i, k)
             for cc in range(3):
                 w[local[i], cc] += c * B[j, cc]
-    for q in range(k):
-        local[patch[q]] = -1
+    _clear_slots(local, patch, k)
     return k
 
 
@@ -402,14 +404,7 @@ def _unit_stress_hessian(F, C, s, HF):
         for q in range(9):
             HF[p, q] = C[p // 3, p % 3] * C[q // 3, q % 3] / 3.0
         HF[p, p] += 1.0
-    for i in range(3):
-        for j in range(3):
-            if i == j:
-                continue
-            for a in range(3):
-                for b in range(3):
-                    if a != b:
-                        HF[3 * i + a, 3 * j + b] += s * _levi(i, j) * _levi(a, b) * F[3 - i - j, 3 - a - b]
+    add_det_hessian(F, s, HF)
 
 
 @njit(cache=True, nogil=True)

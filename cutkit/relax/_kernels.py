@@ -57,33 +57,81 @@ def spring_coefficients(spring_a, spring_b, p, rest_length, stiffness, c_out):
         c_out[s] = ks - ks * rest_length[s] / np.sqrt(l2) if l2 > 0.0 else 0.0
 
 
+@njit(cache=True, nogil=True, fastmath=FASTMATH, inline="always")
+def _spring_forces_precomputed(k, p, adj_offsets, adj_nodes, adj_springs, c_spring, secant):
+    """Spring force on node k (eq. 6) from the coefficients ``c_spring`` of :func:`spring_coefficients`,
+    summed in CSR order, and with ``secant`` the implicit stiffness sum of max(c, 0).
+
+    Returns
+    -------
+    (f0, f1, f2, kimp) : float
+    """
+    pk0 = p[k, 0]
+    pk1 = p[k, 1]
+    pk2 = p[k, 2]
+    f0 = 0.0
+    f1 = 0.0
+    f2 = 0.0
+    kimp = 0.0
+    for a in range(adj_offsets[k], adj_offsets[k + 1]):
+        j = adj_nodes[a]
+        c = c_spring[adj_springs[a]]
+        f0 += c * (p[j, 0] - pk0)
+        f1 += c * (p[j, 1] - pk1)
+        f2 += c * (p[j, 2] - pk2)
+        if secant:
+            kimp += max(c, 0.0)
+    return f0, f1, f2, kimp
+
+
+@njit(cache=True, nogil=True, fastmath=FASTMATH, inline="always")
+def _spring_forces(k, p, adj_offsets, adj_nodes, adj_rest, adj_stiffness, secant):
+    """Spring force on node k (eq. 6) at the predicted positions ``p``, each spring's coefficient
+    computed here, summed in CSR order; with ``secant`` also the sum of max(c, 0).
+
+    Returns
+    -------
+    (f0, f1, f2, kimp) : float
+    """
+    pk0 = p[k, 0]
+    pk1 = p[k, 1]
+    pk2 = p[k, 2]
+    f0 = 0.0
+    f1 = 0.0
+    f2 = 0.0
+    kimp = 0.0
+    for a in range(adj_offsets[k], adj_offsets[k + 1]):
+        j = adj_nodes[a]
+        d0 = p[j, 0] - pk0
+        d1 = p[j, 1] - pk1
+        d2 = p[j, 2] - pk2
+        l2 = d0 * d0 + d1 * d1 + d2 * d2
+        ks = adj_stiffness[a]
+        # physical force coefficient, minus the paper's E (eq. 6); 0 for coincident ends
+        c = ks - ks * adj_rest[a] / np.sqrt(l2) if l2 > 0.0 else 0.0
+        f0 += c * d0
+        f1 += c * d1
+        f2 += c * d2
+        if secant:
+            kimp += max(c, 0.0)
+    return f0, f1, f2, kimp
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _store_node(x_out, v_out, k, x0, x1, x2, v0, v1, v2):
+    """Write node k's position and velocity."""
+    x_out[k, 0] = x0
+    x_out[k, 1] = x1
+    x_out[k, 2] = x2
+    v_out[k, 0] = v0
+    v_out[k, 1] = v1
+    v_out[k, 2] = v2
+
+
 @njit(cache=True, parallel=True, nogil=True, fastmath=FASTMATH)
-def relax_nodes(
-    nodes,
-    target_time,
-    x,
-    v,
-    stamp,
-    p,
-    x_out,
-    v_out,
-    stamp_out,
-    in_place,
-    c_spring,
-    accel_window,
-    n_updates,
-    adj_offsets,
-    adj_nodes,
-    adj_springs,
-    adj_rest,
-    adj_stiffness,
-    node_stiffness,
-    mass,
-    damping,
-    f_ext,
-    gravity,
-    mode,
-):
+def relax_nodes(nodes, target_time, x, v, stamp, p, x_out, v_out, stamp_out, in_place, c_spring, accel_window,
+                n_updates, adj_offsets, adj_nodes, adj_springs, adj_rest, adj_stiffness, node_stiffness, mass,
+                damping, f_ext, gravity, mode):
     """Advance every node of ``nodes`` from its own time stamp to ``target_time``.
 
     The step of node k is ``target_time - stamp[k]`` (section 5.2, last
@@ -109,46 +157,14 @@ def relax_nodes(
         vk1 = v[k, 1]
         vk2 = v[k, 2]
         if h <= 0.0:
-            x_out[k, 0] = xk0
-            x_out[k, 1] = xk1
-            x_out[k, 2] = xk2
-            v_out[k, 0] = vk0
-            v_out[k, 1] = vk1
-            v_out[k, 2] = vk2
+            _store_node(x_out, v_out, k, xk0, xk1, xk2, vk0, vk1, vk2)
             stamp_out[k] = stamp[k]
             continue
         m = mass[k]
-        pk0 = p[k, 0]
-        pk1 = p[k, 1]
-        pk2 = p[k, 2]
-        f0 = 0.0
-        f1 = 0.0
-        f2 = 0.0
-        kimp = 0.0
         if precomputed:
-            for a in range(adj_offsets[k], adj_offsets[k + 1]):
-                j = adj_nodes[a]
-                c = c_spring[adj_springs[a]]
-                f0 += c * (p[j, 0] - pk0)
-                f1 += c * (p[j, 1] - pk1)
-                f2 += c * (p[j, 2] - pk2)
-                if secant:
-                    kimp += max(c, 0.0)
+            f0, f1, f2, kimp = _spring_forces_precomputed(k, p, adj_offsets, adj_nodes, adj_springs, c_spring, secant)
         else:
-            for a in range(adj_offsets[k], adj_offsets[k + 1]):
-                j = adj_nodes[a]
-                d0 = p[j, 0] - pk0
-                d1 = p[j, 1] - pk1
-                d2 = p[j, 2] - pk2
-                l2 = d0 * d0 + d1 * d1 + d2 * d2
-                ks = adj_stiffness[a]
-                # physical force coefficient, minus the paper's E (eq. 6); 0 for coincident ends
-                c = ks - ks * adj_rest[a] / np.sqrt(l2) if l2 > 0.0 else 0.0
-                f0 += c * d0
-                f1 += c * d1
-                f2 += c * d2
-                if secant:
-                    kimp += max(c, 0.0)
+            f0, f1, f2, kimp = _spring_forces(k, p, adj_offsets, adj_nodes, adj_rest, adj_stiffness, secant)
         if mode == MODE_AXIAL:
             kimp = node_stiffness[k]
         # m (v' - v) = h (f - D v' + F* - K (x' - p)),  x' - p = h (v' - v)
@@ -169,12 +185,7 @@ def relax_nodes(
         nx0 = xk0 + h * nv0
         nx1 = xk1 + h * nv1
         nx2 = xk2 + h * nv2
-        x_out[k, 0] = nx0
-        x_out[k, 1] = nx1
-        x_out[k, 2] = nx2
-        v_out[k, 0] = nv0
-        v_out[k, 1] = nv1
-        v_out[k, 2] = nv2
+        _store_node(x_out, v_out, k, nx0, nx1, nx2, nv0, nv1, nv2)
         stamp_out[k] = target_time
         if in_place:
             p[k, 0] = nx0

@@ -48,6 +48,21 @@ def _levi(i, j):
     return 1.0 if (j - i) % 3 == 1 else -1.0
 
 
+@njit(cache=True, nogil=True, inline="always")
+def add_det_hessian(F, s, HF):
+    """HF (9, 9) (index 3 r + c) += s d2J/dF2, J = det F: the entry (3 i + a, 3 j + b) of d2J/dF2 is
+    eps_ijk eps_abc F_kc, zero for i = j or a = b."""
+    for i in range(3):
+        for j in range(3):
+            if i == j:
+                continue
+            for a in range(3):
+                for b in range(3):
+                    if a == b:
+                        continue
+                    HF[3 * i + a, 3 * j + b] += s * _levi(i, j) * _levi(a, b) * F[3 - i - j, 3 - a - b]
+
+
 @njit(cache=True, nogil=True)
 def _deformation(x, el, t, B, F):
     """Fill B (4, 3) with the rows of the gradient operator of element t and F (3, 3) = sum x_j b_j^T."""
@@ -117,16 +132,7 @@ def stress_hessian(F, mu, lam, project, P, HF):
         for q in range(9):
             HF[p, q] = w * C[p // 3, p % 3] * C[q // 3, q % 3]
         HF[p, p] += mu
-    # s d2J/dF2: eps_ijk eps_abc F_kc for i != j, a != b
-    for i in range(3):
-        for j in range(3):
-            if i == j:
-                continue
-            for a in range(3):
-                for b in range(3):
-                    if a == b:
-                        continue
-                    HF[3 * i + a, 3 * j + b] += s * _levi(i, j) * _levi(a, b) * F[3 - i - j, 3 - a - b]
+    add_det_hessian(F, s, HF)
     if project != 0 and not _positive_definite(HF):
         lam_, Q = np.linalg.eigh(HF)
         if lam_[0] < 0.0:

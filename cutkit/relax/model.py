@@ -205,6 +205,57 @@ def tet_edges(tets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return unique_edges(tets)
 
 
+def _checked_mesh(model) -> tuple[np.ndarray, np.ndarray]:
+    """The model's points (n, 3) float64 and tets (m, 4) int64, contiguous; MeshError on bad shapes
+    or indices."""
+    points = np.ascontiguousarray(model.points, np.float64)
+    tets = np.ascontiguousarray(model.tets, np.int64)
+    n = points.shape[0]
+    if points.ndim != 2 or points.shape[1] != 3:
+        raise MeshError(f"points must have shape (n, 3), got {points.shape}")
+    if tets.ndim != 2 or tets.shape[1] != 4 or tets.shape[0] == 0:
+        raise MeshError(f"tets must have shape (m, 4) with m > 0, got {tets.shape}")
+    if tets.min() < 0 or tets.max() >= n:
+        raise MeshError(f"tets index nodes outside 0..{n - 1}")
+    return points, tets
+
+
+def _prestressed_rest_lengths(model, d, length, vol, tet_edge) -> np.ndarray:
+    """Rest lengths (e,) shortened along each prestressed label's fibre (paper section 7.3):
+    ``l_e (1 - strain_e)``, strain_e the volume-weighted mean over all the edge's tets of
+    ``prestrain cos^2(angle(e, fibre))`` (0 for plain tets).  ``d`` (e, 3) are the edge vectors."""
+    n_edges = len(length)
+    strain = np.zeros(n_edges)
+    prestrain, fibre = prestress_of_tets(model, model.labels)
+    for lab in model.prestress.label:
+        in_lab = model.labels == lab
+        if not in_lab.any():
+            continue
+        e_ids = tet_edge[in_lab].ravel()
+        f, eps = fibre[in_lab][0], prestrain[in_lab][0]  # one fibre and prestrain per label
+        cos2 = (d[e_ids] @ f / length[e_ids]) ** 2
+        np.add.at(strain, e_ids, np.repeat(vol[in_lab], 6) * eps * cos2)
+    # an edge shared by prestressed and plain tets: volume-weighted mean over all its tets
+    all_w = np.bincount(tet_edge.ravel(), np.repeat(vol, 6), minlength=n_edges)
+    return length * (1.0 - strain / all_w)
+
+
+def _boundary_conditions(bc, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Fixed flags (n,) bool (fixed and prescribed nodes) and prescribed displacements (n, 3)
+    float64 of a model's boundary conditions; InputError on a node index outside 0..n-1."""
+    fixed = np.zeros(n, bool)
+    presc = np.zeros((n, 3))
+    fn = np.asarray(bc.fixed_nodes, np.int64)
+    pn = np.asarray(bc.prescribed_nodes, np.int64)
+    for name, idx in (("fixed", fn), ("prescribed", pn)):
+        if idx.size and (idx.min() < 0 or idx.max() >= n):
+            raise InputError(f"{name} node index outside 0..{n - 1}")
+    fixed[fn] = True
+    fixed[pn] = True
+    presc[pn] = np.asarray(bc.prescribed_displacement, np.float64).reshape(-1, 3)
+    return fixed, presc
+
+
 def build_spring_model(
     model,
     *,
@@ -238,15 +289,8 @@ def build_spring_model(
     -------
     SpringModel
     """
-    points = np.ascontiguousarray(model.points, np.float64)
-    tets = np.ascontiguousarray(model.tets, np.int64)
+    points, tets = _checked_mesh(model)
     n = points.shape[0]
-    if points.ndim != 2 or points.shape[1] != 3:
-        raise MeshError(f"points must have shape (n, 3), got {points.shape}")
-    if tets.ndim != 2 or tets.shape[1] != 4 or tets.shape[0] == 0:
-        raise MeshError(f"tets must have shape (m, 4) with m > 0, got {tets.shape}")
-    if tets.min() < 0 or tets.max() >= n:
-        raise MeshError(f"tets index nodes outside 0..{n - 1}")
     if not calibration > 0:
         raise InputError(f"stiffness calibration must be > 0, got {calibration}")
     if not (np.isfinite(volume_stiffness) and volume_stiffness >= 0):
@@ -272,31 +316,8 @@ def build_spring_model(
 
     rest = length.copy()
     if prestress and len(model.prestress.label):
-        strain = np.zeros(len(edges))
-        prestrain, fibre = prestress_of_tets(model, model.labels)
-        for lab in model.prestress.label:
-            in_lab = model.labels == lab
-            if not in_lab.any():
-                continue
-            e_ids = tet_edge[in_lab].ravel()
-            f, eps = fibre[in_lab][0], prestrain[in_lab][0]  # one fibre and prestrain per label
-            cos2 = (d[e_ids] @ f / length[e_ids]) ** 2
-            np.add.at(strain, e_ids, np.repeat(vol[in_lab], 6) * eps * cos2)
-        # an edge shared by prestressed and plain tets: volume-weighted mean over all its tets
-        all_w = np.bincount(tet_edge.ravel(), np.repeat(vol, 6), minlength=len(edges))
-        rest = length * (1.0 - strain / all_w)
-
-    fixed = np.zeros(n, bool)
-    presc = np.zeros((n, 3))
-    bc = model.boundary
-    fn = np.asarray(bc.fixed_nodes, np.int64)
-    pn = np.asarray(bc.prescribed_nodes, np.int64)
-    for name, idx in (("fixed", fn), ("prescribed", pn)):
-        if idx.size and (idx.min() < 0 or idx.max() >= n):
-            raise InputError(f"{name} node index outside 0..{n - 1}")
-    fixed[fn] = True
-    fixed[pn] = True
-    presc[pn] = np.asarray(bc.prescribed_displacement, np.float64).reshape(-1, 3)
+        rest = _prestressed_rest_lengths(model, d, length, vol, tet_edge)
+    fixed, presc = _boundary_conditions(model.boundary, n)
     volume = None
     if volume_stiffness > 0:
         from cutkit.relax.volume import VolumeTerm

@@ -17,6 +17,46 @@ from cutkit.errors import InputError
 from cutkit.relax.model import SpringModel, SpringState
 
 
+def _mass_taken(model: SpringModel, parents: np.ndarray, weights: np.ndarray):
+    """Checked mass fractions of :func:`add_nodes`.
+
+    Returns
+    -------
+    par : (p, q) int64
+        ``parents`` with the -1 padding replaced by 0.
+    dm : (p, q) float64
+        Mass each new node takes from each parent (0 for padding).
+    taken : (n,) float64
+        Fraction of its mass each existing node gives away, < 1.
+    """
+    n = model.n_nodes
+    valid = parents >= 0
+    if np.any(parents >= n):
+        raise InputError(f"add_nodes: parent index outside 0..{n - 1}")
+    if np.any(weights[valid] < 0):
+        raise InputError("add_nodes: mass fractions must be >= 0")
+    taken = np.bincount(parents[valid], weights[valid], minlength=n)
+    if np.any(taken >= 1.0):
+        bad = int(np.flatnonzero(taken >= 1.0)[0])
+        raise InputError(f"add_nodes: node {bad} would give away {taken[bad]:.3g} >= 1 of its mass")
+    par = np.where(valid, parents, 0)
+    dm = np.where(valid, weights * model.masses[par], 0.0)  # (p, q)
+    return par, dm, taken
+
+
+def _append_state(state: SpringState, positions, velocities, stamps, fixed) -> None:
+    """Append p new nodes to ``state``: positions, velocities and time stamps (p, 3), (p, 3), (p,), an empty
+    acceleration window, and node list 0 (the finest, section 5.2), -1 for ``fixed`` ones."""
+    p = positions.shape[0]
+    state.positions = np.concatenate([state.positions, positions])
+    state.velocities = np.concatenate([state.velocities, velocities])
+    state.time_stamps = np.concatenate([state.time_stamps, stamps])
+    state.accel_window = np.concatenate([state.accel_window, np.zeros((p, state.accel_window.shape[1]))])
+    state.n_updates = np.concatenate([state.n_updates, np.zeros(p, np.int64)])
+    # section 5.2: nodes made by a cut enter the finest list
+    state.node_list = np.concatenate([state.node_list, np.where(fixed, -1, 0).astype(np.int32)])
+
+
 def add_nodes(
     model: SpringModel,
     state: SpringState,
@@ -62,17 +102,7 @@ def add_nodes(
             f"add_nodes: rest_positions {rest_positions.shape}, positions {positions.shape}, "
             f"parents {parents.shape} and weights {weights.shape} disagree"
         )
-    valid = parents >= 0
-    if np.any(parents >= n):
-        raise InputError(f"add_nodes: parent index outside 0..{n - 1}")
-    if np.any(weights[valid] < 0):
-        raise InputError("add_nodes: mass fractions must be >= 0")
-    taken = np.bincount(parents[valid], weights[valid], minlength=n)
-    if np.any(taken >= 1.0):
-        bad = int(np.flatnonzero(taken >= 1.0)[0])
-        raise InputError(f"add_nodes: node {bad} would give away {taken[bad]:.3g} >= 1 of its mass")
-    par = np.where(valid, parents, 0)
-    dm = np.where(valid, weights * model.masses[par], 0.0)  # (p, q)
+    par, dm, taken = _mass_taken(model, parents, weights)
     new_mass = dm.sum(axis=1)
     if np.any(new_mass <= 0):
         raise InputError("add_nodes: every new node needs a positive mass from its parents")
@@ -92,13 +122,7 @@ def add_nodes(
     model.fixed = np.concatenate([model.fixed, fixed])
     model.prescribed_displacement = np.concatenate([model.prescribed_displacement, positions - rest_positions])
     model.prescribed_displacement[n:][~fixed] = 0.0
-    state.positions = np.concatenate([state.positions, positions])
-    state.velocities = np.concatenate([state.velocities, np.where(fixed[:, None], 0.0, new_vel)])
-    state.time_stamps = np.concatenate([state.time_stamps, stamps])
-    state.accel_window = np.concatenate([state.accel_window, np.zeros((p, state.accel_window.shape[1]))])
-    state.n_updates = np.concatenate([state.n_updates, np.zeros(p, np.int64)])
-    # section 5.2: nodes made by a cut enter the finest list
-    state.node_list = np.concatenate([state.node_list, np.where(fixed, -1, 0).astype(np.int32)])
+    _append_state(state, positions, np.where(fixed[:, None], 0.0, new_vel), stamps, fixed)
     model.rebuild_adjacency(recolour=False)
     model.colour = np.concatenate([model.colour, np.full(p, -1, np.int32)])
     new_ids = np.arange(n, n + p, dtype=np.int64)

@@ -177,24 +177,12 @@ def scalpel_step(params, proxy, velocity, code, entry, normal, tip, a_in, n_in, 
     """
     if free_blade(code, proxy, velocity, tip, a_in, n_in, out):
         return
-
-    b0, b1, b2 = normal[0], normal[1], normal[2]
     # a: the device's a projected into the blade plane, n = b x a (6.1)
-    a0, a1, a2, n0, n1, n2 = blade_frame(normal, a_in, n_in)
-
-    # F_ext from the coupling springs: in-plane spring plus the plane
-    # restoring spring, proportional to the tip's distance from the plane (6.5)
-    dist = (tip[0] - entry[0]) * b0 + (tip[1] - entry[1]) * b1 + (tip[2] - entry[2]) * b2
-    o0, o1, o2 = tip[0] - proxy[0], tip[1] - proxy[1], tip[2] - proxy[2]
-    ob = o0 * b0 + o1 * b1 + o2 * b2
-    k = params[P_K_SPRING]
-    kp = params[P_K_PLANE]
-    s0 = k * (o0 - ob * b0) + kp * dist * b0
-    s1 = k * (o1 - ob * b1) + kp * dist * b1
-    s2 = k * (o2 - ob * b2) + kp * dist * b2
-    e0, e1, e2 = s0 + f_sim[0], s1 + f_sim[1], s2 + f_sim[2]
+    frame = blade_frame(normal, a_in, n_in)
+    a0, a1, a2, n0, n1, n2 = frame
+    dist, e0, e1, e2 = _external_force(params, proxy, entry, normal, tip, f_sim)
     # eq. (9): F_ext = F_par_a + F_par_n + F_perp
-    f_perp = e0 * b0 + e1 * b1 + e2 * b2
+    f_perp = e0 * normal[0] + e1 * normal[1] + e2 * normal[2]
     fa = e0 * a0 + e1 * a1 + e2 * a2
     fn = e0 * n0 + e1 * n1 + e2 * n2
     abs_perp = abs(f_perp)
@@ -216,60 +204,104 @@ def scalpel_step(params, proxy, velocity, code, entry, normal, tip, a_in, n_in, 
     cut_a = 0.0
     cut_n = 0.0
     if c == WITHDRAWING:
-        # the proxy follows the tip within the plane; no cut force
-        p0 = tip[0] - dist * b0
-        p1 = tip[1] - dist * b1
-        p2 = tip[2] - dist * b2
-        velocity[0] = (p0 - proxy[0]) / dt
-        velocity[1] = (p1 - proxy[1]) / dt
-        velocity[2] = (p2 - proxy[2]) / dt
-        proxy[0], proxy[1], proxy[2] = p0, p1, p2
+        _withdraw(proxy, velocity, tip, normal, dist, dt)
     else:
         if c == STATIC:
-            f_par = math.sqrt(fa * fa + fn * fn)
-            # eqs. (13)-(14): static opening and friction per axis; they raise
-            # the break-away threshold above F_enter inside the tissue
-            open_ = params[P_MU_STATIC] * params[P_ETA] * params[P_C_EDGE]
-            fric = params[P_ALPHA_STATIC] * abs_perp
-            threshold = params[P_F_ENTER]
-            if f_par > 0.0:
-                threshold += (abs(fa) * (open_ * d_a + fric) + abs(fn) * (open_ * d_n + fric)) / f_par
-            if f_par < threshold:
-                # eq. (12): F_cut_static = -F_par, the proxy holds still
-                cut_a = -fa
-                cut_n = -fn
-                velocity[0] = 0.0
-                velocity[1] = 0.0
-                velocity[2] = 0.0
-            else:
-                c = CUTTING
-                velocity[0] = 0.0
-                velocity[1] = 0.0
-                velocity[2] = 0.0
+            c, cut_a, cut_n = _static_friction(params, fa, fn, abs_perp, d_a, d_n, velocity)
         if c == CUTTING:
-            va = velocity[0] * a0 + velocity[1] * a1 + velocity[2] * a2
-            vn = velocity[0] * n0 + velocity[1] * n1 + velocity[2] * n2
-            va_new = _dynamic_axis(fa, va, d_a, params, abs_perp)
-            vn_new = _dynamic_axis(fn, vn, d_n, params, abs_perp)
-            # eq. (15): F_m = F_par + F_cut, so F_cut = m dv/dt - F_par
-            m_dt = params[P_MASS] / (MM_PER_M * dt)
-            cut_a = m_dt * (va_new - va) - fa
-            cut_n = m_dt * (vn_new - vn) - fn
-            for i in range(3):
-                ai = a0 if i == 0 else (a1 if i == 1 else a2)
-                ni = n0 if i == 0 else (n1 if i == 1 else n2)
-                velocity[i] = va_new * ai + vn_new * ni
-                proxy[i] += dt * velocity[i]
-            if va_new == 0.0 and vn_new == 0.0:
-                c = STATIC
+            c, cut_a, cut_n = _dynamic_cut(params, fa, fn, abs_perp, d_a, d_n, frame, velocity, proxy)
         # keep the proxy on the blade plane (6.5)
-        pd = (proxy[0] - entry[0]) * b0 + (proxy[1] - entry[1]) * b1 + (proxy[2] - entry[2]) * b2
-        proxy[0] -= pd * b0
-        proxy[1] -= pd * b1
-        proxy[2] -= pd * b2
+        pd = (proxy[0] - entry[0]) * normal[0] + (proxy[1] - entry[1]) * normal[1] + (proxy[2] - entry[2]) * normal[2]
+        proxy[0] -= pd * normal[0]
+        proxy[1] -= pd * normal[1]
+        proxy[2] -= pd * normal[2]
     code[0] = c
+    _device_feedback(params, proxy, normal, tip, frame, dist, (cut_a, cut_n, f_perp, d_a, d_n), out)
 
-    # the device feels the in-plane spring to the proxy and the plane spring
+
+@njit(cache=True)
+def _external_force(params, proxy, entry, normal, tip, f_sim):
+    """F_ext from the coupling springs (6.5): the in-plane spring from the proxy to the tip plus the
+    plane restoring spring, proportional to the tip's signed distance ``dist`` from the blade
+    plane, plus the tissue's force ``f_sim``.  Returns (dist, F_ext as three floats)."""
+    b0, b1, b2 = normal[0], normal[1], normal[2]
+    dist = (tip[0] - entry[0]) * b0 + (tip[1] - entry[1]) * b1 + (tip[2] - entry[2]) * b2
+    o0, o1, o2 = tip[0] - proxy[0], tip[1] - proxy[1], tip[2] - proxy[2]
+    ob = o0 * b0 + o1 * b1 + o2 * b2
+    k = params[P_K_SPRING]
+    kp = params[P_K_PLANE]
+    s0 = k * (o0 - ob * b0) + kp * dist * b0
+    s1 = k * (o1 - ob * b1) + kp * dist * b1
+    s2 = k * (o2 - ob * b2) + kp * dist * b2
+    return dist, s0 + f_sim[0], s1 + f_sim[1], s2 + f_sim[2]
+
+
+@njit(cache=True)
+def _withdraw(proxy, velocity, tip, normal, dist, dt):
+    """Withdrawing (6.5): the proxy follows the tip within the blade plane; no cut force."""
+    p0 = tip[0] - dist * normal[0]
+    p1 = tip[1] - dist * normal[1]
+    p2 = tip[2] - dist * normal[2]
+    velocity[0] = (p0 - proxy[0]) / dt
+    velocity[1] = (p1 - proxy[1]) / dt
+    velocity[2] = (p2 - proxy[2]) / dt
+    proxy[0], proxy[1], proxy[2] = p0, p1, p2
+
+
+@njit(cache=True)
+def _static_friction(params, fa, fn, abs_perp, d_a, d_n, velocity):
+    """The static phase (eqs. 12-14): the proxy holds still (velocity zeroed) unless the in-plane
+    force reaches the break-away threshold, raised above F_enter by static opening and friction
+    per axis.  Returns (code, cut force along a, along n): STATIC with F_cut = -F_par, or CUTTING
+    with no cut force yet."""
+    f_par = math.sqrt(fa * fa + fn * fn)
+    open_ = params[P_MU_STATIC] * params[P_ETA] * params[P_C_EDGE]
+    fric = params[P_ALPHA_STATIC] * abs_perp
+    threshold = params[P_F_ENTER]
+    if f_par > 0.0:
+        threshold += (abs(fa) * (open_ * d_a + fric) + abs(fn) * (open_ * d_n + fric)) / f_par
+    velocity[0] = 0.0
+    velocity[1] = 0.0
+    velocity[2] = 0.0
+    if f_par < threshold:
+        return STATIC, -fa, -fn
+    return CUTTING, 0.0, 0.0
+
+
+@njit(cache=True)
+def _dynamic_cut(params, fa, fn, abs_perp, d_a, d_n, frame, velocity, proxy):
+    """The cutting phase: each in-plane axis moves by :func:`_dynamic_axis`; the proxy advances.
+    Returns (code, cut force along a, along n) with F_cut = m dv/dt - F_par (eq. 15); the code
+    falls back to STATIC when both axes stop."""
+    a0, a1, a2, n0, n1, n2 = frame
+    dt = params[P_DT]
+    va = velocity[0] * a0 + velocity[1] * a1 + velocity[2] * a2
+    vn = velocity[0] * n0 + velocity[1] * n1 + velocity[2] * n2
+    va_new = _dynamic_axis(fa, va, d_a, params, abs_perp)
+    vn_new = _dynamic_axis(fn, vn, d_n, params, abs_perp)
+    m_dt = params[P_MASS] / (MM_PER_M * dt)
+    cut_a = m_dt * (va_new - va) - fa
+    cut_n = m_dt * (vn_new - vn) - fn
+    for i in range(3):
+        ai = a0 if i == 0 else (a1 if i == 1 else a2)
+        ni = n0 if i == 0 else (n1 if i == 1 else n2)
+        velocity[i] = va_new * ai + vn_new * ni
+        proxy[i] += dt * velocity[i]
+    if va_new == 0.0 and vn_new == 0.0:
+        return STATIC, cut_a, cut_n
+    return CUTTING, cut_a, cut_n
+
+
+@njit(cache=True)
+def _device_feedback(params, proxy, normal, tip, frame, dist, forces, out):
+    """Fill ``out``: the device feels the in-plane spring to the proxy and the plane spring; also
+    the cut force, F_perp, the blade frame and (d_a, d_n).  ``forces`` is
+    (cut_a, cut_n, f_perp, d_a, d_n)."""
+    a0, a1, a2, n0, n1, n2 = frame
+    cut_a, cut_n, f_perp, d_a, d_n = forces
+    k = params[P_K_SPRING]
+    kp = params[P_K_PLANE]
+    b0, b1, b2 = normal[0], normal[1], normal[2]
     for i in range(3):
         bi = b0 if i == 0 else (b1 if i == 1 else b2)
         ai = a0 if i == 0 else (a1 if i == 1 else a2)
