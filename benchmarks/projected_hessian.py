@@ -51,11 +51,13 @@ def _fastest(fns: dict, repeats: int) -> dict:
 
 
 def _assembly(em, x, repeats: int) -> dict:
+    from cutkit.relax import _elastic_kernels as KE
     from cutkit.relax import _newton_kernels as KN
     from cutkit.relax.newton import NewtonSolver
 
     solver = NewtonSolver(em)
-    pat, el = solver.pattern(), solver._elements()
+    m = em.n_elements
+    pat, el = solver.pattern(), KE.Elements(em.tets[:m], em.Dminv[:m], em.volume[:m], em.mu[:m], em.lam[:m])
     data = np.empty(pat.indices.shape[0])
     modes = {"exact_s": KN.EXACT, "eigh_s": KN.CLAMP_EIGH, "analytic_s": KN.CLAMP}
     fns = {k: (lambda p=p: KN.assemble_hessian(x, el, pat, p, data)) for k, p in modes.items()}
