@@ -23,9 +23,11 @@ second-order term of det(diag(sigma) + t M)), so H splits into
 This is the eigensystem of Smith, de Goes & Kim, *Stable Neo-Hookean Flesh
 Simulation* (ACM TOG 2018, section 4.2) and *Analytic Eigensystems for
 Isotropic Distortion Energies* (ACM TOG 2019): twist and flip are in closed
-form for any isotropic psi; the scaling block is not, once the barrier b(J)
-joins the energy (its w and s are no longer the paper's), so it is solved as
-the 3x3 symmetric eigenproblem it is, by cyclic Jacobi, to rounding.
+form for any isotropic psi.  The barrier b(J) changes only w and s, not the
+structure, so the same modes hold for cutkit's energy; the scaling block's
+eigenvalues are the roots of a cubic, which loses accuracy where two are
+close, so the 3x3 symmetric eigenproblem is solved by cyclic Jacobi instead,
+to rounding.
 
 The kernels check nothing (:mod:`cutkit.relax.newton` does).
 """
