@@ -93,3 +93,24 @@ def step_bound(x, d, tets, volume, a_max):
                 if a <= a_max:
                     best = min(best, a)
     return best
+
+
+def rotation_svd(F):
+    """U, sigma, V with F = U diag(sigma) V^T, det U = det V = +1, sigma descending in magnitude,
+    the last one carrying the sign of det F (LAPACK's SVD, signs moved by hand)."""
+    U, sigma, Vt = np.linalg.svd(F)
+    V = Vt.T.copy()
+    if np.linalg.det(U) < 0:
+        U[:, 2] *= -1
+        sigma[2] *= -1
+    if np.linalg.det(V) < 0:
+        V[:, 2] *= -1
+        sigma[2] *= -1
+    return U, sigma, V
+
+
+def clamp_negative(H, factor=1):
+    """H with its negative eigenvalues clamped to 0 (factor 1) or reflected (2), by eigh."""
+    w, Q = np.linalg.eigh(H)
+    w = np.where(w < 0, w * (1 - factor), w)
+    return (Q * w) @ Q.T

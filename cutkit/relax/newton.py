@@ -187,7 +187,8 @@ class NewtonSolver:
         diagonal_add : (n,) float64
             ``m / h^2 + c m / h`` per node (0 for a static solve).
         project : int
-            0: exact element Hessians; 1: negative eigenvalues clamped to 0.
+            0: exact element Hessians; 1: negative eigenvalues clamped to 0 (analytic
+            eigensystem); ``_newton_kernels.CLAMP_EIGH``: the same by LAPACK's eigh.
         """
 
         pat = self.pattern()
