@@ -36,7 +36,7 @@ import numpy as np
 from numba import njit
 
 from cutkit.relax._elastic_kernels import barrier
-from cutkit.relax._newton_kernels import _cofactor, _deformation, add_det_hessian
+from cutkit.relax._newton_kernels import _cofactor, _deformation, add_det_hessian, project_hf
 
 #: Per node: natural volume V_a (n,), bulk weight kv_a (n,) (N mm: sum V_e K_e / 4),
 #: the tets around it ``node_ptr`` (n + 1,) int64 / ``node_tets`` (4m,) int64 with their corners
@@ -158,20 +158,6 @@ def forces(x, el, nodal, out):
 
 
 @njit(cache=True, nogil=True)
-def _project(HF):
-    """Clamp the negative eigenvalues of the symmetric (9, 9) HF to zero, in place."""
-    w, Q = np.linalg.eigh(HF)
-    if w[0] >= 0.0:
-        return
-    for p in range(9):
-        for q in range(9):
-            acc = 0.0
-            for e in range(9):
-                acc += Q[p, e] * max(w[e], 0.0) * Q[q, e]
-            HF[p, q] = acc
-
-
-@njit(cache=True, nogil=True)
 def element_hessian(x, el, t, p_e, keep, project, H):
     """The element part of d2W/dx2 of element t (12, 12) (dof 3 j + s), its pressure p_e included;
     ``keep`` (1 - alpha) scales its deviatoric energy."""
@@ -190,8 +176,7 @@ def element_hessian(x, el, t, p_e, keep, project, H):
             HF[p, q] = w * C[p // 3, p % 3] * C[q // 3, q % 3]
         HF[p, p] += mu
     add_det_hessian(F, s, HF)  # s d2J/dF2 = s eps_ijk eps_abc F_kc
-    if project != 0:
-        _project(HF)
+    project_hf(F, mu, w, s, project, HF)  # the analytic eigensystem: the same structure as nh's
     V = el.volume[t]
     for j in range(4):
         for s_ in range(3):
@@ -422,8 +407,7 @@ def smoothed_hessian(x, el, nodal, pattern, project, data):
         k = _smoothed_deformation(x, el, nodal, a, local, patch, w, F)
         s = _unit_deviatoric(F, C)[1]
         _unit_stress_hessian(F, C, s, HF)
-        if project != 0:
-            _project(HF)
+        project_hf(F, 1.0, 1.0 / 3.0, s, project, HF)
         g = nodal.smoothing * nodal.shear[a]
         for p in range(k):
             for q in range(k):

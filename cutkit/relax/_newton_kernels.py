@@ -163,11 +163,18 @@ def stress_hessian(F, mu, lam, project, P, HF):
             HF[p, q] = w * C[p // 3, p % 3] * C[q // 3, q % 3]
         HF[p, p] += mu
     add_det_hessian(F, s, HF)
+    project_hf(F, mu, w, s, project, HF)
+    return J
+
+
+@njit(cache=True, nogil=True)
+def project_hf(F, mu, w, s, project, HF):
+    """Project HF = mu I + w vec(cof F) vec(cof F)^T + s d2J/dF2 (9, 9) in place as ``project`` says
+    (:data:`EXACT` ... :data:`ABSOLUTE_EIGH`); one with a Cholesky factor is left as it is."""
     if (project == CLAMP or project == ABSOLUTE) and not _positive_definite(HF):
         project_stress_hessian(F, mu, w, s, float(project), HF)
     elif project == CLAMP_EIGH or project == ABSOLUTE_EIGH:
         _project_eigh(HF, project - 2)
-    return J
 
 
 @njit(cache=True, nogil=True)
