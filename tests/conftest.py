@@ -1,8 +1,8 @@
 """Test-wide settings.
 
-The suite runs on every core (``-n auto --dist loadgroup`` in pyproject.toml):
-a test file with module-scoped fixtures is one group, so they are built once,
-and every other test goes to whichever worker is free.  The session's demo
+The suite runs on every core (``-n auto --dist loadfile`` in pyproject.toml):
+each test file runs whole on one worker, so its module fixtures are built
+once.  The session's demo
 knee is built once for all workers: the first to need it builds it under a
 file lock in the run's shared temporary folder, the others read it there.
 Each worker gives numba an equal share of the cores (at least one thread);
@@ -20,6 +20,8 @@ def pytest_configure(config):
         # a worker's environment says COLUMNS=80; the commands' output is piped in the tests,
         # where tables are printed whole (cutkit.cli._ui), as in a run without workers
         os.environ.pop("COLUMNS", None)
+    if hasattr(config.option, "loadscopereorder"):
+        config.option.loadscopereorder = False  # the order of pytest_collection_modifyitems stands
     workers = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1"))
     if workers > 1:
         import numba
@@ -28,25 +30,32 @@ def pytest_configure(config):
 
 
 def pytest_collection_modifyitems(config, items):
-    """xdist groups (one per test file with module fixtures); the demo knee's single tests last.
+    """The order the workers take the test files in (``--dist loadfile``: a file runs whole on one
+    worker, so a module fixture is built once).
 
-    xdist hands out the groups first, largest first, then the single tests in
-    this order.  The first group that reads the demo knee builds it (about a
-    minute on two cores, longer while numba compiles); a single test that
-    read it early would hold the other worker waiting for that build, so the
-    single tests that read it come after all the others."""
-    module_fixtures = {}
+    The file that builds the demo knee first (about a minute on two cores), then the files with
+    slow tests, heaviest first, then the other files that read the knee (built by then), then the
+    rest, which even out the workers' ends.  xdist keeps this order (its reordering by the
+    number of tests is switched off in :func:`pytest_configure`)."""
+    files = {}
     for item in items:
-        if item.path not in module_fixtures:
-            module_fixtures[item.path] = 'scope="module"' in item.path.read_text()
-        if module_fixtures[item.path]:
-            item.add_marker(pytest.mark.xdist_group(item.path.name))
+        f = files.setdefault(item.path, {"slow": 0, "knee": False, "first": len(files)})
+        f["slow"] += item.get_closest_marker("slow") is not None
+        f["knee"] |= "demo_knee" in item.fixturenames or item.get_closest_marker("knee") is not None
 
-    def knee_single(item):
-        knee = "demo_knee" in item.fixturenames or item.get_closest_marker("knee") is not None
-        return knee and not module_fixtures[item.path]
+    def rank(item):
+        f = files[item.path]
+        if item.path.name == KNEE_FIRST:
+            return (0, 0, f["first"])
+        if f["knee"]:
+            return (2, 0, f["first"])
+        return (1, -f["slow"], f["first"]) if f["slow"] else (3, 0, f["first"])
 
-    items.sort(key=knee_single)  # stable: the rest keeps the files' order
+    items.sort(key=rank)  # stable: each file keeps its tests' order
+
+
+#: The test file run first: its module fixture builds the demo knee, then simulates on it.
+KNEE_FIRST = "test_knee_tissue.py"
 
 
 @pytest.fixture(autouse=True)
