@@ -36,7 +36,8 @@ import numpy as np
 from numba import njit
 
 from cutkit.relax._elastic_kernels import barrier
-from cutkit.relax._newton_kernels import _cofactor, _deformation, add_det_hessian, project_hf
+from cutkit.relax._eigen_kernels import _cofactor
+from cutkit.relax._newton_kernels import _deformation, add_det_hessian, project_hf
 
 #: Per node: natural volume V_a (n,), bulk weight kv_a (n,) (N mm: sum V_e K_e / 4),
 #: the tets around it ``node_ptr`` (n + 1,) int64 / ``node_tets`` (4m,) int64 with their corners

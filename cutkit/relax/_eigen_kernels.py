@@ -198,12 +198,14 @@ def symmetric_eigen3(A, lam, Q):
 
 @njit(cache=True, nogil=True)
 def _cofactor(F, C):
-    """C = cof F (3, 3): its columns are cross products of F's columns."""
+    """C = cof F = dJ/dF (3, 3): its columns are cross products of F's columns; returns J = det F.
+    (The one copy: the Newton and ANP kernels import it.)"""
     for c in range(3):
         c1, c2 = (c + 1) % 3, (c + 2) % 3
         C[0, c] = F[1, c1] * F[2, c2] - F[2, c1] * F[1, c2]
         C[1, c] = F[2, c1] * F[0, c2] - F[0, c1] * F[2, c2]
         C[2, c] = F[0, c1] * F[1, c2] - F[1, c1] * F[0, c2]
+    return F[0, 0] * C[0, 0] + F[1, 0] * C[1, 0] + F[2, 0] * C[2, 0]
 
 
 @njit(cache=True, nogil=True, inline="always")

@@ -34,7 +34,7 @@ from collections import namedtuple
 import numpy as np
 from numba import njit, prange
 
-from cutkit.relax._eigen_kernels import project_stress_hessian
+from cutkit.relax._eigen_kernels import _cofactor, project_stress_hessian
 from cutkit.relax._elastic_kernels import barrier
 
 #: The sparsity pattern of the global matrix: node rows ``node_ptr`` (n + 1,) int64 and their
@@ -81,17 +81,6 @@ def _deformation(x, el, t, B, F):
             for j in range(4):
                 acc += x[el.tets[t, j], r] * B[j, c]
             F[r, c] = acc
-
-
-@njit(cache=True, nogil=True)
-def _cofactor(F, C):
-    """C = cof F = dJ/dF: its columns are cross products of F's columns; returns J = det F."""
-    for c in range(3):
-        c1, c2 = (c + 1) % 3, (c + 2) % 3
-        C[0, c] = F[1, c1] * F[2, c2] - F[2, c1] * F[1, c2]
-        C[1, c] = F[2, c1] * F[0, c2] - F[0, c1] * F[2, c2]
-        C[2, c] = F[0, c1] * F[1, c2] - F[1, c1] * F[0, c2]
-    return F[0, 0] * C[0, 0] + F[1, 0] * C[1, 0] + F[2, 0] * C[2, 0]
 
 
 @njit(cache=True, nogil=True)
