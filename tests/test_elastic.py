@@ -428,3 +428,38 @@ def test_make_room_matches_the_twin():
     assert KA.make_room(adj2, cap2, corners, used, 8, want[3] - 1) == -want[3] - 1
     np.testing.assert_array_equal(adj2.start, start)
     np.testing.assert_array_equal(cap2, capacity)
+
+
+def test_rows_reserved_before_the_elements_are_the_rows_laid_out_after():
+    # a rebase lays the rows out in sweep order before adding its elements (reserve_rows); the
+    # pool must then hold what adding first and laying out afterwards (lay_out_rows) gives
+    model = block(prestrain=0.05, shape=(4, 3, 2))
+    built = build_element_model(model)
+    fixed = np.zeros((model.n_points, 3), bool)
+    fixed[::7] = True  # held nodes are not swept: their rows go after the colour classes
+    mat = dict(mu=built.mu[:built.n_elements], lam=built.lam[:built.n_elements], density=np.full(model.n_tets, 1e-6))
+
+    def fresh():
+        em = elastic.ElementModel.empty(model.n_points, model.n_tets)
+        em.fixed[:] = fixed
+        em.colour[:] = built.colour
+        return em
+
+    after = fresh()
+    after.add_elements(model.points, model.tets, mat["mu"], mat["lam"], mat["density"])
+    after.lay_out_rows()
+    before = fresh()
+    before.reserve_rows(model.tets)
+    before.add_elements(model.points, model.tets, mat["mu"], mat["lam"], mat["density"])
+    assert before.adj_used == after.adj_used
+    for name in ("adj_start", "adj_capacity", "adj_degree", "masses"):
+        assert np.array_equal(getattr(before, name), getattr(after, name)), name
+    used = after.adj_used
+    for name in elastic.ADJACENCY_POOL:
+        assert np.array_equal(getattr(before, name)[:used], getattr(after, name)[:used]), name
+    assert all(np.array_equal(a, b) for a, b in zip(before.colour_classes(), after.colour_classes()))
+    with pytest.raises(ValueError, match="without elements"):
+        before.reserve_rows(model.tets)
+    uncoloured = elastic.ElementModel.empty(model.n_points, model.n_tets)
+    with pytest.raises(ValueError, match="coloured"):
+        uncoloured.reserve_rows(model.tets)

@@ -563,12 +563,12 @@ class ElasticTissue(TissueBase):
         self.n_orig_tets = m
         n = old.n_nodes
         em = ElementModel.empty(n, cm._tets.shape[0])
-        em.add_elements(cm._X[:n], cm.orig_tets, self.mu, self.lam, self.density, self.prestrain, self.fibre,
-                        ids=np.arange(m))
         em.damping[:] = old.damping
         em.fixed[:] = old.fixed
         em.colour[:] = old.colour  # the same tets on the same nodes: the colouring stays valid
         em.element, em.deviatoric_smoothing = old.element, old.deviatoric_smoothing
-        em.lay_out_rows()
+        em.reserve_rows(cm.orig_tets)  # the rows in sweep order before they are filled: no copy after
+        em.add_elements(cm._X[:n], cm.orig_tets, self.mu, self.lam, self.density, self.prestrain, self.fibre,
+                        ids=np.arange(m))
         self.em = em
         self._newton = self._newton_solver()
