@@ -1,0 +1,101 @@
+"""The rebase at a stroke's end on a cut model: its wall time, and how it splits between its parts.
+
+Usage: python benchmarks/rebase.py --json --model knee.h5 [--repeat 3]
+
+Runs ``simulate`` on the shipped incision (``sample_volumes/incision.csv``) with the blade lifted
+out along its axis at the end, so the stroke ends and the session rebases (the rebase a live
+session runs in its own thread while the next stroke's poses wait), then rebases the same session
+``--repeat`` times more (each a full rebase of the same mesh, without the cut's sub-tets).
+Reports, per rebase, the wall time of :meth:`Session.rebase` and of its parts: the cut mesh's
+(``CutMesh.rebase``: a fresh cut state, its faces, edges and twins), the tissue's (the element
+model built again on the new numbering; the default element tissue) and the rest (surface collision, hierarchies, hooks).
+Set ``NUMBA_NUM_THREADS`` as the run to compare with; run two commits back to back.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+
+def _timed(cls, name: str, log: list):
+    """Wrap ``cls.name`` so that each call appends its wall time (s) to ``log``."""
+    original = getattr(cls, name)
+
+    def timed(self, *a, **k):
+        t0 = time.perf_counter()
+        out = original(self, *a, **k)
+        log.append(time.perf_counter() - t0)
+        return out
+
+    setattr(cls, name, timed)
+
+
+def lifted_incision(path: str, out_mm: float = 15.0, lift_s: float = 0.2):
+    """The incision of ``path`` with one more row: the blade drawn back ``out_mm`` along its axis."""
+    from cutkit.cutting.trajectory import Trajectory, read_trajectory
+
+    cut = read_trajectory(path)
+    out = cut.tip[-1] - out_mm * cut.a[-1]
+    return Trajectory(np.append(cut.t, cut.t[-1] + lift_s), np.vstack([cut.tip, out]), np.vstack([cut.a, cut.a[-1]]),
+                      np.vstack([cut.n, cut.n[-1]]), blade_length=cut.blade_length, blade_breadth=cut.blade_breadth)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--model", required=True, help="A model file (the demo knee: cutkit-demo/knee.h5).")
+    ap.add_argument("--trajectory", default=str(Path(__file__).resolve().parents[1] / "sample_volumes/incision.csv"))
+    ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--json", action="store_true")
+    args = ap.parse_args()
+
+    from cutkit.cutting.cutmesh import CutMesh
+    from cutkit.io.model_h5 import read_model
+    from cutkit.simulate import SimulateOptions, simulate
+    from cutkit.simulate.elastic_tissue import ElasticTissue
+    from cutkit.simulate.session import Session
+
+    logs = {"total": [], "cut_mesh": [], "tissue": []}
+    sessions = []
+    original = Session.rebase
+
+    def rebase(self):
+        sessions.append(self)
+        t0 = time.perf_counter()
+        out = original(self)
+        logs["total"].append(time.perf_counter() - t0)
+        return out
+
+    Session.rebase = rebase
+    _timed(CutMesh, "rebase", logs["cut_mesh"])
+    _timed(ElasticTissue, "rebase", logs["tissue"])
+    model = read_model(args.model)
+    with tempfile.TemporaryDirectory() as tmp:
+        simulate(model, lifted_incision(args.trajectory), Path(tmp) / "out",
+                 SimulateOptions(frames=False, hold_s=0.05, write_model=False))
+        if not sessions:
+            raise SystemExit("the stroke did not end inside the run: no rebase to time")
+        session = sessions[0]
+        first = {k: v[0] for k, v in logs.items() if v}
+        for _ in range(args.repeat):
+            session.rebase()
+    again = {k: v[-args.repeat:] for k, v in logs.items()}
+    rest = [t - c - s for t, c, s in zip(again["total"], again["cut_mesh"], again["tissue"])]
+    result = {"model": args.model, "tets": int(session.tis.cm.orig_tets.shape[0]), "tissue": type(session.tis).__name__,
+              "first_rebase_s": first,
+              "rebase_s": {k: float(np.median(v)) for k, v in again.items()} | {"rest": float(np.median(rest))},
+              "rebase_s_all": again}
+    if args.json:
+        print(json.dumps(result))
+    else:
+        for k, v in result["rebase_s"].items():
+            print(f"rebase.{k:10s} {v * 1e3:8.1f} ms (median of {args.repeat})")
+
+
+if __name__ == "__main__":
+    main()
