@@ -18,6 +18,11 @@ Three activities, as in the paper's Fig. 1 (section 2):
 Every session records the poses it acted on (``trajectory.csv``),
 ``forces.csv``, ``summary.json`` and the cut ``model.h5``; ``cutkit
 simulate model.h5 --trajectory OUT/trajectory.csv`` replays it.
+
+On a :class:`~cutkit.simulate.clock.SteppedClock` (``clock=``) the loop
+does each tick whole before the clock moves, the relaxation in its own
+thread and a stroke's rebase waited for: the session then cuts what that
+replay cuts, to the bit (docs/live.md, "The stepped clock").
 """
 
 from __future__ import annotations
