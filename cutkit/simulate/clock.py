@@ -58,6 +58,9 @@ class SteppedClock:
     step : float
         Seconds per loop pass; the haptic period (1 ms) by default, so that
         each pass is one tick of the force model, as in ``cutkit simulate``.
+        A pass is one force-model tick whatever the step: with another step
+        the session is as deterministic, but the force model no longer runs
+        at 1 kHz of this clock and the replay of the recording differs.
 
     Attributes
     ----------
