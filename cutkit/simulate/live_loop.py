@@ -9,9 +9,9 @@ from pathlib import Path
 
 import numpy as np
 
+from cutkit.errors import InputError
 from cutkit.interrupts import check_stop, safe_points
 from cutkit.scalpel import FREE
-from cutkit.errors import InputError
 from cutkit.simulate.clock import as_clock
 from cutkit.simulate.live_parts import MAX_CATCH_UP_TICKS, MirroredForceModel, RelaxThread, TickMeter
 from cutkit.simulate.live_rebase import CATCH_UP_BUDGET_S, BackgroundRebase, StillPicture
