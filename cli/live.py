@@ -11,9 +11,10 @@ from cutkit.cli._ui import overwrite_option
               help="Recording folder: trajectory.csv, forces.csv, summary.json, model.h5.")
 @overwrite_option
 @click.option("--haptics", metavar="HOST:PORT", help="Poses from a device through a running `cutkit haptics serve`.")
-@click.option("--trajectory", type=click.Path(dir_okay=False), help="Poses from a trajectory file, on the wall clock.")
+@click.option("--trajectory", type=click.Path(dir_okay=False),
+              help="Poses from a trajectory file, on the session's clock (--clock).")
 @click.option("--speed", default=1.0, show_default=True, type=click.FloatRange(min=1e-3),
-              help="Trajectory seconds per wall second (--trajectory).")
+              help="Trajectory seconds per second of the session's clock (--trajectory).")
 @click.option("--igtl", "igtl_port", type=click.IntRange(1, 65535), default=None,
               help="Poses from OpenIGTLink TRANSFORMs on this port (3D Slicer: 18944); the tissue goes back as POLYDATA.")
 @click.option("--igtl-device", default="ScalpelToReference", show_default=True,
@@ -34,6 +35,9 @@ from cutkit.cli._ui import overwrite_option
 @click.option("--no-window", is_flag=True, help="No window (needs no display); without a pose option the mouse needs one.")
 @click.option("--fps", default=30.0, show_default=True, type=click.FloatRange(min=1.0), help="Frames per second to the views.")
 @click.option("--seconds", type=click.FloatRange(min=0.0), default=None, help="End after this many seconds.")
+@click.option("--clock", type=click.Choice(["wall", "stepped"]), default="wall", show_default=True,
+              help="The session's clock: the wall, or stepped (--trajectory only): one haptic tick per loop pass, "
+                   "each done whole, so the session cuts what `cutkit simulate` replaying its recording cuts.")
 @click.option("--until-idle", type=click.FloatRange(min=0.0), default=None,
               help="End once the tissue has relaxed this many seconds of its own time past the last pose.")
 @click.option("--geometry-rate", "geometry_rate_hz", default=50.0, show_default=True, type=float,
@@ -45,7 +49,7 @@ from cutkit.cli._ui import overwrite_option
               help="How the element model's relaxation steps are solved: projected Newton or vertex block "
                    "descent [default: vbd].")
 def command(model, out_dir, overwrite, haptics, trajectory, speed, igtl_port, igtl_device, camera, no_window, fps,
-            seconds, until_idle, geometry_rate_hz, blade_length, material_model, solver, **igtl_opts):
+            seconds, clock, until_idle, geometry_rate_hz, blade_length, material_model, solver, **igtl_opts):
     """Cut MODEL live; Ctrl-C (or closing the window) ends the session, its recording stays valid."""
     from cutkit.cli._ui import console
     from cutkit.errors import InputError
@@ -60,6 +64,8 @@ def command(model, out_dir, overwrite, haptics, trajectory, speed, igtl_port, ig
         raise InputError("give at most one of --haptics, --trajectory, --igtl")
     if no_window and haptics is None and trajectory is None and igtl_port is None:
         raise InputError("--no-window needs a pose source: --haptics, --trajectory or --igtl (the mouse needs the window)")
+    if clock == "stepped" and trajectory is None:
+        raise InputError("--clock stepped needs --trajectory: a device, 3D Slicer and the mouse move on the wall clock")
     igtl = _igtl_options(igtl_port, **igtl_opts)
     opt = SimulateOptions(geometry_rate_hz=geometry_rate_hz, blade_length=blade_length,
                           material_model=material_model, frames=False, solver=solver)
@@ -68,11 +74,18 @@ def command(model, out_dir, overwrite, haptics, trajectory, speed, igtl_port, ig
     tet_model = read_model(model)
     preflight(tet_model, str(model))
     clear_outputs(earlier)
-    source, views, closers = _open(haptics, trajectory, speed, igtl_port, igtl_device, no_window, igtl, camera)
+    session_clock = None
+    if clock == "stepped":
+        from cutkit.simulate.clock import SteppedClock
+
+        session_clock = SteppedClock()
+    source, views, closers = _open(haptics, trajectory, speed, igtl_port, igtl_device, no_window, igtl, camera,
+                                   session_clock)
     try:
         with folder_guard(out_dir):
             summary = run_live(tet_model, source, views, out_dir, opt, max_seconds=seconds, fps=fps,
-                               until_idle_s=until_idle, model_path=str(model), on_start=_started)
+                               until_idle_s=until_idle, model_path=str(model), on_start=_started,
+                               clock=session_clock)
     finally:
         source.close()
         for v in views:
@@ -138,8 +151,8 @@ def _show_igtl_log() -> None:
         log.setLevel(logging.INFO)
 
 
-def _open(haptics, trajectory, speed, igtl_port, igtl_device, no_window, igtl, camera="follow"):
-    """The pose source, the views and what else to close."""
+def _open(haptics, trajectory, speed, igtl_port, igtl_device, no_window, igtl, camera="follow", clock=None):
+    """The pose source, the views and what else to close; a trajectory on ``clock`` when one is given."""
     views, closers = [], []
     mouse = None
     if haptics is not None:
@@ -150,7 +163,7 @@ def _open(haptics, trajectory, speed, igtl_port, igtl_device, no_window, igtl, c
     elif trajectory is not None:
         from cutkit.live import TrajectoryPoseSource
 
-        source = TrajectoryPoseSource(trajectory, speed=speed)
+        source = TrajectoryPoseSource(trajectory, speed=speed, **({} if clock is None else {"clock": clock}))
     elif igtl_port is not None:
         from cutkit.live.igtl import IGTLEndpoint, IGTLPolyDataView, IGTLPoseSource
 

@@ -108,7 +108,7 @@ def make_pose(t, tip, a, n, buttons: int = 0) -> Pose:
 
 # ---------------------------------------------------------------------------- trajectory
 class TrajectoryPoseSource:
-    """Replay a trajectory on the wall clock.
+    """Replay a trajectory on the wall clock (or on a session's stepped clock).
 
     The clock starts at the first ``poll()`` (or at ``start``); each poll
     returns the trajectory's pose at the elapsed time (``Trajectory.pose_at``,
@@ -122,8 +122,9 @@ class TrajectoryPoseSource:
     speed : float
         Trajectory seconds per wall second.
     loop : bool
-    clock : callable
-        Wall clock, s (``time.time``); tests pass their own.
+    clock : callable or clock object
+        Seconds now (``time.time``); or a session clock with ``now()``
+        (:class:`~cutkit.simulate.clock.SteppedClock`: give the session the same one).
     start : float, optional
         Wall time of the trajectory's first row; default: the first poll.
     """
@@ -137,7 +138,7 @@ class TrajectoryPoseSource:
             raise InputError(f"replay speed must be positive, got {speed}")
         self.speed = float(speed)
         self.loop = bool(loop)
-        self.clock = clock
+        self.clock = clock.now if callable(getattr(clock, "now", None)) else clock
         self.start = start
         self.finished = False
         self._last = None

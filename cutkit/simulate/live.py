@@ -1,4 +1,4 @@
-"""A live session: a :class:`~cutkit.simulate.session.Session` on the wall clock.
+"""A live session: a :class:`~cutkit.simulate.session.Session` on the wall clock (or a stepped one).
 
 Three activities, as in the paper's Fig. 1 (section 2):
 
@@ -18,6 +18,11 @@ Three activities, as in the paper's Fig. 1 (section 2):
 Every session records the poses it acted on (``trajectory.csv``),
 ``forces.csv``, ``summary.json`` and the cut ``model.h5``; ``cutkit
 simulate model.h5 --trajectory OUT/trajectory.csv`` replays it.
+
+On a :class:`~cutkit.simulate.clock.SteppedClock` (``clock=``) the loop
+does each tick whole before the clock moves, the relaxation in its own
+thread and a stroke's rebase waited for: the session then cuts what that
+replay cuts, to the bit (docs/live.md, "The stepped clock").
 """
 
 from __future__ import annotations
@@ -34,7 +39,7 @@ __all__ = ["KEEP_ALIVE_S", "MAX_CATCH_UP_TICKS", "MirroredForceModel", "RelaxThr
 
 def run_live(model, source, views, out_dir, opt=None, *, max_seconds: float | None = None, fps: float = 30.0,
              idle_end_s: float = 0.5, stop: threading.Event | None = None, model_path: str | None = None,
-             on_frame=None, until_idle_s: float | None = None, on_start=None) -> dict:
+             on_frame=None, until_idle_s: float | None = None, on_start=None, clock=None) -> dict:
     """Cut ``model`` live with the poses of ``source``; show it in ``views``; record into ``out_dir``.
 
     Parameters
@@ -61,6 +66,11 @@ def run_live(model, source, views, out_dir, opt=None, *, max_seconds: float | No
         Called after each frame went to the views.
     on_start : callable(), optional
         Called once the model has settled and the loop starts.
+    clock : WallClock or SteppedClock, optional
+        The time the session reads (:mod:`cutkit.simulate.clock`); the wall clock by default.
+        On a :class:`~cutkit.simulate.clock.SteppedClock` (given to the source too) every loop
+        pass is one haptic tick done whole: ``max_seconds``, ``idle_end_s`` and the rates are
+        in its seconds, and the session cuts what ``cutkit simulate`` replaying its recording cuts.
 
     Returns
     -------
@@ -70,12 +80,12 @@ def run_live(model, source, views, out_dir, opt=None, *, max_seconds: float | No
     with one_blas_thread():  # the same sums on every machine: docs/relaxation.md
         return _run_live(model, source, views, out_dir, opt, max_seconds=max_seconds, fps=fps, idle_end_s=idle_end_s,
                          stop=stop, model_path=model_path, on_frame=on_frame, until_idle_s=until_idle_s,
-                         on_start=on_start)
+                         on_start=on_start, clock=clock)
 
 
 def _run_live(model, source, views, out_dir, opt, *, max_seconds, fps, idle_end_s, stop, model_path, on_frame,
-              until_idle_s, on_start) -> dict:
+              until_idle_s, on_start, clock) -> dict:
     """:func:`run_live` with BLAS on one thread."""
-    loop = LiveLoop(model, source, views, Path(out_dir), opt, fps=fps, model_path=model_path)
+    loop = LiveLoop(model, source, views, Path(out_dir), opt, fps=fps, model_path=model_path, clock=clock)
     return loop.run(max_seconds=max_seconds, idle_end_s=idle_end_s, stop=stop, on_frame=on_frame,
                     until_idle_s=until_idle_s, on_start=on_start)

@@ -9,8 +9,10 @@ from pathlib import Path
 
 import numpy as np
 
+from cutkit.errors import InputError
 from cutkit.interrupts import check_stop, safe_points
 from cutkit.scalpel import FREE
+from cutkit.simulate.clock import as_clock
 from cutkit.simulate.live_parts import MAX_CATCH_UP_TICKS, MirroredForceModel, RelaxThread, TickMeter
 from cutkit.simulate.live_rebase import CATCH_UP_BUDGET_S, BackgroundRebase, StillPicture
 from cutkit.simulate.run import HAPTIC_DT, RATE_WARN_FRACTION, SimulateOptions
@@ -92,10 +94,15 @@ class OuterBoundary:
 
 
 class LiveLoop:
-    """One live session: the session, its threads, its views and its recording."""
+    """One live session: the session, its threads, its views and its recording.
+
+    ``clock`` (:mod:`cutkit.simulate.clock`) is the time the session reads:
+    the wall clock by default; on a :class:`~cutkit.simulate.clock.SteppedClock`
+    each pass of the loop is one haptic tick done whole (:meth:`_stepped_loop`).
+    """
 
     def __init__(self, model, source, views, out_dir: Path, opt: SimulateOptions | None, fps: float = 30.0,
-                 model_path: str | None = None):
+                 model_path: str | None = None, clock=None):
         from cutkit.cutting.trajectory import DEFAULT_BLADE_BREADTH, DEFAULT_BLADE_LENGTH
         from cutkit.live.sources import HapticsPoseSource
         from cutkit.simulate.record import ForceRecorder, NodeColours, PoseRecorder
@@ -103,13 +110,17 @@ class LiveLoop:
 
         self.opt = opt or SimulateOptions(frames=False)
         self.opt.check()
+        self.clock = as_clock(clock)
+        self.stepped = bool(getattr(self.clock, "stepped", False))
+        self.sleep = getattr(self.clock, "sleep", time.sleep)
+        self.service = isinstance(source, HapticsPoseSource)
+        _check_stepped_source(self.clock, self.stepped, source, self.service)
         self.out_dir, self.source, self.views, self.model_path = out_dir, source, list(views), model_path
         blade_length = self.opt.blade_length or DEFAULT_BLADE_LENGTH
         self.session = s = Session(model, self.opt, blade_length, DEFAULT_BLADE_BREADTH)
         out_dir.mkdir(parents=True, exist_ok=True)  # once the model is known to run
-        self.service = isinstance(source, HapticsPoseSource)
         self.poses = PoseRecorder(blade_length, DEFAULT_BLADE_BREADTH)
-        self.meter = TickMeter(source, poses=self.poses) if self.service else None
+        self.meter = TickMeter(source, poses=self.poses, clock=self.clock.now) if self.service else None
         if self.service:
             # the cut follows an in-process copy of the service's model, ticked with every device pose
             s.scalpel = MirroredForceModel(source, DEFAULT_BLADE_BREADTH)
@@ -122,7 +133,8 @@ class LiveLoop:
         self.boundary = OuterBoundary(s.tis.cm, s.contact.faces, s.contact.face_tet)
         s.on_rebase.append(self.boundary.rebase)
         # a stroke's rebase runs off this thread; the poses meanwhile are held, then ticked and cut
-        self.rebaser = BackgroundRebase(s)
+        # (on a stepped clock it is waited for at once: _start_rebase)
+        self.rebaser = BackgroundRebase(s, clock=self.clock.now)
         s.rebase_runner = self._start_rebase
         self.still: StillPicture | None = None  # the tissue drawn while a rebase runs
         self.held: collections.deque = collections.deque()  # in-process ticks: poses not yet ticked
@@ -151,14 +163,15 @@ class LiveLoop:
         # before the clock starts, kernels not yet loaded load (or compile) here, not in the
         # middle of the first cut: a tiny cut with this material model, one step of this tissue
         warm_up(outputs=False, material_model=s.material_model)
-        s.relax.advance(np.zeros((s.tis.n_nodes, 3)), s.tis.time + chunk)
-        self.t0 = time.perf_counter() - s.tis.time
+        if not self.stepped:  # a stepped session's tissue starts where cutkit simulate's does
+            s.relax.advance(np.zeros((s.tis.n_nodes, 3)), s.tis.time + chunk)
+        self.t0 = self.clock.now() - s.tis.time
         self._frame(None)  # views build their windows before the clock starts
         self.frame_s.clear()
-        self.t0 = time.perf_counter() - s.tis.time
-        clock = self.now
-        self.relax = RelaxThread(s, clock, chunk)
-        self.relax.start()
+        self.t0 = self.clock.now() - s.tis.time
+        self.relax = RelaxThread(s, self.now, chunk)
+        if not self.stepped:  # stepped: the loop relaxes in its own thread (RelaxThread.relax_here)
+            self.relax.start()
         self.interrupted = False
         self.on_frame = on_frame
         # Ctrl-C and SIGTERM stop the loop between two passes; one that comes while the
@@ -200,9 +213,12 @@ class LiveLoop:
         return None
 
     def now(self) -> float:
-        return time.perf_counter() - self.t0
+        """Session seconds: the clock's time since the loop started, plus the tissue's time then."""
+        return self.clock.now() - self.t0
 
     def _loop(self, max_seconds, idle_end_s, stop, on_frame, until_idle_s) -> None:
+        if self.stepped:
+            return self._stepped_loop(max_seconds, idle_end_s, stop, on_frame, until_idle_s)
         next_geo = next_frame = next_tick = 0.0
         finished_at = None
         while not stop.is_set():
@@ -237,17 +253,69 @@ class LiveLoop:
                 self._frame(on_frame)
                 if due:  # a cut's extra frame leaves the frame clock as it is
                     next_frame = max(next_frame + self.frame_period, self.now())
-            # idle: the tissue has relaxed until_idle_s of its own time past the last pose (on a
-            # slow machine the tissue lags the wall clock; the recording should not depend on it)
-            idle = (until_idle_s is not None and self.pose is not None
-                    and self.session.tis.time - self.pose[3] > until_idle_s
-                    and not (self.meter is not None and self.meter.queue))
-            behind = self.rebaser.busy or self.held
-            if (self.source.finished or idle) and not behind:
+            if self._finished(until_idle_s):
                 finished_at = now if finished_at is None else finished_at
                 if now - finished_at >= idle_end_s:
                     break
-            time.sleep(LOOP_IDLE_S)
+            self.sleep(LOOP_IDLE_S)
+
+    def _finished(self, until_idle_s) -> bool:
+        """The source is finished, or idle: the tissue has relaxed ``until_idle_s`` of its own time past
+        the last pose (on a slow machine the tissue lags the wall clock; the recording should not depend
+        on it); and no pose waits for a rebase."""
+        idle = (until_idle_s is not None and self.pose is not None
+                and self.session.tis.time - self.pose[3] > until_idle_s
+                and not (self.meter is not None and self.meter.queue))
+        behind = self.rebaser.busy or self.held
+        return bool((self.source.finished or idle) and not behind)
+
+    def _stepped_loop(self, max_seconds, idle_end_s, stop, on_frame, until_idle_s) -> None:
+        """The loop on a stepped clock: each pass is one tick of the clock, done whole before it moves.
+
+        Per pass, in ``cutkit simulate``'s order (``_Replay._ticks``): the
+        source's pose at the pass's time, one force-model tick with it; every
+        ``geo_every``-th pass the cut (a stroke's rebase waited for) and the
+        relaxation to the pass's time in this thread; frames on the frame
+        clock.  Nothing depends on how long any of it took.
+        """
+        s = self.session
+        next_frame = 0.0
+        finished_at = None
+        k = 0
+        while not stop.is_set():
+            check_stop()  # the safe point: no tick, cut or frame is half done here
+            now = self.now()
+            if (max_seconds is not None and now >= max_seconds) or self.view_closed:
+                break
+            pose = self.source.poll()
+            if pose is not None:
+                self._on_pose(pose)
+            if self.pose is not None:
+                tip, a, n, _ = self.pose
+                out = s.haptic_tick(tip, a, n)
+                self.forces.add(now, s.code, out, tip, s.scalpel.proxy)
+            if k % self.geo_every == 0:
+                self._stepped_geometry(now)
+            if now >= next_frame or self.pending_cut:
+                self._frame(on_frame)
+                next_frame = max(next_frame + self.frame_period, now) if now >= next_frame else next_frame
+            if self._finished(until_idle_s):
+                finished_at = now if finished_at is None else finished_at
+                if now - finished_at >= idle_end_s:
+                    break
+            self.clock.advance()
+            k += 1
+
+    def _stepped_geometry(self, now: float) -> None:
+        """The cut at the current pose, then the relaxation to ``now`` (session seconds) in this thread."""
+        s = self.session
+        before = s.tets_cut, s.tis.n_nodes
+        if self.pose is not None:
+            self.cut_tip = np.array(self.pose[0], np.float64)
+        self.relax.f_ext = s.geometry_update()  # a stroke's rebase runs here, waited for (_start_rebase)
+        if (s.tets_cut, s.tis.n_nodes) != before and self.pose is not None:
+            self.pending_cut.append(self.pose[3])
+        self.relax.relax_here(now)
 
     def _on_pose(self, pose) -> None:
         arrival = self.now()
@@ -267,6 +335,9 @@ class LiveLoop:
         self.still = StillPicture(points, self.colours.get(points.shape[0]), s.tets_cut)
         self.tets_at_rebases.append(s.tets_cut)
         self.rebaser.start()
+        if self.stepped:  # in step with the loop: the next pass sees the rebased tissue, as offline
+            self.rebaser.wait()
+            self._rebased()
 
     def _rebased(self) -> None:
         """The rebase is done: the poses that came meanwhile are ticked and cut next."""
@@ -468,7 +539,8 @@ class LiveLoop:
         lat = np.array(self.latency) * 1e3
         f = np.diff(np.array(self.frame_s))
         rebase_s = self.rebaser.wall_s
-        stats = {"source": type(self.source).__name__, "wall_s": self.loop_wall, "poses": len(self.poses.rows),
+        stats = {"source": type(self.source).__name__, "clock": type(self.clock).__name__,
+                 "wall_s": self.loop_wall, "poses": len(self.poses.rows),
                  "trajectory_recorded": recorded, "frames": self.frames,
                  "geometry_updates_skipped": self.geometry_skipped,
                  "fps": float(1.0 / f.mean()) if f.size else 0.0,
@@ -490,6 +562,20 @@ class LiveLoop:
         else:
             stats["haptic_hz"] = self.session.counts["haptic_ticks"] / wall
         return stats
+
+
+def _check_stepped_source(clock, stepped: bool, source, service: bool) -> None:
+    """A stepped session needs a source on its clock: not the haptics service (its own 1 kHz clock),
+    and a source with a ``clock`` (a TrajectoryPoseSource) given the session's."""
+    if not stepped:
+        return
+    if service:
+        raise InputError("a stepped clock cannot drive the haptics service, which ticks on its own clock: "
+                         "use the wall clock with --haptics")
+    own = getattr(source, "clock", None)
+    if own is not None and own != clock.now:
+        raise InputError(f"the pose source ({type(source).__name__}) reads another clock than the session's "
+                         "stepped clock: give it the same clock (clock=...)")
 
 
 __all__ = ["LiveLoop", "OuterBoundary"]

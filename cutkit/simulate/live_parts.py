@@ -75,10 +75,10 @@ class TickMeter:
     :class:`~cutkit.simulate.record.PoseRecorder`).  Each names the server tick that used it and the
     server's clock at that tick, so the loop's rate is ticks over server
     time, whatever frames this process missed; consecutive ticks give the
-    periods.
+    periods.  ``clock`` (seconds, the session clock's scale) stamps each pose's arrival.
     """
 
-    def __init__(self, source, capacity: int = 1 << 20, poses=None):
+    def __init__(self, source, capacity: int = 1 << 20, poses=None, clock=time.perf_counter):
         from cutkit.haptics import protocol as P
         from cutkit.haptics.client import decode_device_pose
 
@@ -99,7 +99,7 @@ class TickMeter:
                         # every pose the service's force model acted on, at its tick's time;
                         # the device frame's a is the trajectory's n and the other way round
                         tip, a, n = np.array(d.tip), np.array(d.n), np.array(d.a)
-                        self.queue.append((ts / 1e9, tip, a, n, time.perf_counter()))
+                        self.queue.append((ts / 1e9, tip, a, n, clock()))
                         if poses is not None:
                             poses.add(ts / 1e9, tip, a, n)
             return frames
@@ -128,6 +128,10 @@ class TickMeter:
 
 class RelaxThread(threading.Thread):
     """Relaxation on the wall clock in its own thread, one step per hold of the session's lock.
+
+    On a stepped clock the thread is not started: the session's loop calls
+    :meth:`relax_here` at each geometry update instead (docs/live.md, "The
+    stepped clock").
 
     Parameters
     ----------
@@ -163,7 +167,16 @@ class RelaxThread(threading.Thread):
         except BaseException as err:  # handed to the main loop, which raises it
             self.error = err
 
+    def relax_here(self, until: float) -> None:
+        """Relax to ``until`` (session seconds) in the caller's thread, with :attr:`f_ext`, and refit
+        the surface hierarchy while the blade is out: ``cutkit simulate``'s step after each cut."""
+        t1 = time.perf_counter()
+        self.session.relax_to(self.f_ext, until)
+        self.steps += 1
+        self.step_s.append(time.perf_counter() - t1)
+
     def halt(self) -> None:
         self.stop.set()
-        self.join(timeout=30.0)
+        if self.ident is not None:  # started (never on a stepped clock)
+            self.join(timeout=30.0)
 

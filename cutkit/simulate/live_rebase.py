@@ -55,6 +55,9 @@ class BackgroundRebase:
     Parameters
     ----------
     session : Session
+    clock : callable
+        Seconds now, the session clock's scale (``time.perf_counter`` by default): the
+        :attr:`windows`.
 
     Attributes
     ----------
@@ -63,13 +66,13 @@ class BackgroundRebase:
     wall_s : list of float
         Wall seconds of each rebase, waiting for the lock included.
     windows : list of (float, float)
-        ``time.perf_counter()`` at the start and the end of each rebase.
+        ``clock()`` at the start and the end of each rebase.
     error : BaseException or None
         What the last rebase raised (raised again by :meth:`done`).
     """
 
-    def __init__(self, session):
-        self.session = session
+    def __init__(self, session, clock=time.perf_counter):
+        self.session, self.clock = session, clock
         self.thread: threading.Thread | None = None
         self.error: BaseException | None = None
         self.wall_s: list[float] = []
@@ -88,15 +91,14 @@ class BackgroundRebase:
 
     def _run(self) -> None:
         s = self.session
-        t0 = time.perf_counter()
+        t0, w0 = self.clock(), time.perf_counter()
         try:
             with s.lock.urgent():
                 s.rebase()
         except BaseException as err:  # handed to the main loop by done()
             self.error = err
-        t1 = time.perf_counter()
-        self.wall_s.append(t1 - t0)
-        self.windows.append((t0, t1))
+        self.wall_s.append(time.perf_counter() - w0)
+        self.windows.append((t0, self.clock()))
 
     def done(self) -> bool:
         """True once a started rebase has finished (then no longer :attr:`busy`); raises its error."""
