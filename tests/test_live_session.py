@@ -134,6 +134,25 @@ def test_the_stepped_clock_ticks_whole_haptic_periods():
             SteppedClock(bad)
 
 
+def test_the_frame_clock_makes_up_a_late_frame_and_restarts_after_a_stall():
+    from cutkit.simulate.live_loop import LiveLoop
+
+    loop = LiveLoop.__new__(LiveLoop)  # the frame clock alone: no session behind it
+    loop.frame_period = 0.1
+    t = [0.0]
+    loop.now = lambda: t[0]
+    t[0] = 0.13  # the frame due at 0.1 drawn 30 ms late: the next stays on the schedule
+    assert loop._next_frame(0.1) == pytest.approx(0.2)
+    t[0] = 0.35  # a stall of more than a period: one period from now, not a burst of frames
+    assert loop._next_frame(0.1) == pytest.approx(0.45)
+    # every frame drawn 40 % of a period late: still ten frames a second over 100 s
+    due = 0.0
+    for _ in range(1000):
+        t[0] = due + 0.04
+        due = loop._next_frame(due)
+    assert due == pytest.approx(100.0)
+
+
 def test_ctrl_c_ends_the_session_with_a_valid_recording(model, tmp_path):
     out = tmp_path / "live"
     frames = []

@@ -252,7 +252,7 @@ class LiveLoop:
                 due = now >= next_frame
                 self._frame(on_frame)
                 if due:  # a cut's extra frame leaves the frame clock as it is
-                    next_frame = max(next_frame + self.frame_period, self.now())
+                    next_frame = self._next_frame(next_frame)
             if self._finished(until_idle_s):
                 finished_at = now if finished_at is None else finished_at
                 if now - finished_at >= idle_end_s:
@@ -434,6 +434,14 @@ class LiveLoop:
             self.pending_cut.append(self.pose[3])
         if s.scalpel.code == FREE:  # the hierarchy serves the entry test: refit to the relaxed surface
             s.refit()
+
+    def _next_frame(self, due: float) -> float:
+        """When the frame after the one due at ``due`` is due: one frame period later, so that a frame
+        drawn late is made up by the next one and the rate holds at ``fps``; more than a period behind
+        (a long cut step), one period from now instead of a burst of frames."""
+        now = self.now()
+        following = due + self.frame_period
+        return following if following >= now - self.frame_period else now + self.frame_period
 
     def _frame_stale(self) -> bool:
         """Whether the newest frame is older than :data:`PRE_CUT_FRAME_AGE` frame periods."""
