@@ -151,6 +151,8 @@ class ElasticTissue(TissueBase):
         if solver in ("newton", "hybrid"):
             self.counts["newton_iterations"] = 0
         self.step_log: dict[str, list] = {"iterations": [], "relative_residual": []}
+        #: seconds in each part of the hybrid's polishes (cutkit.relax.hybrid.TIMED)
+        self.polish_timings: dict[str, float] = {}
         if solver == "hybrid":
             self.step_log["polish_iterations"] = []
         self._newton = self._newton_solver()
@@ -160,16 +162,12 @@ class ElasticTissue(TissueBase):
         self._seeds: list[np.ndarray] = []
 
     def _newton_solver(self):
-        """A fresh :class:`~cutkit.relax.newton.NewtonSolver` of the element model (None for vbd;
-        local, :data:`cutkit.relax.hybrid.POLISH_RINGS`, for the hybrid's polish)."""
-        if self.solver == "vbd":
+        """A fresh :class:`~cutkit.relax.newton.NewtonSolver` of the element model (None for vbd and
+        the hybrid, whose polish keeps no pattern)."""
+        if self.solver != "newton":
             return None
         from cutkit.relax.newton import NewtonSolver
 
-        if self.solver == "hybrid":
-            from cutkit.relax.hybrid import POLISH_RINGS
-
-            return NewtonSolver(self.em, region_rings=POLISH_RINGS)
         return NewtonSolver(self.em, region_rings=NEWTON_REGION_RINGS)
 
     def _force_scale(self) -> float:
@@ -284,33 +282,40 @@ class ElasticTissue(TissueBase):
         return sweeps
 
     def _sweep_step(self, f_ext: np.ndarray, loaded: np.ndarray, atol: float, stop):
-        """One vertex block descent step (:func:`~cutkit.relax.vbd.local_step`); with the ``"hybrid"``
-        solver, a step that ends at its sweep cap unconverged (not stopped) is finished by
-        :func:`~cutkit.relax.hybrid.polish_step`.  Returns (info, true residual N); the polish's
-        Newton iterations go to ``step_log["polish_iterations"]``."""
+        """One vertex block descent step (:func:`~cutkit.relax.vbd.local_step`); returns (info, true
+        residual N).  With the ``"hybrid"`` solver, a step not stopped that the sweeps leave out of
+        balance (their own test failed at the cap, or the true residual is above ``atol``) is
+        finished by :meth:`_polish`."""
         seeds = np.concatenate([loaded, *self._seeds]) if self._seeds else loaded
         x0, v0 = self.state.positions.copy(), self.state.velocities.copy()
         info = local_step(self.em, self.state, self.step_s, f_ext, self.r2, seeds, atol=atol,
                           max_iterations=self.step_max_iterations, stop=stop)
-        polish = (self.solver == "hybrid" and info.taken and not info.converged
-                  and info.iterations >= self.step_max_iterations and not (stop is not None and stop[0]))
-        true_residual = self._true_residual(x0, v0, f_ext) if info.taken and not polish else 0.0
-        if self.solver != "hybrid" or not info.taken:
-            return info, true_residual
+        if not info.taken:
+            return info, 0.0
+        if self.solver != "hybrid":
+            return info, self._true_residual(x0, v0, f_ext)
+        r = self._residual(x0, v0, f_ext)
+        free = ~self.em.fixed & (self.em.adj_degree > 0)[:, None]
+        true_residual = float(np.linalg.norm(r[free]))
         polished = 0
-        if polish:
-            from cutkit.relax.hybrid import polish_step
-            from cutkit.relax.vbd import SolveInfo
-
-            p = polish_step(self.em, self.state, x0, v0, self.step_s, f_ext, atol=atol, solver=self._newton)
-            polished, true_residual = p.iterations, p.residual
-            info = SolveInfo(info.iterations, info.initial_residual, p.residual, p.converged, info.node_updates)
-            # each node's residual is what the next step's sweeps wake by (vbd.local_step)
-            r = self._residual(x0, v0, f_ext)
-            self.r2[:] = np.einsum("ij,ij->i", r, r)
+        if not (stop is not None and stop[0]) and (true_residual > atol or not info.converged):
+            info, true_residual, polished = self._polish(info, x0, v0, f_ext, r, atol)
         self.counts["newton_iterations"] += polished
         self.step_log["polish_iterations"].append(int(polished))
         return info, true_residual
+
+    def _polish(self, info, x0, v0, f_ext, r, atol: float):
+        """:func:`~cutkit.relax.hybrid.polish_step` of the step the sweeps left (residual r); the
+        nodes' last residuals (what the next step's sweeps wake by) become the true ones.
+        Returns (info, true residual N, Newton iterations)."""
+        from cutkit.relax.hybrid import polish_step
+        from cutkit.relax.vbd import SolveInfo
+
+        p, r = polish_step(self.em, self.state, x0, v0, self.step_s, f_ext, atol=atol, residual=r,
+                           timings=self.polish_timings)
+        self.r2[:] = np.einsum("ij,ij->i", r, r)
+        done = SolveInfo(info.iterations, info.initial_residual, p.residual, p.converged, info.node_updates)
+        return done, p.residual, p.iterations
 
     def _true_residual(self, x0: np.ndarray, v0: np.ndarray, f_ext: np.ndarray) -> float:
         """N: the norm over all free dofs of the backward Euler residual of the step just made from
