@@ -28,7 +28,8 @@ Prints one JSON object with ``--json``:
   the cut knee to 1e-3 of its force scale (knee.solvers.to_residual; ``--no-to-residual`` leaves
   that out).  ``--repeat N`` runs the solvers in turn N times (keys ``vbd``, ``hybrid``, ``vbd#2``,
   ...: back to back on a shared machine); each run reports ``relaxation_wall_s`` and, for the
-  hybrid, ``polish_iterations_total`` and ``polished_steps``.
+  hybrid, ``polish_iterations_total``, ``polished_steps``, ``polish_calls`` and ``polish_s`` (the
+  polishes' wall seconds, in all and by part).
 """
 
 from __future__ import annotations
@@ -196,7 +197,8 @@ def knee_solvers(model, solvers=("newton", "vbd"), hold_s: float = 1.0, rtol: fl
                      "opening_mm": s["cut_opening_mm"]["final_mean"], "settle": s["settle"],
                      "inverted_tets_deformed": s["inverted_tets_deformed"], "warnings": s["warnings"],
                      "relaxation_wall_s": s["time_per_task_s"]["relaxation"],
-                     **{k: rs[k] for k in ("polish_iterations_total", "polished_steps") if k in rs}}
+                     **{k: rs[k] for k in ("polish_iterations_total", "polished_steps", "polish_calls", "polish_s")
+                        if k in rs}}
         if cut is None:
             cut = (em, x, rs["force_scale_N"])
     if not to_residual:

@@ -21,6 +21,8 @@ colour classes.
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 
 from cutkit.cutting import CutMesh
@@ -154,6 +156,7 @@ class ElasticTissue(TissueBase):
         #: seconds in each part of the hybrid's polishes (cutkit.relax.hybrid.TIMED)
         self.polish_timings: dict[str, float] = {}
         if solver == "hybrid":
+            self.counts["polish_calls"] = 0
             self.step_log["polish_iterations"] = []
         self._newton = self._newton_solver()
         self.force_scale = self._force_scale()
@@ -311,8 +314,11 @@ class ElasticTissue(TissueBase):
         from cutkit.relax.hybrid import polish_step
         from cutkit.relax.vbd import SolveInfo
 
+        t0 = time.perf_counter()
         p, r = polish_step(self.em, self.state, x0, v0, self.step_s, f_ext, atol=atol, residual=r,
                            timings=self.polish_timings)
+        self.polish_timings["total"] = self.polish_timings.get("total", 0.0) + time.perf_counter() - t0
+        self.counts["polish_calls"] += 1
         self.r2[:] = np.einsum("ij,ij->i", r, r)
         done = SolveInfo(info.iterations, info.initial_residual, p.residual, p.converged, info.node_updates)
         return done, p.residual, p.iterations
@@ -357,8 +363,11 @@ class ElasticTissue(TissueBase):
             ``solver``, ``count``, ``not_converged``, ``worst_relative_residual``,
             ``iterations_total``, ``rtol``, and per step ``iterations`` and
             ``relative_residual`` (true final residual over the force scale);
-            ``"hybrid"`` adds ``polish_iterations_total`` and per step
-            ``polish_iterations``.
+            ``"hybrid"`` adds ``polish_iterations_total``, ``polished_steps``
+            (steps with a Newton iteration), ``polish_calls`` (steps that
+            called the polish), ``polish_s`` (wall seconds of the polishes:
+            ``total`` and each part of :data:`cutkit.relax.hybrid.TIMED`) and
+            per step ``polish_iterations``.
         """
         rel = self.step_log["relative_residual"]
         return {"solver": self.solver, "count": len(rel), "not_converged": int(self.counts["steps_not_converged"]),
@@ -374,7 +383,8 @@ class ElasticTissue(TissueBase):
             return {}
         its = self.step_log["polish_iterations"]
         return {"polish_iterations_total": int(sum(its)), "polished_steps": int(sum(1 for k in its if k)),
-                "polish_iterations": list(its)}
+                "polish_calls": int(self.counts["polish_calls"]),
+                "polish_s": {k: float(v) for k, v in self.polish_timings.items()}, "polish_iterations": list(its)}
 
     # ------------------------------------------------------------ cut
     def apply_cut(self, res) -> dict:
