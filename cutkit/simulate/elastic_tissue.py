@@ -53,7 +53,7 @@ STEP_MAX_ITERATIONS = 50
 SETTLE_RTOL = 1e-3
 #: How each relaxation step is solved: projected Newton (:mod:`cutkit.relax.newton`),
 #: vertex block descent (:func:`cutkit.relax.vbd.local_step`), or vertex block descent with a
-#: step that ends at its sweep cap finished by a local Newton polish (:mod:`cutkit.relax.hybrid`).
+#: step it leaves out of balance finished by a local Newton polish (:mod:`cutkit.relax.hybrid`).
 SOLVERS = ("newton", "vbd", "hybrid")
 #: The solver of a run that names none (docs/relaxation.md, "Measured on the demo knee").
 DEFAULT_SOLVER = "vbd"
