@@ -134,8 +134,13 @@ def polish_step(em: ElementModel, state: ElementState, x0: np.ndarray, v0: np.nd
 
 
 def _iterate(step, x, r, atol, rings, fraction, max_iterations, timer):
-    """The Newton iterations of :func:`polish_step` on x in place from its residual r; (info, r)."""
+    """The Newton iterations of :func:`polish_step` on x in place from its residual r; (info, r).
+
+    Each iterate lowers G but near the barrier may raise the residual (the step bound cuts a step
+    short by a crushed tet): a polish that ends above its tolerance leaves x at its iterate of
+    least residual (the sweeps' end included), so it never hands on more than it was given."""
     res = r0 = float(np.linalg.norm(r))
+    best = (res, x.copy(), r)
     it = 0
     full = False  # the last step was not cut short by the step bound
     while res > atol and it < max_iterations:
@@ -156,6 +161,10 @@ def _iterate(step, x, r, atol, rings, fraction, max_iterations, timer):
             inside = float(np.linalg.norm(r[region]))
         if res > atol and (res * res - inside * inside > inside * inside or not moved):
             rings = 2 * rings + 1  # the out-of-balance mode reaches past the region: widen it
+        if res < best[0] and res > atol:
+            best = (res, x.copy(), r)
+    if res > best[0]:
+        res, x[:], r = best
     return SolveInfo(it, r0, res, res <= atol), r
 
 
