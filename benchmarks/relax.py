@@ -29,7 +29,9 @@ Prints one JSON object with ``--json``:
   that out).  ``--repeat N`` runs the solvers in turn N times (keys ``vbd``, ``hybrid``, ``vbd#2``,
   ...: back to back on a shared machine); each run reports ``relaxation_wall_s`` and, for the
   hybrid, ``polish_iterations_total``, ``polished_steps``, ``polish_calls`` and ``polish_s`` (the
-  polishes' wall seconds, in all and by part).
+  polishes' wall seconds, in all and by part).  ``--static`` adds to each run a static projected
+  Newton solve of its cut model from its final state to 1e-3 of the force scale (``static``: the
+  mean distance between node copies coincident at rest before and after, how far nodes move).
 """
 
 from __future__ import annotations
@@ -157,7 +159,8 @@ def knee_simulate(model, paths: int = KNEE_PATHS) -> dict:
 
 
 def knee_solvers(model, solvers=("newton", "vbd"), hold_s: float = 1.0, rtol: float = 1e-3,
-                 cap_s: float = 600.0, trajectory=None, repeat: int = 1, to_residual: bool = True) -> dict:
+                 cap_s: float = 600.0, trajectory=None, repeat: int = 1, to_residual: bool = True,
+                 static: bool = False) -> dict:
     """The demo incision with each element solver (``SimulateOptions.solver``) and a ``hold_s`` hold:
     steps not converged, worst step residual, simulated/wall, the final out-of-balance force over
     the force scale, the opening; then, on the cut model the first solver left, the wall time each
@@ -199,6 +202,8 @@ def knee_solvers(model, solvers=("newton", "vbd"), hold_s: float = 1.0, rtol: fl
                      "relaxation_wall_s": s["time_per_task_s"]["relaxation"],
                      **{k: rs[k] for k in ("polish_iterations_total", "polished_steps", "polish_calls", "polish_s")
                         if k in rs}}
+        if static:
+            out[key]["static"] = static_reference(em, cm.points, x, rtol * rs["force_scale_N"])
         if cut is None:
             cut = (em, x, rs["force_scale_N"])
     if not to_residual:
@@ -225,6 +230,32 @@ def knee_solvers(model, solvers=("newton", "vbd"), hold_s: float = 1.0, rtol: fl
                            "relative": float(np.linalg.norm(elastic_forces(em, x)[free]) / scale)}
     out["to_residual"] = to
     return out
+
+
+def static_reference(em, X, x, atol: float) -> dict:
+    """A static projected Newton solve of the cut model from a run's final state x to ``atol`` N (the
+    equilibrium the run's state relaxes to): the mean distance between node copies that coincide at
+    rest (X; the cut's duplicated nodes) before and after, mm, and how far the nodes move to it."""
+    from cutkit.relax.newton import NewtonSolver, newton_static
+
+    _, group, counts = np.unique(X, axis=0, return_inverse=True, return_counts=True)
+    group = group.ravel()
+    pairs = []
+    for g in np.flatnonzero(counts >= 2):
+        nodes = np.flatnonzero(group == g)
+        pairs += [(a, b) for i, a in enumerate(nodes) for b in nodes[i + 1:]]
+    pairs = np.array(pairs, np.int64).reshape(-1, 2)
+    xs = x.copy()
+    t0 = time.perf_counter()
+    info = newton_static(em, xs, rtol=0.0, atol=atol, solver=NewtonSolver(em))
+    move = np.linalg.norm(xs - x, axis=1)
+
+    def opening(y):
+        return float(np.linalg.norm(y[pairs[:, 0]] - y[pairs[:, 1]], axis=1).mean()) if len(pairs) else 0.0
+
+    return {"wall_s": time.perf_counter() - t0, "iterations": info.iterations, "converged": bool(info.converged),
+            "coincident_pairs": int(len(pairs)), "opening_mm": opening(x), "static_opening_mm": opening(xs),
+            "move_max_mm": float(move.max()), "move_p99_mm": float(np.percentile(move, 99))}
 
 
 def slab_solvers(hold_s: float = 1.0, solvers=("newton", "vbd"), **runs) -> dict:
@@ -305,6 +336,8 @@ def main(argv=None):
                     help="with --knee-simulate: compare these element solvers (e.g. newton,vbd) instead")
     ap.add_argument("--hold", type=float, default=1.0, help="hold after the incision of --solvers, s")
     ap.add_argument("--repeat", type=int, default=1, help="with --solvers: run them in turn this many times")
+    ap.add_argument("--static", action="store_true",
+                    help="with --solvers: a static Newton solve from each run's final state (its opening)")
     ap.add_argument("--no-to-residual", action="store_true",
                     help="with --solvers: leave out the static solves of the cut knee to 1e-3 (to_residual)")
     ap.add_argument("--slab-solvers", action="store_true",
@@ -316,7 +349,7 @@ def main(argv=None):
     if args.slab_solvers:
         names = tuple(args.solvers.split(",")) if args.solvers else ("newton", "vbd")
         out["slab"] = {"solvers": slab_solvers(args.hold, names, repeat=args.repeat,
-                                               to_residual=not args.no_to_residual)}
+                                               to_residual=not args.no_to_residual, static=args.static)}
         return _print(out, args.json)
     if args.knee_simulate:
         from cutkit.io.model_h5 import read_model
@@ -324,7 +357,7 @@ def main(argv=None):
         if args.solvers:
             out["knee"] = {"solvers": knee_solvers(read_model(args.knee_simulate), tuple(args.solvers.split(",")),
                                                    hold_s=args.hold, repeat=args.repeat,
-                                                   to_residual=not args.no_to_residual)}
+                                                   to_residual=not args.no_to_residual, static=args.static)}
             return _print(out, args.json)
         out["knee"] = {"simulate": knee_simulate(read_model(args.knee_simulate), args.knee_paths)}
         return _print(out, args.json)
