@@ -2,6 +2,7 @@
 
 Usage: python benchmarks/relax.py [--json] [--big N] [--small N] [--knee MODEL.h5] [--knee-simulate MODEL.h5]
        python benchmarks/relax.py --json --knee-simulate knee.h5 --solvers newton,vbd [--hold 1.0]
+       python benchmarks/relax.py --json --knee-simulate knee.h5 --solvers vbd,hybrid --repeat 2 --no-to-residual
 
 Prints one JSON object with ``--json``:
   spring_updates_per_s                  semi-implicit Jacobi sweep (numba, all threads), spring ends per s
@@ -24,7 +25,13 @@ Prints one JSON object with ``--json``:
   with ``--solvers newton,vbd`` it instead runs the demo incision and a ``--hold`` with each element
   solver (knee.solvers: steps not converged, worst step residual, simulated/wall, the final
   out-of-balance force over the force scale, the opening) and the wall time each takes to bring
-  the cut knee to 1e-3 of its force scale (knee.solvers.to_residual).
+  the cut knee to 1e-3 of its force scale (knee.solvers.to_residual; ``--no-to-residual`` leaves
+  that out).  ``--repeat N`` runs the solvers in turn N times (keys ``vbd``, ``hybrid``, ``vbd#2``,
+  ...: back to back on a shared machine); each run reports ``relaxation_wall_s`` and, for the
+  hybrid, ``polish_iterations_total``, ``polished_steps``, ``polish_calls`` and ``polish_s`` (the
+  polishes' wall seconds, in all and by part).  ``--static`` adds to each run a static projected
+  Newton solve of its cut model from its final state to 1e-3 of the force scale (``static``: the
+  mean distance between node copies coincident at rest before and after, how far nodes move).
 """
 
 from __future__ import annotations
@@ -152,7 +159,8 @@ def knee_simulate(model, paths: int = KNEE_PATHS) -> dict:
 
 
 def knee_solvers(model, solvers=("newton", "vbd"), hold_s: float = 1.0, rtol: float = 1e-3,
-                 cap_s: float = 600.0, trajectory=None) -> dict:
+                 cap_s: float = 600.0, trajectory=None, repeat: int = 1, to_residual: bool = True,
+                 static: bool = False) -> dict:
     """The demo incision with each element solver (``SimulateOptions.solver``) and a ``hold_s`` hold:
     steps not converged, worst step residual, simulated/wall, the final out-of-balance force over
     the force scale, the opening; then, on the cut model the first solver left, the wall time each
@@ -171,7 +179,8 @@ def knee_solvers(model, solvers=("newton", "vbd"), hold_s: float = 1.0, rtol: fl
 
     traj = trajectory if trajectory is not None else read_trajectory(demo_inputs()[1])
     out, cut = {}, None
-    for name in solvers:
+    runs = [(name, name if k == 0 else f"{name}#{k + 1}") for k in range(repeat) for name in solvers]
+    for name, key in runs:
         with tempfile.TemporaryDirectory() as d:
             t0 = time.perf_counter()
             s = simulate(model, traj, Path(d), SimulateOptions(fps=10, frames=False, hold_s=hold_s, solver=name))
@@ -181,7 +190,7 @@ def knee_solvers(model, solvers=("newton", "vbd"), hold_s: float = 1.0, rtol: fl
         em = build_element_model(cm)
         x = cm.points + cm.point_data["displacement"]
         free = ~em.fixed & (em.adj_degree > 0)[:, None]
-        out[name] = {"steps": rs["count"], "steps_not_converged": rs["not_converged"],
+        out[key] = {"steps": rs["count"], "steps_not_converged": rs["not_converged"],
                      "worst_step_relative_residual": rs["worst_relative_residual"],
                      "iterations_total": rs["iterations_total"], "force_scale_N": rs["force_scale_N"],
                      "final_out_of_balance_relative": float(np.linalg.norm(elastic_forces(em, x)[free])
@@ -189,9 +198,16 @@ def knee_solvers(model, solvers=("newton", "vbd"), hold_s: float = 1.0, rtol: fl
                      "simulated_per_wall": s["simulated_per_wall"], "simulate_wall_s": wall,
                      "time_per_task_s": s["time_per_task_s"], "cut_tets": s["cut_tets"],
                      "opening_mm": s["cut_opening_mm"]["final_mean"], "settle": s["settle"],
-                     "inverted_tets_deformed": s["inverted_tets_deformed"], "warnings": s["warnings"]}
+                     "inverted_tets_deformed": s["inverted_tets_deformed"], "warnings": s["warnings"],
+                     "relaxation_wall_s": s["time_per_task_s"]["relaxation"],
+                     **{k: rs[k] for k in ("polish_iterations_total", "polished_steps", "polish_calls", "polish_s")
+                        if k in rs}}
+        if static:
+            out[key]["static"] = static_reference(em, cm.points, x, rtol * rs["force_scale_N"])
         if cut is None:
             cut = (em, x, rs["force_scale_N"])
+    if not to_residual:
+        return out
     em, x0, scale = cut
     free = ~em.fixed & (em.adj_degree > 0)[:, None]
     atol = rtol * scale
@@ -216,9 +232,36 @@ def knee_solvers(model, solvers=("newton", "vbd"), hold_s: float = 1.0, rtol: fl
     return out
 
 
-def slab_solvers(hold_s: float = 1.0) -> dict:
+def static_reference(em, X, x, atol: float) -> dict:
+    """A static projected Newton solve of the cut model from a run's final state x to ``atol`` N (the
+    equilibrium the run's state relaxes to): the mean distance between node copies that coincide at
+    rest (X; the cut's duplicated nodes) before and after, mm, and how far the nodes move to it."""
+    from cutkit.relax.newton import NewtonSolver, newton_static
+
+    _, group, counts = np.unique(X, axis=0, return_inverse=True, return_counts=True)
+    group = group.ravel()
+    pairs = []
+    for g in np.flatnonzero(counts >= 2):
+        nodes = np.flatnonzero(group == g)
+        pairs += [(a, b) for i, a in enumerate(nodes) for b in nodes[i + 1:]]
+    pairs = np.array(pairs, np.int64).reshape(-1, 2)
+    xs = x.copy()
+    t0 = time.perf_counter()
+    info = newton_static(em, xs, rtol=0.0, atol=atol, solver=NewtonSolver(em))
+    move = np.linalg.norm(xs - x, axis=1)
+
+    def opening(y):
+        return float(np.linalg.norm(y[pairs[:, 0]] - y[pairs[:, 1]], axis=1).mean()) if len(pairs) else 0.0
+
+    return {"wall_s": time.perf_counter() - t0, "iterations": info.iterations, "converged": bool(info.converged),
+            "coincident_pairs": int(len(pairs)), "opening_mm": opening(x), "static_opening_mm": opening(xs),
+            "move_max_mm": float(move.max()), "move_p99_mm": float(np.percentile(move, 99))}
+
+
+def slab_solvers(hold_s: float = 1.0, solvers=("newton", "vbd"), **runs) -> dict:
     """knee_solvers on the prestressed slab of tests/test_simulate.py (16 x 6 x 8 cubes of 2 mm,
-    4,608 tets, muscle, 15 % prestrain across the cut) with its 20 mm incision, 5 mm deep."""
+    4,608 tets, muscle, 15 % prestrain across the cut) with its 20 mm incision, 5 mm deep
+    (``runs``: knee_solvers' ``repeat`` and ``to_residual``)."""
     import sys
     from pathlib import Path
 
@@ -229,7 +272,7 @@ def slab_solvers(hold_s: float = 1.0) -> dict:
 
     traj = straight_incision([6.0, 0.0, 8.3], [26.0, 0.0, 8.3], inward=[0, 1, 0], depth=5.0, approach=3.0,
                              press_time=0.3, cut_time=0.6, rate=100)
-    return knee_solvers(slab(0.15), hold_s=hold_s, trajectory=traj)
+    return knee_solvers(slab(0.15), solvers, hold_s=hold_s, trajectory=traj, **runs)
 
 
 def knee_to_residual(model, rtol: float) -> dict:
@@ -292,6 +335,11 @@ def main(argv=None):
     ap.add_argument("--solvers", default=None,
                     help="with --knee-simulate: compare these element solvers (e.g. newton,vbd) instead")
     ap.add_argument("--hold", type=float, default=1.0, help="hold after the incision of --solvers, s")
+    ap.add_argument("--repeat", type=int, default=1, help="with --solvers: run them in turn this many times")
+    ap.add_argument("--static", action="store_true",
+                    help="with --solvers: a static Newton solve from each run's final state (its opening)")
+    ap.add_argument("--no-to-residual", action="store_true",
+                    help="with --solvers: leave out the static solves of the cut knee to 1e-3 (to_residual)")
     ap.add_argument("--slab-solvers", action="store_true",
                     help="the --solvers comparison on tests/test_simulate.py's prestressed slab")
     ap.add_argument("--knee-paths", type=int, default=KNEE_PATHS,
@@ -299,14 +347,17 @@ def main(argv=None):
     args = ap.parse_args(argv)
     out = {}
     if args.slab_solvers:
-        out["slab"] = {"solvers": slab_solvers(args.hold)}
+        names = tuple(args.solvers.split(",")) if args.solvers else ("newton", "vbd")
+        out["slab"] = {"solvers": slab_solvers(args.hold, names, repeat=args.repeat,
+                                               to_residual=not args.no_to_residual, static=args.static)}
         return _print(out, args.json)
     if args.knee_simulate:
         from cutkit.io.model_h5 import read_model
 
         if args.solvers:
             out["knee"] = {"solvers": knee_solvers(read_model(args.knee_simulate), tuple(args.solvers.split(",")),
-                                                   hold_s=args.hold)}
+                                                   hold_s=args.hold, repeat=args.repeat,
+                                                   to_residual=not args.no_to_residual, static=args.static)}
             return _print(out, args.json)
         out["knee"] = {"simulate": knee_simulate(read_model(args.knee_simulate), args.knee_paths)}
         return _print(out, args.json)

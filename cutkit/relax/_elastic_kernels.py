@@ -399,6 +399,18 @@ def node_forces(x, adj, out):
 
 
 @njit(cache=True, nogil=True)
+def forces_at(x, adj, nodes, out):
+    """Elastic force -dW/dx on each of ``nodes`` (k,) int64, N: ``out`` (k, 3); the same sums as
+    :func:`node_forces` makes for them."""
+    scratch = np.empty((_max_degree(adj, nodes), 4))
+    for q in range(nodes.shape[0]):
+        f0, f1, f2, h00, h01, h02, h11, h12, h22 = _accumulate(nodes[q], x, adj, scratch)
+        out[q, 0] = f0
+        out[q, 1] = f1
+        out[q, 2] = f2
+
+
+@njit(cache=True, nogil=True)
 def element_energy(x, el):
     """Total elastic energy sum V psi(F), N mm (= mJ)."""
     total = 0.0

@@ -390,18 +390,10 @@ class NewtonSolver:
     def _factor_solve(self, A, r: np.ndarray):
         """d with A d = r by cholespy's sparse Cholesky factorisation; None where A is not positive
         definite."""
-        import cholespy
-
         self.counts["factorisations"] += 1
-        try:
-            with _quiet_stderr():  # CHOLMOD reports an indefinite matrix on stderr as well
-                L = cholespy.CholeskySolverD(A.shape[0], A.indptr.astype(np.int32),
-                                             A.indices.astype(np.int32), A.data, cholespy.MatrixType.CSR)
-        except ValueError:
+        d = cholesky_solve(A, r)
+        if d is None:
             self.counts["indefinite"] += 1
-            return None
-        d = np.zeros_like(r)
-        L.solve(np.ascontiguousarray(r), d)
         return d
 
 
@@ -415,6 +407,42 @@ class NewtonSolver:
                 d[~free] = 0.0
                 return d
         return None
+
+
+def cholesky_solve(A, b: np.ndarray):
+    """d with A d = b by cholespy's sparse Cholesky factorisation (CHOLMOD).
+
+    Parameters
+    ----------
+    A : (k, k) scipy CSR float64
+        Symmetric.
+    b : (k,) float64
+
+    Returns
+    -------
+    (k,) float64, or None where A is not positive definite.
+    """
+    import cholespy
+
+    try:
+        with _quiet_stderr():  # CHOLMOD reports an indefinite matrix on stderr as well
+            L = cholespy.CholeskySolverD(A.shape[0], A.indptr.astype(np.int32),
+                                         A.indices.astype(np.int32), A.data, cholespy.MatrixType.CSR)
+    except ValueError:
+        return None
+    d = np.zeros_like(b)
+    L.solve(np.ascontiguousarray(b), d)
+    return d
+
+
+def out_of_balance_nodes(r: np.ndarray, outside: float) -> np.ndarray:
+    """The smallest set of nodes (largest residuals first) outside of which the residual norm is at
+    most ``outside`` (N): (k,) int64, largest residual first, of ``r`` (n, 3) float64 N."""
+    r2 = np.einsum("ij,ij->i", r, r)
+    order = np.argsort(-r2, kind="stable")
+    # tail[k]: the squared residual of every node after the k largest
+    tail = np.concatenate([np.cumsum(r2[order][::-1])[::-1], [0.0]])
+    return order[:int(np.argmax(tail <= outside * outside))]
 
 
 def newton_region(r: np.ndarray, free: np.ndarray, node_ptr: np.ndarray, node_idx: np.ndarray,
@@ -441,13 +469,8 @@ def newton_region(r: np.ndarray, free: np.ndarray, node_ptr: np.ndarray, node_id
     (n,) bool
         The region; nodes with no free dof are left out.
     """
-    r2 = np.einsum("ij,ij->i", r, r)
-    order = np.argsort(-r2, kind="stable")
-    # tail[k]: the squared residual of every node after the k largest
-    tail = np.concatenate([np.cumsum(r2[order][::-1])[::-1], [0.0]])
-    k = int(np.argmax(tail <= outside * outside))
     region = np.zeros(r.shape[0], bool)
-    region[order[:k]] = True
+    region[out_of_balance_nodes(r, outside)] = True
     counts = np.diff(node_ptr)
     for _ in range(int(rings)):
         region[node_idx[np.repeat(region, counts)]] = True

@@ -21,6 +21,8 @@ colour classes.
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 
 from cutkit.cutting import CutMesh
@@ -49,9 +51,10 @@ STEP_RTOL = 1e-2
 STEP_MAX_ITERATIONS = 50
 #: Relative residual the settle before a cut reaches (docs/relaxation.md).
 SETTLE_RTOL = 1e-3
-#: How each relaxation step is solved: projected Newton (:mod:`cutkit.relax.newton`) or
-#: vertex block descent (:func:`cutkit.relax.vbd.local_step`).
-SOLVERS = ("newton", "vbd")
+#: How each relaxation step is solved: projected Newton (:mod:`cutkit.relax.newton`),
+#: vertex block descent (:func:`cutkit.relax.vbd.local_step`), or vertex block descent with a
+#: step it leaves out of balance finished by a local Newton polish (:mod:`cutkit.relax.hybrid`).
+SOLVERS = ("newton", "vbd", "hybrid")
 #: The solver of a run that names none (docs/relaxation.md, "Measured on the demo knee").
 DEFAULT_SOLVER = "vbd"
 #: Newton iterations one step may take before it moves on (reported, as the sweep cap is).
@@ -93,7 +96,7 @@ class ElasticTissue(TissueBase):
         Sweeps (vbd) one step may make; Newton steps take at most
         :data:`NEWTON_STEP_MAX_ITERATIONS` iterations.
     solver : str
-        ``"newton"`` or ``"vbd"`` (:data:`SOLVERS`).
+        ``"newton"``, ``"vbd"`` or ``"hybrid"`` (:data:`SOLVERS`).
     element : str
         ``"nh"`` (stable neo-Hookean linear tets) or ``"anp"`` (average nodal
         pressure tetrahedron, :mod:`cutkit.relax.anp`; newton only).
@@ -105,7 +108,9 @@ class ElasticTissue(TissueBase):
     ----------
     step_log : dict
         Per relaxation step: ``iterations`` (Newton iterations or sweeps) and
-        ``relative_residual`` (true final residual over the force scale).
+        ``relative_residual`` (true final residual over the force scale);
+        ``"hybrid"`` adds ``polish_iterations`` (the Newton iterations of
+        each step's polish, 0 where the sweeps converged).
     """
 
     def __init__(self, model, *, blade_length: float, step_s: float, centre_nodes: bool = False,
@@ -145,9 +150,14 @@ class ElasticTissue(TissueBase):
         em.lay_out_rows()
         self.state: ElementState = initial_element_state(model)
         self.counts = {"steps": 0, "sweeps": 0, "node_updates": 0, "steps_not_converged": 0}
-        if solver == "newton":
+        if solver in ("newton", "hybrid"):
             self.counts["newton_iterations"] = 0
         self.step_log: dict[str, list] = {"iterations": [], "relative_residual": []}
+        #: seconds in each part of the hybrid's polishes (cutkit.relax.hybrid.TIMED)
+        self.polish_timings: dict[str, float] = {}
+        if solver == "hybrid":
+            self.counts["polish_calls"] = 0
+            self.step_log["polish_iterations"] = []
         self._newton = self._newton_solver()
         self.force_scale = self._force_scale()
         # last squared residual of every node and the nodes a cut or a load wakes (vbd.local_step)
@@ -155,7 +165,8 @@ class ElasticTissue(TissueBase):
         self._seeds: list[np.ndarray] = []
 
     def _newton_solver(self):
-        """A fresh :class:`~cutkit.relax.newton.NewtonSolver` of the element model (None for vbd)."""
+        """A fresh :class:`~cutkit.relax.newton.NewtonSolver` of the element model (None for vbd and
+        the hybrid, whose polish keeps no pattern)."""
         if self.solver != "newton":
             return None
         from cutkit.relax.newton import NewtonSolver
@@ -265,11 +276,7 @@ class ElasticTissue(TissueBase):
                                    max_iterations=NEWTON_STEP_MAX_ITERATIONS, solver=self._newton, stop=stop)
                 true_residual = info.residual
             else:
-                seeds = np.concatenate([loaded, *self._seeds]) if self._seeds else loaded
-                x0, v0 = self.state.positions.copy(), self.state.velocities.copy()
-                info = local_step(self.em, self.state, self.step_s, f_ext, self.r2, seeds, atol=atol,
-                                  max_iterations=self.step_max_iterations, stop=stop)
-                true_residual = self._true_residual(x0, v0, f_ext) if info.taken else 0.0
+                info, true_residual = self._sweep_step(f_ext, loaded, atol, stop)
             if not info.taken:
                 break  # stopped before its first sweep was done: its seeds stay for the next
             self._seeds = []
@@ -277,16 +284,62 @@ class ElasticTissue(TissueBase):
             self._count(info, true_residual)
         return sweeps
 
+    def _sweep_step(self, f_ext: np.ndarray, loaded: np.ndarray, atol: float, stop):
+        """One vertex block descent step (:func:`~cutkit.relax.vbd.local_step`); returns (info, true
+        residual N).  With the ``"hybrid"`` solver, a step not stopped that the sweeps leave out of
+        balance (their own test failed at the cap, or the true residual is above ``atol``) is
+        finished by :meth:`_polish`."""
+        seeds = np.concatenate([loaded, *self._seeds]) if self._seeds else loaded
+        x0, v0 = self.state.positions.copy(), self.state.velocities.copy()
+        info = local_step(self.em, self.state, self.step_s, f_ext, self.r2, seeds, atol=atol,
+                          max_iterations=self.step_max_iterations, stop=stop)
+        if not info.taken:
+            return info, 0.0
+        if self.solver != "hybrid":
+            return info, self._true_residual(x0, v0, f_ext)
+        r = self._residual(x0, v0, f_ext)
+        free = ~self.em.fixed & (self.em.adj_degree > 0)[:, None]
+        true_residual = float(np.linalg.norm(r[free]))
+        polished = 0
+        if not (stop is not None and stop[0]) and (true_residual > atol or not info.converged):
+            info, true_residual, polished = self._polish(info, x0, v0, f_ext, r, atol)
+        self.counts["newton_iterations"] += polished
+        self.step_log["polish_iterations"].append(int(polished))
+        return info, true_residual
+
+    def _polish(self, info, x0, v0, f_ext, r, atol: float):
+        """:func:`~cutkit.relax.hybrid.polish_step` of the step the sweeps left (residual r); the
+        nodes' last residuals (what the next step's sweeps wake by) become the true ones.
+        Returns (info, true residual N, Newton iterations)."""
+        from cutkit.relax.hybrid import polish_step
+        from cutkit.relax.vbd import SolveInfo
+
+        t0 = time.perf_counter()
+        p, r = polish_step(self.em, self.state, x0, v0, self.step_s, f_ext, atol=atol, residual=r,
+                           timings=self.polish_timings)
+        self.polish_timings["total"] = self.polish_timings.get("total", 0.0) + time.perf_counter() - t0
+        self.counts["polish_calls"] += 1
+        self.r2[:] = np.einsum("ij,ij->i", r, r)
+        done = SolveInfo(info.iterations, info.initial_residual, p.residual, p.converged, info.node_updates)
+        return done, p.residual, p.iterations
+
     def _true_residual(self, x0: np.ndarray, v0: np.ndarray, f_ext: np.ndarray) -> float:
         """N: the norm over all free dofs of the backward Euler residual of the step just made from
         (x0, v0) (vertex block descent's own residual keeps each sleeping node's last value)."""
+        em = self.em
+        free = ~em.fixed & (em.adj_degree > 0)[:, None]
+        return float(np.linalg.norm(self._residual(x0, v0, f_ext)[free]))
+
+    def _residual(self, x0: np.ndarray, v0: np.ndarray, f_ext: np.ndarray) -> np.ndarray:
+        """(n, 3) float64 N: the backward Euler residual of the step just made from (x0, v0), 0 at
+        held dofs and at nodes without tets."""
         from cutkit.relax.anp import element_forces as elastic_forces
 
         em, x, h = self.em, self.state.positions, self.step_s
         m = em.masses[:, None]
         r = elastic_forces(em, x) + f_ext - m / (h * h) * (x - x0 - h * v0) - em.damping[:, None] * m / h * (x - x0)
-        free = ~em.fixed & (em.adj_degree > 0)[:, None]
-        return float(np.linalg.norm(r[free]))
+        r[em.fixed | (em.adj_degree == 0)[:, None]] = 0.0
+        return r
 
     def _count(self, info, true_residual: float) -> None:
         """Book one relaxation step: the counters and the per-step log (the true residual)."""
@@ -309,14 +362,29 @@ class ElasticTissue(TissueBase):
         dict
             ``solver``, ``count``, ``not_converged``, ``worst_relative_residual``,
             ``iterations_total``, ``rtol``, and per step ``iterations`` and
-            ``relative_residual`` (true final residual over the force scale).
+            ``relative_residual`` (true final residual over the force scale);
+            ``"hybrid"`` adds ``polish_iterations_total``, ``polished_steps``
+            (steps with a Newton iteration), ``polish_calls`` (steps that
+            called the polish), ``polish_s`` (wall seconds of the polishes:
+            ``total`` and each part of :data:`cutkit.relax.hybrid.TIMED`) and
+            per step ``polish_iterations``.
         """
         rel = self.step_log["relative_residual"]
         return {"solver": self.solver, "count": len(rel), "not_converged": int(self.counts["steps_not_converged"]),
                 "worst_relative_residual": float(max(rel, default=0.0)),
                 "iterations_total": int(sum(self.step_log["iterations"])), "rtol": self.step_rtol,
                 "force_scale_N": float(self.force_scale),
-                "iterations": list(self.step_log["iterations"]), "relative_residual": list(rel)}
+                "iterations": list(self.step_log["iterations"]), "relative_residual": list(rel),
+                **self._polish_report()}
+
+    def _polish_report(self) -> dict:
+        """The hybrid's polish in :meth:`relax_report` (nothing for the other solvers)."""
+        if self.solver != "hybrid":
+            return {}
+        its = self.step_log["polish_iterations"]
+        return {"polish_iterations_total": int(sum(its)), "polished_steps": int(sum(1 for k in its if k)),
+                "polish_calls": int(self.counts["polish_calls"]),
+                "polish_s": {k: float(v) for k, v in self.polish_timings.items()}, "polish_iterations": list(its)}
 
     # ------------------------------------------------------------ cut
     def apply_cut(self, res) -> dict:

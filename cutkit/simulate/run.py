@@ -99,7 +99,9 @@ class SimulateOptions:
         Write the frame series (off for benchmarks).
     solver : str or None
         How the element model's relaxation steps are solved: ``"newton"``
-        (projected Newton) or ``"vbd"`` (vertex block descent); None:
+        (projected Newton), ``"vbd"`` (vertex block descent) or ``"hybrid"``
+        (vertex block descent, a step left unconverged at its sweep cap
+        finished by a local Newton polish, :mod:`cutkit.relax.hybrid`); None:
         :data:`cutkit.simulate.elastic_tissue.DEFAULT_SOLVER`.  Ignored by the springs.
     scalpel : str
         Scalpel force model: ``"paper"`` (section 6, F_enter and cut
@@ -162,16 +164,16 @@ class SimulateOptions:
             raise InputError(f"blade-length must be a positive number, got {self.blade_length}")
         if not (np.isfinite(self.volume_stiffness) and self.volume_stiffness >= 0):
             raise InputError(f"volume-stiffness must be a number >= 0, got {self.volume_stiffness}")
-        if self.solver is not None and self.solver not in ("newton", "vbd"):
-            raise InputError(f"solver must be newton or vbd, not {self.solver!r}")
+        if self.solver is not None and self.solver not in ("newton", "vbd", "hybrid"):
+            raise InputError(f"solver must be newton, vbd or hybrid, not {self.solver!r}")
         from cutkit.scalpel import SCALPEL_MODELS
 
         if self.scalpel not in SCALPEL_MODELS:
             raise InputError(f"scalpel must be one of {', '.join(SCALPEL_MODELS)}, not {self.scalpel!r}")
         if self.element not in ("nh", "anp"):
             raise InputError(f"element must be nh or anp, not {self.element!r}")
-        if self.element == "anp" and self.solver == "vbd":
-            raise InputError("element anp is solved by the newton solver only, not vbd")
+        if self.element == "anp" and self.solver in ("vbd", "hybrid"):
+            raise InputError(f"element anp is solved by the newton solver only, not {self.solver}")
         if self.deviatoric_smoothing is not None:
             a = float(self.deviatoric_smoothing)
             if self.element != "anp":

@@ -1,0 +1,218 @@
+"""The hybrid solver: vertex block descent steps that stall at their sweep cap are finished by a local
+Newton polish, converged on the whole model's true residual, at the state a minimiser written here
+reaches, no tet ever inverted; a step the sweeps finish alone is untouched."""
+
+import numpy as np
+import pytest
+
+from _fem_reference import kuhn_box
+from _twins_elastic import deformation_gradients
+from cutkit.errors import CutkitError
+from cutkit.mesh.quality import signed_volumes
+from cutkit.model.tetmodel import Materials, TetModel
+from cutkit.relax.hybrid import polish_step
+from cutkit.relax.vbd import elastic_energy, elastic_forces, local_step
+from cutkit.simulate import SimulateOptions
+from cutkit.simulate.elastic_tissue import ElasticTissue
+
+ROW = dict(label=1, name="m", E=30e3, poisson_ratio=0.45, density=1090.0, damping=8.0, F_enter=0.8,
+           mu_static=1e-6, mu_dynamic=1e-6, rho_dynamic=1e-8, alpha_static=0.1, alpha_dynamic=0.1,
+           c_edge=1.0, c_shape=1.0)
+H = 0.02
+
+
+def pressed(solver, load):
+    """A 3 x 3 x 2 mm block held at its base, one top node pressed down by ``load`` N."""
+    p, t = kuhn_box((3.0, 3.0, 2.0), (3, 3, 2))
+    model = TetModel.from_arrays(p, t, materials=Materials.from_rows([ROW]))
+    tis = ElasticTissue(model, blade_length=1.0, step_s=H, solver=solver)
+    tis.em.fixed[p[:, 2] == 0] = True
+    tis.bc_fixed = p[:, 2] == 0
+    tis.em.forget_colour_classes()
+    f = np.zeros_like(p)
+    f[int(np.flatnonzero(p[:, 2] == 2.0)[4])] = [0.0, 0.0, -load]
+    return tis, f
+
+
+def true_residual(em, x, x0, v0, f, h=H):
+    """N: the backward Euler residual's norm over the free dofs, written out here."""
+    m = em.masses[:, None]
+    r = elastic_forces(em, x) + f - m / h ** 2 * (x - x0 - h * v0) - em.damping[:, None] * m / h * (x - x0)
+    return float(np.linalg.norm(r[~em.fixed & (em.adj_degree > 0)[:, None]]))
+
+
+def test_steps_that_stall_the_sweeps_end_converged_and_no_tet_ever_inverts(monkeypatch):
+    """0.3 N on one node crushes a tet into the barrier band (J ~ 4e-3): every sweep step ends at
+    its cap; with the polish every step ends within its tolerance, and no Newton iterate inverts a tet."""
+    import cutkit.relax.hybrid as HY
+
+    vbd, f = pressed("vbd", 0.3)
+    hyb, _ = pressed("hybrid", 0.3)
+    lowest = []
+    search = HY._line_search
+
+    def watched(problem, x, d, r, res):
+        out = search(problem, x, d, r, res)
+        m = hyb.em.n_elements  # every tet of the model, at every accepted iterate
+        lowest.append(np.linalg.det(deformation_gradients(x, hyb.em.tets[:m], hyb.em.Dminv[:m])).min())
+        return out
+
+    monkeypatch.setattr(HY, "_line_search", watched)
+    vbd.advance(f, 10 * H)
+    assert vbd.relax_report()["not_converged"] == 10  # the case stalls the sweeps
+    atol = hyb.step_rtol * hyb.force_scale
+    for _ in range(10):
+        x0, v0 = hyb.positions.copy(), hyb.velocities.copy()
+        hyb.advance(f, hyb.time + H)
+        assert true_residual(hyb.em, hyb.positions, x0, v0, f) <= atol
+        np.testing.assert_array_equal(hyb.velocities[~hyb.em.fixed], ((hyb.positions - x0) / H)[~hyb.em.fixed])
+        assert signed_volumes(hyb.positions, hyb.cm.tets).min() > 0
+    rep = hyb.relax_report()
+    assert rep["not_converged"] == 0 and rep["worst_relative_residual"] <= rep["rtol"]
+    assert rep["polished_steps"] >= 1 and rep["polish_iterations_total"] == hyb.counts["newton_iterations"] > 0
+    assert len(rep["polish_iterations"]) == rep["count"] == 10 and rep["polish_calls"] >= rep["polished_steps"]
+    assert {"total", "assembly", "factorisation"} <= set(rep["polish_s"])
+    J = signed_volumes(hyb.positions, hyb.cm.tets) / signed_volumes(hyb.rest_positions, hyb.cm.tets)
+    assert J.min() < 0.01  # a tet in the barrier band
+    assert lowest and min(lowest) > 0.0
+
+
+def reference_step(em, x0, v0, f, h=H):
+    """One backward Euler step from (x0, v0) minimised over every free dof at once by scipy's
+    trust-region Newton (Hessian by central differences of the gradient), from x0: no solver under test."""
+    from scipy.optimize import minimize
+
+    free = ~em.fixed
+    m = em.masses[:, None]
+    y = np.where(free, x0 + h * v0, x0)
+    ki, kd = m / h ** 2, em.damping[:, None] * m / h
+
+    def full(z):
+        x = x0.copy()
+        x[free] = z
+        return x
+
+    def fun(z):
+        x = full(z)
+        return (elastic_energy(em, x) + 0.5 * float(np.sum(ki * (x - y) ** 2 + kd * (x - x0) ** 2))
+                - float(np.sum(f * x)))
+
+    def jac(z):
+        x = full(z)
+        return -(elastic_forces(em, x) + f - ki * (x - y) - kd * (x - x0))[free]
+
+    def hess(z, e=1e-6):
+        cols = []
+        for k in range(z.size):
+            zp, zm = z.copy(), z.copy()
+            zp[k] += e
+            zm[k] -= e
+            cols.append((jac(zp) - jac(zm)) / (2 * e))
+        A = np.array(cols).T
+        return 0.5 * (A + A.T)
+
+    res = minimize(fun, x0[free], jac=jac, hess=hess, method="trust-exact", options={"gtol": 1e-11, "maxiter": 300})
+    return full(res.x)
+
+
+def test_a_polished_step_is_the_backward_euler_step_of_a_reference_minimiser():
+    """The sweeps stop at their cap on a crushing load; the polish of the same step, to a tight
+    tolerance, reaches the minimiser of the step's potential that scipy finds (to 1e-6 mm)."""
+    tis, f = pressed("vbd", 0.1)
+    em, st = tis.em, tis.state
+    x0, v0 = st.positions.copy(), st.velocities.copy()
+    sweeps = local_step(em, st, H, f, np.zeros(em.n_nodes), np.arange(em.n_nodes), atol=1e-12, max_iterations=50)
+    assert not sweeps.converged and sweeps.iterations == 50
+    atol = 1e-9
+    info, r = polish_step(em, st, x0, v0, H, f, atol=atol)
+    assert info.converged and info.iterations > 0
+    assert true_residual(em, st.positions, x0, v0, f) == pytest.approx(info.residual, rel=1e-6, abs=1e-12)
+    assert info.residual <= atol and np.linalg.norm(r) == pytest.approx(info.residual, rel=1e-12)
+    ref = reference_step(em, x0, v0, f)
+    assert np.abs(st.positions - ref).max() <= 1e-6
+    assert np.abs(ref - x0).max() > 1.0  # the step moved the loaded node by millimetres
+    np.testing.assert_array_equal(st.velocities[~em.fixed], ((st.positions - x0) / H)[~em.fixed])
+
+
+def test_a_step_the_sweeps_finish_is_the_same_to_the_bit_with_the_hybrid():
+    """A light load: the sweeps converge within their cap, the polish is never called, and the
+    hybrid's states equal vertex block descent's bit for bit."""
+    vbd, f = pressed("vbd", 0.002)
+    hyb, _ = pressed("hybrid", 0.002)
+    for k in range(1, 6):
+        vbd.advance(f, k * H)
+        hyb.advance(f, k * H)
+        np.testing.assert_array_equal(hyb.positions, vbd.positions)
+        np.testing.assert_array_equal(hyb.velocities, vbd.velocities)
+    rep = hyb.relax_report()
+    assert rep["not_converged"] == 0 and rep["polish_iterations"] == [0] * 5 and rep["polished_steps"] == 0
+    assert rep["iterations"] == vbd.relax_report()["iterations"]
+    assert rep["relative_residual"] == vbd.relax_report()["relative_residual"]
+    assert "polish_iterations" not in vbd.relax_report()
+
+
+def test_the_hybrid_is_a_solver_choice_and_the_polish_checks_its_input():
+    SimulateOptions(solver="hybrid").check()
+    with pytest.raises(CutkitError):
+        SimulateOptions(solver="hybrid", element="anp").check()
+    tis, f = pressed("hybrid", 0.1)
+    x0 = tis.positions.copy()
+    with pytest.raises(CutkitError, match="x0 must have shape"):
+        polish_step(tis.em, tis.state, x0[:-1], np.zeros_like(x0), H, f, atol=1e-3)
+    with pytest.raises(CutkitError, match="atol"):
+        polish_step(tis.em, tis.state, x0, np.zeros_like(x0), H, f, atol=0.0)
+    with pytest.raises(CutkitError, match="rings"):
+        polish_step(tis.em, tis.state, x0, np.zeros_like(x0), H, f, atol=1e-3, rings=-1)
+
+
+@pytest.mark.parametrize("iterations", [1, 2, 3, 5])
+def test_a_polish_cut_short_never_hands_on_more_residual_than_it_was_given(iterations):
+    """However few iterations it may make, the polish ends at its iterate of least residual (the
+    sweeps' end included), with that residual and its velocities, every tet upright.  (0.3 N: the
+    first iteration lowers G but raises the residual from 0.47 to 2.2 N, the third from 0.41 to 0.63 N.)"""
+    tis, f = pressed("vbd", 0.3)
+    em, st = tis.em, tis.state
+    x0, v0 = st.positions.copy(), st.velocities.copy()
+    local_step(em, st, H, f, np.zeros(em.n_nodes), np.arange(em.n_nodes), atol=1e-12, max_iterations=50)
+    xs = st.positions.copy()
+    info, r = polish_step(em, st, x0, v0, H, f, atol=1e-9, max_iterations=iterations)
+    assert info.residual <= info.initial_residual
+    if iterations == 1:  # its only iterate was worse: the sweeps' end stands
+        np.testing.assert_array_equal(st.positions, xs)
+    assert true_residual(em, st.positions, x0, v0, f) == pytest.approx(info.residual, rel=1e-9)
+    np.testing.assert_array_equal(st.velocities[~em.fixed], ((st.positions - x0) / H)[~em.fixed])
+    assert signed_volumes(st.positions, tis.cm.tets).min() > 0
+
+
+def test_forces_at_some_nodes_equal_the_twins_and_the_whole_models_sums():
+    """forces_at sums what node_forces sums for the nodes it is given, and both equal the NumPy
+    twin's -dW/dx (a crushed block: the barrier is in the sums)."""
+    from _twins_elastic import forces as forces_twin
+    from cutkit.relax import _elastic_kernels as KE
+
+    tis, f = pressed("vbd", 0.3)
+    tis.advance(f, 3 * H)
+    em, x = tis.em, tis.positions
+    nodes = np.array([0, 5, 17, int(np.argmin(x[:, 2]))], np.int64)
+    out = np.empty((nodes.size, 3))
+    KE.forces_at(x, em.adjacency, nodes, out)
+    whole = elastic_forces(em, x)
+    np.testing.assert_array_equal(out, whole[nodes])
+    m = em.n_elements
+    twin = forces_twin(x, em.tets[:m], em.Dminv[:m], em.volume[:m], em.mu[:m], em.lam[:m])
+    np.testing.assert_allclose(out, twin[nodes], rtol=1e-9, atol=1e-12 * np.abs(twin).max())
+
+
+def test_the_polish_residual_kept_row_by_row_equals_the_whole_models():
+    """The residual the polish keeps (rows of the region's nodes summed again after each iteration)
+    equals the whole model's residual recomputed from scratch at the final positions."""
+    tis, f = pressed("vbd", 0.3)
+    em, st = tis.em, tis.state
+    x0, v0 = st.positions.copy(), st.velocities.copy()
+    local_step(em, st, H, f, np.zeros(em.n_nodes), np.arange(em.n_nodes), atol=1e-12, max_iterations=50)
+    info, r = polish_step(em, st, x0, v0, H, f, atol=1e-9, max_iterations=4)
+    assert info.iterations == 4
+    m, x = em.masses[:, None], st.positions
+    full = elastic_forces(em, x) + f - m / H ** 2 * (x - x0 - H * v0) - em.damping[:, None] * m / H * (x - x0)
+    full[em.fixed] = 0.0
+    np.testing.assert_allclose(r, full, rtol=0, atol=1e-12 * np.abs(full).max())
