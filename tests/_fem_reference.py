@@ -138,3 +138,47 @@ def p2_block_reaction(L, cells, E, nu, strain):
     u[top_z] = -strain * L[2]
     u = skfem.solve(*skfem.condense(K, np.zeros(basis.N), x=u, D=np.concatenate([bottom, top_all])), solver=_cholesky)
     return float(-(K @ u)[top_z].sum())
+
+
+def trust_region_minimum(em, x0, f, free, *, ki=0.0, kd=0.0, y=None, gtol=1e-11, maxiter=500):
+    """The minimiser over the ``free`` (n, 3) bool dofs of an element model ``em`` of
+
+        W(x) + sum ki/2 |x - y|^2 + sum kd/2 |x - x0|^2 - f . x
+
+    (``ki``, ``kd`` scalars or (n, 1) float64; ``y`` default ``x0``; static equilibrium with both 0,
+    one backward Euler step with ki = m/h^2, kd = c m/h), by scipy's trust-region Newton
+    (trust-exact) from ``x0``: gradient from the model's forces, Hessian by central differences of
+    it; a method independent of every cutkit solver.  Returns the positions (n, 3) float64.
+    """
+    from scipy.optimize import minimize
+
+    from cutkit.relax.vbd import elastic_energy, elastic_forces
+
+    y = x0 if y is None else y
+
+    def full(z):
+        x = x0.copy()
+        x[free] = z
+        return x
+
+    def fun(z):
+        x = full(z)
+        return (elastic_energy(em, x) + 0.5 * float(np.sum(ki * (x - y) ** 2 + kd * (x - x0) ** 2))
+                - float(np.sum(f * x)))
+
+    def jac(z):
+        x = full(z)
+        return -(elastic_forces(em, x) + f - ki * (x - y) - kd * (x - x0))[free]
+
+    def hess(z, e=1e-6):
+        cols = []
+        for k in range(z.size):
+            zp, zm = z.copy(), z.copy()
+            zp[k] += e
+            zm[k] -= e
+            cols.append((jac(zp) - jac(zm)) / (2 * e))
+        H = np.array(cols).T
+        return 0.5 * (H + H.T)
+
+    res = minimize(fun, x0[free], jac=jac, hess=hess, method="trust-exact", options={"gtol": gtol, "maxiter": maxiter})
+    return full(res.x)

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 import _twins_newton as T
-from _fem_reference import kuhn_box
+from _fem_reference import kuhn_box, trust_region_minimum
 from _twins_elastic import deformation_gradients
 from cutkit.cutting import cut_step
 from cutkit.errors import InputError
@@ -129,30 +129,8 @@ def test_step_bound_matches_the_twin(deformed):
 # ---------------------------------------------------------------- solves against a reference
 
 def reference_minimum(em, x0, f, free):
-    """The static minimiser of W - f.x by scipy's trust-region Newton (trust-exact): gradient
-    -elastic_forces, Hessian by central differences of it; a method independent of the solver."""
-    from scipy.optimize import minimize
-
-    def full(z):
-        x = x0.copy()
-        x[free] = z
-        return x
-
-    fun = lambda z: elastic_energy(em, full(z)) - float(np.sum(f * full(z)))
-    jac = lambda z: -(elastic_forces(em, full(z)) + f)[free]
-
-    def hess(z, h=1e-6):
-        cols = []
-        for k in range(z.size):
-            zp, zm = z.copy(), z.copy()
-            zp[k] += h
-            zm[k] -= h
-            cols.append((jac(zp) - jac(zm)) / (2 * h))
-        H = np.array(cols).T
-        return 0.5 * (H + H.T)
-
-    res = minimize(fun, x0[free], jac=jac, hess=hess, method="trust-exact", options={"gtol": 1e-11, "maxiter": 500})
-    return full(res.x)
+    """The static minimiser of W - f.x by scipy's trust-region Newton (_fem_reference)."""
+    return trust_region_minimum(em, x0, f, free, gtol=1e-11, maxiter=500)
 
 
 def cantilever():

@@ -5,13 +5,13 @@ reaches."""
 import numpy as np
 import pytest
 
-from _fem_reference import kuhn_box
+from _fem_reference import kuhn_box, trust_region_minimum
 from _twins_elastic import deformation_gradients
 from cutkit.errors import InputError
 from cutkit.model.tetmodel import Materials, TetModel
 from cutkit.relax.elastic import ElementState, build_element_model
 from cutkit.relax.newton import NewtonSolver, newton_region, newton_step
-from cutkit.relax.vbd import elastic_energy, elastic_forces
+from cutkit.relax.vbd import elastic_forces
 
 ROW = dict(label=1, name="m", E=30e3, poisson_ratio=0.45, density=1090.0, damping=8.0, F_enter=0.8,
            mu_static=1e-6, mu_dynamic=1e-6, rho_dynamic=1e-8, alpha_static=0.1, alpha_dynamic=0.1,
@@ -33,38 +33,10 @@ def block():
 
 def reference_step(em, x0, f, h):
     """One backward Euler step from rest, minimised over every free dof at once by scipy's
-    trust-region Newton (Hessian by central differences of the gradient): no region, no solver under test."""
-    from scipy.optimize import minimize
-
-    free = ~em.fixed
+    trust-region Newton (_fem_reference): no region, no solver under test."""
     m = em.masses[:, None]
-    a = m / h ** 2 + em.damping[:, None] * m / h  # from rest, y = x0 = x^n
-
-    def full(z):
-        x = x0.copy()
-        x[free] = z
-        return x
-
-    def fun(z):
-        x = full(z)
-        return elastic_energy(em, x) + 0.5 * float(np.sum(a * (x - x0) ** 2)) - float(np.sum(f * x))
-
-    def jac(z):
-        x = full(z)
-        return -(elastic_forces(em, x) + f - a * (x - x0))[free]
-
-    def hess(z, e=1e-6):
-        cols = []
-        for k in range(z.size):
-            zp, zm = z.copy(), z.copy()
-            zp[k] += e
-            zm[k] -= e
-            cols.append((jac(zp) - jac(zm)) / (2 * e))
-        A = np.array(cols).T
-        return 0.5 * (A + A.T)
-
-    res = minimize(fun, x0[free], jac=jac, hess=hess, method="trust-exact", options={"gtol": 1e-12, "maxiter": 200})
-    return full(res.x)
+    return trust_region_minimum(em, x0, f, ~em.fixed, ki=m / h ** 2, kd=em.damping[:, None] * m / h,
+                                gtol=1e-12, maxiter=200)
 
 
 def test_a_local_newton_step_reaches_the_whole_models_step():
