@@ -165,3 +165,40 @@ def test_removing_elements_leaves_the_rows_a_fresh_build_has():
     np.testing.assert_allclose(cut.masses, fresh.masses, rtol=1e-12, atol=1e-30)
     orphans = np.flatnonzero(fresh.adj_degree[:n] == 0)
     assert lone in orphans and np.all(cut.masses[orphans] == 0.0)
+
+
+def test_the_kept_forces_are_the_whole_models_at_every_step_of_a_cut(monkeypatch, tmp_path):
+    # a step's true residual reads the kept elastic forces (KeptForces): summed again only where the
+    # step moved nodes or a cut changed tets; at every call they must be the whole pass's, bit for bit
+    from test_simulate import slab
+
+    from cutkit.cutting.trajectory import straight_incision
+    from cutkit.relax.vbd import elastic_forces
+    from cutkit.simulate import SimulateOptions, simulate
+    from cutkit.simulate import elastic_tissue
+    from cutkit.simulate.elastic_tissue import KeptForces
+
+    # every change summed in part, however large (on this small slab a step often wakes a quarter)
+    monkeypatch.setattr(elastic_tissue, "KEPT_FORCES_WHOLE_SHARE", 1.0)
+    calls = {"kept": 0, "whole": 0}
+    get, whole = KeptForces.get, KeptForces._whole
+
+    def checked_get(self, em, x):
+        f = get(self, em, x)
+        assert np.array_equal(f, elastic_forces(em, x))
+        calls["kept"] += 1
+        return f
+
+    def counted_whole(self, em, x):
+        calls["whole"] += 1
+        return whole(self, em, x)
+
+    monkeypatch.setattr(KeptForces, "get", checked_get)
+    monkeypatch.setattr(KeptForces, "_whole", counted_whole)
+    traj = straight_incision([6.0, 0.0, 8.3], [26.0, 0.0, 8.3], inward=[0, 1, 0], depth=5.0, approach=3.0,
+                             press_time=0.2, cut_time=0.3, rate=100)
+    for solver in ("vbd", "hybrid"):
+        summary = simulate(slab(), traj, tmp_path / solver, SimulateOptions(frames=False, hold_s=0.2, solver=solver,
+                                                                           write_model=False))
+        assert summary["cut_tets"] > 0
+    assert calls["kept"] > 50 and calls["whole"] <= 4  # summed whole at a run's first step and its rebase

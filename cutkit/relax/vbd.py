@@ -211,6 +211,20 @@ def elastic_forces(em: ElementModel, positions) -> np.ndarray:
     return out
 
 
+def elastic_forces_at(em: ElementModel, positions, nodes) -> np.ndarray:
+    """Elastic node forces -dW/dx on ``nodes`` (k,) int64 only, N: (k, 3) float64.
+
+    Each node's force is the sum over its own adjacency row, the same sum
+    :func:`elastic_forces` makes for it, so the values are those of the whole
+    pass, bit for bit, at the cost of the nodes asked for.
+    """
+    nodes = np.ascontiguousarray(nodes, np.int64)
+    out = np.empty((nodes.shape[0], 3))
+    if nodes.size:
+        K.forces_at(np.ascontiguousarray(positions, np.float64), em.adjacency, nodes, out)
+    return out
+
+
 def elastic_energy(em: ElementModel, positions) -> float:
     """Total stored energy, N mm."""
     return float(K.element_energy(np.ascontiguousarray(positions, np.float64), em.elements))
