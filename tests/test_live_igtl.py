@@ -625,3 +625,36 @@ def test_igtl_options_need_igtl_and_reach_the_source_and_view(tmp_path):
         for x in views + closers:
             x.close()
         log.handlers[:], log.level = handlers, level
+
+
+class _CountingEndpoint:
+    """Stands in for an endpoint with a client: counts the messages a view hands it."""
+
+    connected = True
+
+    def __init__(self):
+        self.sent = 0
+
+    def send(self, message) -> None:
+        self.sent += 1
+
+
+def test_the_surface_rate_cap_keeps_frames_with_jitter_and_caps_faster_ones():
+    from cutkit.live.igtl import IGTLPolyDataView
+
+    t = [0.0]
+    view = IGTLPolyDataView(endpoint=_CountingEndpoint(), max_rate_hz=30.0, clock=lambda: t[0])
+    box, faces = box_frame((0.0, 0.0, 0.0), (1.0, 1.0, 1.0))
+    frame = LiveFrame(points=box, boundary_faces=faces)
+    jitter = np.random.default_rng(5).uniform(-0.004, 0.004, 300)
+    # the session's frames at the cap's own rate, each up to 4 ms early or late: every one is sent
+    for k in range(300):
+        t[0] = k / 30.0 + jitter[k]
+        view.show(frame)
+    assert view.frames_sent == 300
+    # frames at 120 a second for 10 s: the cap's rate, not more
+    start, sent = t[0] + 1.0, view.frames_sent
+    for k in range(1200):
+        t[0] = start + k / 120.0
+        view.show(frame)
+    assert 299 <= view.frames_sent - sent <= 301

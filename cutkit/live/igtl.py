@@ -256,11 +256,19 @@ class IGTLPoseSource(_Owner):
         super().close()
 
 
+#: The POLYDATA rate cap sends a frame that comes up to this share of a period before its slot:
+#: the session's frames come at the same nominal rate (30 a second) with a jitter of a few ms, and a
+#: cap measured from the last send skipped every frame that came a little early (gaps of two
+#: periods, over 100 ms across a stroke's end).  The slots keep the cap's long-run rate.
+SEND_EARLY_FRACTION = 0.25
+
+
 class IGTLPolyDataView(_Owner):
     """Send the deformed boundary and the cut surface to every OpenIGTLink client (3D Slicer).
 
-    Each shown frame (at most ``max_rate_hz`` a second, and only while a
-    client is connected) becomes two POLYDATA messages, ``tissue_name`` (the
+    Each shown frame (at most ``max_rate_hz`` a second on time slots one
+    period apart, a frame up to :data:`SEND_EARLY_FRACTION` of a period
+    early taking its slot; only while a client is connected) becomes two POLYDATA messages, ``tissue_name`` (the
     outer boundary) and ``cut_name`` (the cut surface), triangles over the
     points they use, in the client's frame, each point with two attributes:
     ``"Normals"`` (POINT NORMAL, unit, outward) and ``"Colors"`` (POINT RGBA
@@ -294,17 +302,18 @@ class IGTLPolyDataView(_Owner):
         self.to_client = np.linalg.inv(tracker_to_model(frame, registration))
         self.clock = clock
         self.frames_sent = 0
-        self._last = -np.inf
+        self._slot = -np.inf  # the rate cap's time slot of the last frame sent
         # compile (or load) the normals kernel now, not on a client thread while the session runs
         _SurfaceMessage("warm-up", np.eye(3), np.array([[0, 1, 2]]), None, None, np.eye(4))._pack_content()
         self._attach(port, endpoint, local_only, driver)
 
     def show(self, frame: LiveFrame) -> None:
         now = self.clock()
-        if now - self._last < self.min_period or not self.endpoint.connected:
+        slot = self._slot + self.min_period
+        if now < slot - SEND_EARLY_FRACTION * self.min_period or not self.endpoint.connected:
             return
         frame.check()
-        self._last = now
+        self._slot = slot if slot >= now - self.min_period else now
         # copies (a few ms for 80k triangles): the surfaces are built and packed on the endpoint's
         # client threads, off the session's thread, from arrays the session may change
         points = frame.points.copy()
