@@ -64,6 +64,8 @@ def test_an_unconverged_step_gives_one_warning_line():
     rep = {"count": 120, "not_converged": 55, "worst_relative_residual": 0.97, "rtol": 1e-2, "solver": "vbd"}
     line = relax_steps_warning(rep)
     assert line.startswith("55 of 120 relaxation steps ended unconverged") and "9.7e-01" in line
+    assert line.endswith("solver vbd; --solver hybrid finishes such steps)")  # the sweeps' run is told the way out
+    assert relax_steps_warning(dict(rep, solver="hybrid")).endswith("solver hybrid)")
     assert relax_steps_warning(dict(rep, not_converged=0)) is None
 
 

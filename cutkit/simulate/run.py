@@ -441,6 +441,8 @@ def relax_steps_warning(report: dict) -> str | None:
     """The one line a run's warnings get when a relaxation step ended unconverged, else None."""
     if not report["not_converged"]:
         return None
+    # the sweeps stall on crushed tets near a cut (docs/relaxation.md): say what finishes such steps
+    hint = "; --solver hybrid finishes such steps" if report["solver"] == "vbd" else ""
     return (f"{report['not_converged']} of {report['count']} relaxation steps ended unconverged "
             f"(worst residual {report['worst_relative_residual']:.1e} of the force scale, asked "
-            f"{report['rtol']:.0e}; solver {report['solver']})")
+            f"{report['rtol']:.0e}; solver {report['solver']}{hint})")
