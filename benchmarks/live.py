@@ -108,13 +108,15 @@ def play_rate(seconds: float, priority: str) -> dict:
             "forwarded_per_s": forwarded / seconds, "session_polls_with_a_pose": polled}
 
 
-def _lifted(traj, out_mm: float = 13.0, lift_s: float = 0.1):
-    """``traj`` with one more row: the blade drawn back ``out_mm`` along its axis in ``lift_s``."""
+def lifted(traj, out_mm: float = 13.0, lift_s: float = 0.1):
+    """``traj`` with one more row: the blade drawn back ``out_mm`` along its axis in ``lift_s``
+    (the stroke ends; also benchmarks/rebase.py's)."""
     from cutkit.cutting.trajectory import Trajectory
 
     tip = traj.tip[-1] - out_mm * traj.a[-1]
     return Trajectory(np.append(traj.t, traj.t[-1] + lift_s), np.vstack([traj.tip, tip]),
-                      np.vstack([traj.a, traj.a[-1]]), np.vstack([traj.n, traj.n[-1]]))
+                      np.vstack([traj.a, traj.a[-1]]), np.vstack([traj.n, traj.n[-1]]),
+                      blade_length=traj.blade_length, blade_breadth=traj.blade_breadth)
 
 
 def _then(first, second, gap: float):
@@ -133,7 +135,7 @@ def strokes(which: str = "two", gap_s: float = 0.05, pause_s: float = 1.0):
     from cutkit.cutting.trajectory import Trajectory, straight_incision
 
     def incision(z):  # as sample_volumes/incision.csv says it was made
-        return _lifted(straight_incision(start=[25.0, 6.0, z], end=[55.0, 6.0, z], inward=[0, 1, 0], depth=8,
+        return lifted(straight_incision(start=[25.0, 6.0, z], end=[55.0, 6.0, z], inward=[0, 1, 0], depth=8,
                                          approach=5, press_time=0.4, cut_time=1.5, rate=100))
 
     traj = {"one": lambda: incision(75.0), "second": lambda: incision(60.0),

@@ -16,11 +16,15 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from live import lifted  # noqa: E402
 
 
 def _timed(cls, name: str, log: list):
@@ -36,16 +40,6 @@ def _timed(cls, name: str, log: list):
     setattr(cls, name, timed)
 
 
-def lifted_incision(path: str, out_mm: float = 15.0, lift_s: float = 0.2):
-    """The incision of ``path`` with one more row: the blade drawn back ``out_mm`` along its axis."""
-    from cutkit.cutting.trajectory import Trajectory, read_trajectory
-
-    cut = read_trajectory(path)
-    out = cut.tip[-1] - out_mm * cut.a[-1]
-    return Trajectory(np.append(cut.t, cut.t[-1] + lift_s), np.vstack([cut.tip, out]), np.vstack([cut.a, cut.a[-1]]),
-                      np.vstack([cut.n, cut.n[-1]]), blade_length=cut.blade_length, blade_breadth=cut.blade_breadth)
-
-
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--model", required=True, help="A model file (the demo knee: cutkit-demo/knee.h5).")
@@ -55,6 +49,7 @@ def main() -> None:
     args = ap.parse_args()
 
     from cutkit.cutting.cutmesh import CutMesh
+    from cutkit.cutting.trajectory import read_trajectory
     from cutkit.io.model_h5 import read_model
     from cutkit.simulate import SimulateOptions, simulate
     from cutkit.simulate.elastic_tissue import ElasticTissue
@@ -76,7 +71,7 @@ def main() -> None:
     _timed(ElasticTissue, "rebase", logs["tissue"])
     model = read_model(args.model)
     with tempfile.TemporaryDirectory() as tmp:
-        simulate(model, lifted_incision(args.trajectory), Path(tmp) / "out",
+        simulate(model, lifted(read_trajectory(args.trajectory), out_mm=15.0, lift_s=0.2), Path(tmp) / "out",
                  SimulateOptions(frames=False, hold_s=0.05, write_model=False))
         if not sessions:
             raise SystemExit("the stroke did not end inside the run: no rebase to time")
