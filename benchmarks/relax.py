@@ -160,12 +160,17 @@ def knee_simulate(model, paths: int = KNEE_PATHS) -> dict:
 
 def knee_solvers(model, solvers=("newton", "vbd"), hold_s: float = 1.0, rtol: float = 1e-3,
                  cap_s: float = 600.0, trajectory=None, repeat: int = 1, to_residual: bool = True,
-                 static: bool = False) -> dict:
+                 static: bool = False, lift: bool = False, static_rtol: float = 1e-5) -> dict:
     """The demo incision with each element solver (``SimulateOptions.solver``) and a ``hold_s`` hold:
     steps not converged, worst step residual, simulated/wall, the final out-of-balance force over
     the force scale, the opening; then, on the cut model the first solver left, the wall time each
     solver takes to bring it to ``rtol`` of the force scale (static; vertex block descent with
-    Chebyshev acceleration, stopped after ``cap_s``)."""
+    Chebyshev acceleration, stopped after ``cap_s``).
+
+    ``lift``: the blade is drawn out of the wound before the hold (``live.lifted``), so the hold has
+    no load and the final out-of-balance force (the elastic forces alone) is the model's own; with
+    the blade left in, that figure counts the blade's load too, and ``last_step_relative_residual``
+    (the step's own, load included) is the one to read.  ``static`` solves to ``static_rtol``."""
     import tempfile
     from pathlib import Path
 
@@ -178,6 +183,10 @@ def knee_solvers(model, solvers=("newton", "vbd"), hold_s: float = 1.0, rtol: fl
     from cutkit.demo import demo_inputs
 
     traj = trajectory if trajectory is not None else read_trajectory(demo_inputs()[1])
+    if lift:
+        from live import lifted
+
+        traj = lifted(traj)
     out, cut = {}, None
     runs = [(name, name if k == 0 else f"{name}#{k + 1}") for k in range(repeat) for name in solvers]
     for name, key in runs:
@@ -192,6 +201,7 @@ def knee_solvers(model, solvers=("newton", "vbd"), hold_s: float = 1.0, rtol: fl
         free = ~em.fixed & (em.adj_degree > 0)[:, None]
         out[key] = {"steps": rs["count"], "steps_not_converged": rs["not_converged"],
                      "worst_step_relative_residual": rs["worst_relative_residual"],
+                     "last_step_relative_residual": rs["relative_residual"][-1] if rs["relative_residual"] else None,
                      "iterations_total": rs["iterations_total"], "force_scale_N": rs["force_scale_N"],
                      "final_out_of_balance_relative": float(np.linalg.norm(elastic_forces(em, x)[free])
                                                             / rs["force_scale_N"]),
@@ -200,10 +210,10 @@ def knee_solvers(model, solvers=("newton", "vbd"), hold_s: float = 1.0, rtol: fl
                      "opening_mm": s["cut_opening_mm"]["final_mean"], "settle": s["settle"],
                      "inverted_tets_deformed": s["inverted_tets_deformed"], "warnings": s["warnings"],
                      "relaxation_wall_s": s["time_per_task_s"]["relaxation"],
-                     **{k: rs[k] for k in ("polish_iterations_total", "polished_steps", "polish_calls", "polish_s")
-                        if k in rs}}
+                     **{k: rs[k] for k in ("polish_iterations_total", "polished_steps", "polish_calls", "polish_s",
+                                           "resting_steps", "rest_rtol") if k in rs}}
         if static:
-            out[key]["static"] = static_reference(em, cm.points, x, rtol * rs["force_scale_N"])
+            out[key]["static"] = static_reference(em, cm.points, x, static_rtol * rs["force_scale_N"])
         if cut is None:
             cut = (em, x, rs["force_scale_N"])
     if not to_residual:
@@ -338,6 +348,10 @@ def main(argv=None):
     ap.add_argument("--repeat", type=int, default=1, help="with --solvers: run them in turn this many times")
     ap.add_argument("--static", action="store_true",
                     help="with --solvers: a static Newton solve from each run's final state (its opening)")
+    ap.add_argument("--lift", action="store_true",
+                    help="with --solvers: draw the blade out before the hold (a hold without load)")
+    ap.add_argument("--static-rtol", type=float, default=1e-5,
+                    help="with --static: the static solve's residual over the force scale")
     ap.add_argument("--no-to-residual", action="store_true",
                     help="with --solvers: leave out the static solves of the cut knee to 1e-3 (to_residual)")
     ap.add_argument("--slab-solvers", action="store_true",
@@ -349,7 +363,8 @@ def main(argv=None):
     if args.slab_solvers:
         names = tuple(args.solvers.split(",")) if args.solvers else ("newton", "vbd")
         out["slab"] = {"solvers": slab_solvers(args.hold, names, repeat=args.repeat,
-                                               to_residual=not args.no_to_residual, static=args.static)}
+                                               to_residual=not args.no_to_residual, static=args.static,
+                                               lift=args.lift, static_rtol=args.static_rtol)}
         return _print(out, args.json)
     if args.knee_simulate:
         from cutkit.io.model_h5 import read_model
@@ -357,7 +372,8 @@ def main(argv=None):
         if args.solvers:
             out["knee"] = {"solvers": knee_solvers(read_model(args.knee_simulate), tuple(args.solvers.split(",")),
                                                    hold_s=args.hold, repeat=args.repeat,
-                                                   to_residual=not args.no_to_residual, static=args.static)}
+                                                   to_residual=not args.no_to_residual, static=args.static,
+                                                   lift=args.lift, static_rtol=args.static_rtol)}
             return _print(out, args.json)
         out["knee"] = {"simulate": knee_simulate(read_model(args.knee_simulate), args.knee_paths)}
         return _print(out, args.json)

@@ -21,11 +21,12 @@ ROW = dict(label=1, name="m", E=30e3, poisson_ratio=0.45, density=1090.0, dampin
 H = 0.02
 
 
-def pressed(solver, load):
-    """A 3 x 3 x 2 mm block held at its base, one top node pressed down by ``load`` N."""
+def pressed(solver, load, rest_rtol=None):
+    """A 3 x 3 x 2 mm block held at its base, one top node pressed down by ``load`` N (a load that
+    stays the same, so the hybrid's steps after the first rest unless ``rest_rtol`` is None)."""
     p, t = kuhn_box((3.0, 3.0, 2.0), (3, 3, 2))
     model = TetModel.from_arrays(p, t, materials=Materials.from_rows([ROW]))
-    tis = ElasticTissue(model, blade_length=1.0, step_s=H, solver=solver)
+    tis = ElasticTissue(model, blade_length=1.0, step_s=H, solver=solver, rest_rtol=rest_rtol)
     tis.em.fixed[p[:, 2] == 0] = True
     tis.bc_fixed = p[:, 2] == 0
     tis.em.forget_colour_classes()
@@ -187,3 +188,68 @@ def test_the_polish_residual_kept_row_by_row_equals_the_whole_models():
     full = elastic_forces(em, x) + f - m / H ** 2 * (x - x0 - H * v0) - em.damping[:, None] * m / H * (x - x0)
     full[em.fixed] = 0.0
     np.testing.assert_allclose(r, full, rtol=0, atol=1e-12 * np.abs(full).max())
+
+
+def test_a_resting_step_is_the_backward_euler_step_of_a_reference_minimiser():
+    """Under a load that stays, every step after the first rests: solved by Newton on the whole model
+    (no sweeps), to a tight rest tolerance it is the minimiser scipy finds, no tet inverts.  The step
+    stops at the solvers' floor of 1e-7 N (DEFAULT_ATOL_N), which leaves 2.7e-6 mm on this block's
+    softest direction: hence 1e-5 mm (the reference's residual is 4e-13 N)."""
+    from cutkit.relax.vbd import DEFAULT_ATOL_N
+
+    hyb, f = pressed("hybrid", 0.1, rest_rtol=1e-9)
+    hyb.advance(f, H)  # the first step: no last load to compare with
+    x0, v0 = hyb.positions.copy(), hyb.velocities.copy()
+    hyb.advance(f, 2 * H)
+    assert true_residual(hyb.em, hyb.positions, x0, v0, f) <= DEFAULT_ATOL_N
+    ref = reference_step(hyb.em, x0, v0, f)
+    assert true_residual(hyb.em, ref, x0, v0, f) <= 1e-11
+    assert np.abs(hyb.positions - ref).max() <= 1e-5
+    assert np.abs(ref - x0).max() > 1e-3  # the first step left it out of balance: the resting one moved
+    np.testing.assert_array_equal(hyb.velocities[~hyb.em.fixed], ((hyb.positions - x0) / H)[~hyb.em.fixed])
+    rep = hyb.relax_report()
+    assert rep["resting"] == [False, True] and rep["resting_steps"] == 1 and rep["iterations"][1] == 0
+    assert rep["polish_iterations"][1] > 0 and rep["rest_rtol"] == 1e-9
+    assert signed_volumes(hyb.positions, hyb.cm.tets).min() > 0
+
+
+def test_resting_steps_end_within_the_rest_tolerance_and_a_balanced_one_costs_no_iteration():
+    """The default rest tolerance (10x tighter than a cutting step's): each resting step's true
+    residual, written out here, is within it; once in balance a step makes no Newton iteration and
+    the tissue is at rest."""
+    from cutkit.simulate.elastic_tissue import REST_RTOL
+    from cutkit.relax.vbd import DEFAULT_ATOL_N
+
+    hyb, f = pressed("hybrid", 0.3, rest_rtol=REST_RTOL)
+    atol = max(REST_RTOL * hyb.force_scale, DEFAULT_ATOL_N)
+    assert atol < hyb.step_rtol * hyb.force_scale
+    for k in range(1, 7):
+        x0, v0 = hyb.positions.copy(), hyb.velocities.copy()
+        hyb.advance(f, k * H)
+        if k > 1:
+            assert true_residual(hyb.em, hyb.positions, x0, v0, f) <= atol
+        assert signed_volumes(hyb.positions, hyb.cm.tets).min() > 0
+    rep = hyb.relax_report()
+    assert rep["not_converged"] == 0 and rep["resting_steps"] == 5
+    assert rep["polish_iterations"][-1] == 0 and np.all(hyb.velocities == 0.0)
+    assert max(rep["relative_residual"][1:]) <= REST_RTOL
+
+
+def test_a_cut_or_a_new_load_ends_the_rest_and_the_rest_tolerance_is_checked():
+    hyb, f = pressed("hybrid", 0.1, rest_rtol=1e-3)
+    hyb.advance(f, H)
+    hyb.advance(f, 2 * H)
+    hyb.advance(1.5 * f, 3 * H)  # the blade moved: its load changed
+    hyb._cut_since_step = True  # what a cut that added or removed tets leaves for the next step
+    hyb.advance(1.5 * f, 4 * H)
+    hyb.advance(1.5 * f, 5 * H)
+    g = 1.5 * f
+    g[1, 0] += 1e-9  # a still blade's load settles: a change within the rest tolerance still rests
+    hyb._seeds.append(np.array([0], np.int64))  # a cut step that only moved nodes
+    hyb.advance(g, 6 * H)
+    assert hyb.relax_report()["resting"] == [False, True, False, False, True, True]
+    p, t = kuhn_box((1.0, 1.0, 1.0), (1, 1, 1))
+    model = TetModel.from_arrays(p, t, materials=Materials.from_rows([ROW]))
+    for bad in (0.0, -1.0, float("nan")):
+        with pytest.raises(CutkitError, match="rest_rtol must be a positive number or None"):
+            ElasticTissue(model, blade_length=1.0, step_s=H, solver="hybrid", rest_rtol=bad)

@@ -63,6 +63,12 @@ NEWTON_STEP_MAX_ITERATIONS = 30
 #: grown by k rings, and the step still ends on the whole model's residual
 #: (:class:`~cutkit.relax.newton.NewtonSolver`'s ``region_rings``; docs/relaxation.md, "Local Newton").
 NEWTON_REGION_RINGS: int | None = None
+#: A resting step of the hybrid (nothing cut since the last step and the last step's load, to within
+#: this tolerance: the blade still or gone) is solved to this fraction of the force scale, by projected Newton on the
+#: whole model (:meth:`ElasticTissue._rest_step`): the wound's gaping is a soft mode whose force is
+#: within the cutting steps' tolerance almost at once, so only a tighter solve brings it to its
+#: equilibrium (docs/relaxation.md, "Resting steps").
+REST_RTOL = 1e-3
 
 
 #: A new or moved node within this (barycentric) distance outside the nearest tet of the
@@ -165,6 +171,11 @@ class ElasticTissue(TissueBase):
     deviatoric_smoothing : float or None
         ANP's deviatoric share on the nodes; None:
         :data:`~cutkit.relax.anp.ANP_SMOOTHING`.
+    rest_rtol : float or None
+        ``"hybrid"`` only: the tolerance of a resting step (nothing cut since
+        the last step, the last step's load to within this tolerance) as a fraction of :attr:`force_scale`,
+        solved by projected Newton on the whole model; None: resting steps
+        are solved as the others.
 
     Attributes
     ----------
@@ -178,7 +189,8 @@ class ElasticTissue(TissueBase):
     def __init__(self, model, *, blade_length: float, step_s: float, centre_nodes: bool = False,
                  poisson_ratio: float | None = None, step_rtol: float = STEP_RTOL,
                  step_max_iterations: int = STEP_MAX_ITERATIONS, solver: str = DEFAULT_SOLVER,
-                 element: str = "nh", deviatoric_smoothing: float | None = None):
+                 element: str = "nh", deviatoric_smoothing: float | None = None,
+                 rest_rtol: float | None = REST_RTOL):
         from cutkit.errors import InputError
         from cutkit.relax.anp import ANP_SMOOTHING, check_element
 
@@ -193,6 +205,9 @@ class ElasticTissue(TissueBase):
         self.step_s = float(step_s)
         self.step_rtol = float(step_rtol)
         self.step_max_iterations = int(step_max_iterations)
+        if rest_rtol is not None and not (np.isfinite(rest_rtol) and rest_rtol > 0):
+            raise InputError(f"rest_rtol must be a positive number or None, not {rest_rtol!r}")
+        self.rest_rtol = None if rest_rtol is None else float(rest_rtol)
         n, m = cm.n_orig_points, cm.orig_tets.shape[0]
         self.n_orig_tets = m
         # material of each original tet (a sub-tet has its original's)
@@ -219,8 +234,13 @@ class ElasticTissue(TissueBase):
         self.polish_timings: dict[str, float] = {}
         if solver == "hybrid":
             self.counts["polish_calls"] = 0
+            self.counts["resting_steps"] = 0
             self.step_log["polish_iterations"] = []
+            self.step_log["resting"] = []
         self._newton = self._newton_solver()
+        self._rest_newton = None  # the hybrid's resting steps' solver (its pattern), built on first use
+        self._last_load: np.ndarray | None = None
+        self._cut_since_step = False  # tets or nodes added or removed since the last step
         self.force_scale = self._force_scale()
         # last squared residual of every node and the nodes a cut or a load wakes (vbd.local_step)
         self.r2 = np.zeros(em.n_nodes)
@@ -343,15 +363,70 @@ class ElasticTissue(TissueBase):
             if not info.taken:
                 break  # stopped before its first sweep was done: its seeds stay for the next
             self._seeds = []
+            self._cut_since_step = False
             sweeps += info.iterations
             self._count(info, true_residual)
         return sweeps
+
+    def _resting(self, f_ext: np.ndarray) -> bool:
+        """Whether the coming step rests: the hybrid, no tet or node added or removed since the last
+        step (nodes that follow a still blade may have moved), and a load
+        that differs from the last step's by at most the rest tolerance (N, the norm of the
+        difference: a change that small cannot move the equilibrium by more than the tolerance
+        lets a step miss it; the blade's load on a still blade settles geometrically, it is not
+        constant to the bit).  The load is kept for the next call."""
+        last, self._last_load = self._last_load, f_ext.copy()
+        if self.solver != "hybrid" or self.rest_rtol is None or last is None or last.shape != f_ext.shape:
+            return False
+        if self._cut_since_step:
+            return False
+        return float(np.linalg.norm(f_ext - last)) <= self._rest_atol()
+
+    def _rest_atol(self) -> float:
+        """N: a resting step's tolerance."""
+        return max(self.rest_rtol * self.force_scale, DEFAULT_ATOL_N)
+
+    def _rest_step(self, f_ext: np.ndarray, stop):
+        """One resting step: projected Newton on the whole model to :attr:`rest_rtol` of the force
+        scale (:func:`~cutkit.relax.newton.newton_step`, its pattern kept until the mesh changes);
+        a step already within it ends at once, at rest.  Returns (info, true residual N, Newton
+        iterations)."""
+        from cutkit.relax.newton import NewtonSolver, newton_step
+        from cutkit.relax.vbd import SolveInfo
+
+        atol = self._rest_atol()
+        x0, v0 = self.state.positions.copy(), self.state.velocities.copy()
+        r = self._residual(x0, v0, f_ext)  # at x = x0: the kept forces, nothing summed again
+        res = float(np.linalg.norm(r))
+        if res <= atol:
+            self.state.velocities[:] = 0.0
+            self.state.time += self.step_s
+            self.r2[:] = np.einsum("ij,ij->i", r, r)
+            return SolveInfo(0, res, res, True, 0), res, 0
+        if self._rest_newton is None:
+            self._rest_newton = NewtonSolver(self.em, hessian="projected")
+        info = newton_step(self.em, self.state, self.step_s, f_ext, atol=atol,
+                           max_iterations=NEWTON_STEP_MAX_ITERATIONS, solver=self._rest_newton, stop=stop)
+        if not info.taken:
+            return info, 0.0, 0
+        r = self._residual(x0, v0, f_ext)
+        self.r2[:] = np.einsum("ij,ij->i", r, r)
+        res = float(np.linalg.norm(r))
+        return SolveInfo(0, info.initial_residual, res, res <= atol, 0), res, info.iterations
 
     def _sweep_step(self, f_ext: np.ndarray, loaded: np.ndarray, atol: float, stop):
         """One vertex block descent step (:func:`~cutkit.relax.vbd.local_step`); returns (info, true
         residual N).  With the ``"hybrid"`` solver, a step not stopped that the sweeps leave out of
         balance (their own test failed at the cap, or the true residual is above ``atol``) is
         finished by :meth:`_polish`."""
+        if self._resting(f_ext):
+            info, true_residual, newton = self._rest_step(f_ext, stop)
+            if info.taken:
+                self.counts["newton_iterations"] += newton
+                self.counts["resting_steps"] += 1
+                self.step_log["polish_iterations"].append(int(newton))
+                self.step_log["resting"].append(True)
+            return info, true_residual
         seeds = np.concatenate([loaded, *self._seeds]) if self._seeds else loaded
         x0, v0 = self.state.positions.copy(), self.state.velocities.copy()
         info = local_step(self.em, self.state, self.step_s, f_ext, self.r2, seeds, atol=atol,
@@ -368,6 +443,7 @@ class ElasticTissue(TissueBase):
             info, true_residual, polished = self._polish(info, x0, v0, f_ext, r, atol)
         self.counts["newton_iterations"] += polished
         self.step_log["polish_iterations"].append(int(polished))
+        self.step_log["resting"].append(False)
         return info, true_residual
 
     def _polish(self, info, x0, v0, f_ext, r, atol: float):
@@ -427,8 +503,10 @@ class ElasticTissue(TissueBase):
             ``"hybrid"`` adds ``polish_iterations_total``, ``polished_steps``
             (steps with a Newton iteration), ``polish_calls`` (steps that
             called the polish), ``polish_s`` (wall seconds of the polishes:
-            ``total`` and each part of :data:`cutkit.relax.hybrid.TIMED`) and
-            per step ``polish_iterations``.
+            ``total`` and each part of :data:`cutkit.relax.hybrid.TIMED`),
+            ``resting_steps`` and ``rest_rtol`` (:meth:`_rest_step`), and per
+            step ``polish_iterations`` (a resting step's Newton iterations
+            included) and ``resting``.
         """
         rel = self.step_log["relative_residual"]
         return {"solver": self.solver, "count": len(rel), "not_converged": int(self.counts["steps_not_converged"]),
@@ -445,6 +523,8 @@ class ElasticTissue(TissueBase):
         its = self.step_log["polish_iterations"]
         return {"polish_iterations_total": int(sum(its)), "polished_steps": int(sum(1 for k in its if k)),
                 "polish_calls": int(self.counts["polish_calls"]),
+                "resting_steps": int(self.counts["resting_steps"]), "rest_rtol": self.rest_rtol,
+                "resting": list(self.step_log["resting"]),
                 "polish_s": {k: float(v) for k, v in self.polish_timings.items()}, "polish_iterations": list(its)}
 
     # ------------------------------------------------------------ cut
@@ -497,6 +577,10 @@ class ElasticTissue(TissueBase):
         self._seeds.append(np.unique(np.concatenate(touched)))
         if self._newton is not None:
             self._newton.reset()  # nodes and elements changed: the matrix pattern is built again
+        self._rest_newton = None
+        # a step that only moved the nodes that follow the blade (a still blade re-places them
+        # every step) cut nothing: the next step may rest
+        self._cut_since_step |= bool(n_new > n_old or added.size or removed.size)
         return {"nodes_added": int(n_new - n_old), "elements_added": int(added.size),
                 "elements_removed": int(removed.size)}
 
@@ -703,3 +787,5 @@ class ElasticTissue(TissueBase):
                         ids=np.arange(m))
         self.em = em
         self._newton = self._newton_solver()
+        self._rest_newton = None
+        self._last_load = None  # numbered as before the rebase: the next step does not rest
