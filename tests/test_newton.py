@@ -250,6 +250,26 @@ def test_the_cg_solves_reach_the_same_static_answer(preconditioner):
     assert np.abs(x_cg - x_chol).max() <= 1e-6 * np.abs(x_chol - p).max()
 
 
+def test_a_looser_inner_tolerance_reaches_the_same_answer_with_fewer_cg_iterations_a_solve():
+    """cg_rtol (inexact Newton, the hybrid's resting steps take 0.1) changes the work of each linear
+    solve, not where the outer iterations stop: the same static answer as the factorisation's."""
+    p, em, f, tip = cantilever()
+    f = 0.25 * f
+    x_chol = p.copy()
+    assert newton_static(em, x_chol, f_ext=f, rtol=1e-10, atol=0.0, solver=NewtonSolver(em, linear="cholesky")).converged
+    per_solve = {}
+    for rtol in (1e-2, 0.1):
+        x = p.copy()
+        cg = NewtonSolver(em, linear="cg", cg_rtol=rtol)
+        info = newton_static(em, x, f_ext=f, rtol=1e-10, atol=0.0, max_iterations=200, solver=cg)
+        assert info.converged and np.abs(x - x_chol).max() <= 1e-6 * np.abs(x_chol - p).max()
+        per_solve[rtol] = cg.counts["cg_iterations"] / info.iterations
+    assert per_solve[0.1] < per_solve[1e-2]
+    for bad in (0.0, 1.0, float("nan")):
+        with pytest.raises(InputError, match="cg_rtol must be in"):
+            NewtonSolver(em, cg_rtol=bad)
+
+
 def test_block_jacobi_inverts_each_nodes_diagonal_block(deformed):
     """node_block_inverse against the 3 x 3 diagonal blocks of the dense matrix, inverted one by one."""
     em, x = deformed

@@ -118,6 +118,9 @@ class NewtonSolver:
         takes the exact Hessian wherever it is positive definite.
     preconditioner : str
         One of :data:`PRECONDITIONERS`: what preconditions the CG solves.
+    cg_rtol : float
+        Relative residual each conjugate-gradient solve stops at (inexact
+        Newton; default :data:`CG_RTOL`).
     region_rings : int, optional
         None: every iteration solves the whole model.  k >= 0: each iteration
         solves on :func:`newton_region` grown by k rings (doubled after an
@@ -126,7 +129,8 @@ class NewtonSolver:
     """
 
     def __init__(self, em: ElementModel, *, linear: str = "auto", hessian: str = "auto",
-                 preconditioner: str = "block_jacobi", region_rings: int | None = None):
+                 preconditioner: str = "block_jacobi", region_rings: int | None = None,
+                 cg_rtol: float = CG_RTOL):
         if linear not in LINEAR_SOLVERS:
             raise InputError(f"linear solver must be one of {', '.join(LINEAR_SOLVERS)}, not {linear!r}")
         if hessian not in HESSIANS:
@@ -135,7 +139,10 @@ class NewtonSolver:
             raise InputError(f"preconditioner must be one of {', '.join(PRECONDITIONERS)}, not {preconditioner!r}")
         if region_rings is not None and not (isinstance(region_rings, (int, np.integer)) and region_rings >= 0):
             raise InputError(f"region_rings must be None or a non-negative integer, not {region_rings!r}")
+        if not (np.isfinite(cg_rtol) and 0.0 < cg_rtol < 1.0):
+            raise InputError(f"cg_rtol must be in (0, 1), not {cg_rtol!r}")
         self.em = em
+        self.cg_rtol = float(cg_rtol)
         self.region_rings = None if region_rings is None else int(region_rings)
         #: dofs of each local iteration's region (0: that iteration solved the whole model)
         self.region_log: list[int] = []
@@ -213,7 +220,7 @@ class NewtonSolver:
             if self._amg is None or self._amg[1] > A.shape[0]:
                 self._build_amg(A, x, free)
             M = self._preconditioner(A)
-        d, its = _pcg(A, r, M, CG_RTOL, CG_MAX_ITERATIONS)
+        d, its = _pcg(A, r, M, self.cg_rtol, CG_MAX_ITERATIONS)
         self.counts["cg_iterations"] += its
         if d is None:  # negative curvature: the exact Hessian is indefinite
             self.counts["indefinite"] += 1
