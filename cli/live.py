@@ -197,5 +197,10 @@ def _report(console, summary, out_dir) -> None:
         f"{live['wall_s']:.1f} s, haptics {live['haptic_hz']:.0f} Hz, {live['fps']:.0f} fps, "
         f"relaxation {live['relax_passes_per_s']:.0f} passes/s"
         + (f", pose-to-picture latency p50 {lat['p50']:.0f} ms p95 {lat['p95']:.0f} ms" if lat else ""))
+    from cutkit.simulate.run import relax_steps_line
+
+    line = relax_steps_line(summary["relax_steps"]) if "relax_steps" in summary else None
+    if line:
+        say(line)
     say(f"recorded: {out_dir}/trajectory.csv (replay: cutkit simulate MODEL --trajectory "
                   f"{out_dir}/trajectory.csv -o OUT/), forces.csv, summary.json, model.h5")

@@ -157,6 +157,11 @@ def report(console, summary, out_dir) -> None:
         f"{summary['simulated_s']:.2f} s simulated in {summary['wall_s']:.1f} s "
         f"(simulated/wall {summary['simulated_per_wall']:.2f}; relaxation {t['relaxation']:.1f} s, "
         f"cutting {t['collision_and_cut']:.1f} s, output {t['output']:.1f} s)")
+    from cutkit.simulate.run import relax_steps_line
+
+    line = relax_steps_line(summary["relax_steps"]) if "relax_steps" in summary else None
+    if line:
+        say(line)
     if "rates_hz" in summary:
         r = summary["rates_hz"]
         say(f"rates: haptics {r['haptics']:.0f} Hz, geometry {r['geometry_updates']:.0f} Hz, "

@@ -11,7 +11,7 @@ from cutkit.model.tetmodel import Materials, Prestress, TetModel
 from cutkit.relax.vbd import elastic_forces
 from cutkit.simulate import SimulateOptions
 from cutkit.simulate.elastic_tissue import ElasticTissue
-from cutkit.simulate.run import relax_steps_warning
+from cutkit.simulate.run import relax_steps_line, relax_steps_warning
 
 ROW = dict(label=1, name="m", E=30e3, poisson_ratio=0.45, density=1090.0, damping=8.0, F_enter=0.8,
            mu_static=1e-6, mu_dynamic=1e-6, rho_dynamic=1e-8, alpha_static=0.1, alpha_dynamic=0.1,
@@ -67,6 +67,18 @@ def test_an_unconverged_step_gives_one_warning_line():
     assert line.endswith("solver vbd; --solver hybrid finishes such steps)")  # the sweeps' run is told the way out
     assert relax_steps_warning(dict(rep, solver="hybrid")).endswith("solver hybrid)")
     assert relax_steps_warning(dict(rep, not_converged=0)) is None
+
+
+def test_the_closing_line_says_how_the_steps_ended_and_where_the_last_one_did():
+    rep = {"count": 145, "not_converged": 0, "solver": "hybrid", "resting_steps": 70, "force_scale_N": 28.25,
+           "relative_residual": [0.004, 5.8e-4]}
+    assert relax_steps_line(rep) == ("relaxation (hybrid): 145 of 145 steps within tolerance, 70 resting; "
+                                     "the last ended at 5.8e-04 of the force scale (28.2 N)")
+    rep = dict(rep, solver="vbd", not_converged=80, relative_residual=[0.89])
+    del rep["resting_steps"]
+    assert relax_steps_line(rep) == ("relaxation (vbd): 65 of 145 steps within tolerance; "
+                                     "the last ended at 8.9e-01 of the force scale (28.2 N)")
+    assert relax_steps_line(dict(rep, count=0, relative_residual=[])) is None
 
 
 def test_a_settle_with_nothing_to_do_says_skipped():

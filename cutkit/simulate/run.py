@@ -437,6 +437,19 @@ def preflight(model, model_path: str = "MODEL", available: int | None = None, me
                          f"{model_path} --ratio R -o SMALLER.h5`)")
 
 
+def relax_steps_line(report: dict) -> str | None:
+    """The closing line on a run's relaxation: steps, how many ended within tolerance, resting steps,
+    and the last step's residual (what the final state is out of balance by, the blade's load
+    included); None without steps."""
+    if not report.get("count"):
+        return None
+    ok = report["count"] - report["not_converged"]
+    resting = f", {report['resting_steps']} resting" if report.get("resting_steps") else ""
+    last = report["relative_residual"][-1]
+    return (f"relaxation ({report['solver']}): {ok} of {report['count']} steps within tolerance{resting}; "
+            f"the last ended at {last:.1e} of the force scale ({report['force_scale_N']:.3g} N)")
+
+
 def relax_steps_warning(report: dict) -> str | None:
     """The one line a run's warnings get when a relaxation step ended unconverged, else None."""
     if not report["not_converged"]:
