@@ -66,6 +66,8 @@ def test_an_unconverged_step_gives_one_warning_line():
     assert line.startswith("55 of 120 relaxation steps ended unconverged") and "9.7e-01" in line
     assert line.endswith("solver vbd; --solver hybrid finishes such steps)")  # the sweeps' run is told the way out
     assert relax_steps_warning(dict(rep, solver="hybrid")).endswith("solver hybrid)")
+    assert relax_steps_warning(dict(rep, solver="hybrid", rest_rtol=1e-3)).endswith(
+        "asked 1e-02, resting steps 1e-03; solver hybrid)")
     assert relax_steps_warning(dict(rep, not_converged=0)) is None
 
 

@@ -456,6 +456,7 @@ def relax_steps_warning(report: dict) -> str | None:
         return None
     # the sweeps stall on crushed tets near a cut (docs/relaxation.md): say what finishes such steps
     hint = "; --solver hybrid finishes such steps" if report["solver"] == "vbd" else ""
+    resting = f", resting steps {report['rest_rtol']:.0e}" if report.get("rest_rtol") else ""
     return (f"{report['not_converged']} of {report['count']} relaxation steps ended unconverged "
             f"(worst residual {report['worst_relative_residual']:.1e} of the force scale, asked "
-            f"{report['rtol']:.0e}; solver {report['solver']}{hint})")
+            f"{report['rtol']:.0e}{resting}; solver {report['solver']}{hint})")
