@@ -420,19 +420,26 @@ def element_energy(x, el):
             continue
         a0 = el.tets[t, 0]
         D = el.Dminv[t]
-        F = np.zeros((3, 3))
+        # F = Ds Dm^-1 in scalars: a per-element array and LAPACK's det made a whole-model energy
+        # (each Newton line search trial) cost 40 ms on the cut knee, 2.6 ms without them
+        F00 = F01 = F02 = F10 = F11 = F12 = F20 = F21 = F22 = 0.0
         for j in range(3):
             aj = el.tets[t, j + 1]
-            for r in range(3):
-                ej = x[aj, r] - x[a0, r]
-                for c in range(3):
-                    F[r, c] += ej * D[j, c]
-        J = np.linalg.det(F)
+            e0, e1, e2 = x[aj, 0] - x[a0, 0], x[aj, 1] - x[a0, 1], x[aj, 2] - x[a0, 2]
+            d0, d1, d2 = D[j, 0], D[j, 1], D[j, 2]
+            F00 += e0 * d0
+            F01 += e0 * d1
+            F02 += e0 * d2
+            F10 += e1 * d0
+            F11 += e1 * d1
+            F12 += e1 * d2
+            F20 += e2 * d0
+            F21 += e2 * d1
+            F22 += e2 * d2
+        J = F00 * (F11 * F22 - F12 * F21) - F01 * (F10 * F22 - F12 * F20) + F02 * (F10 * F21 - F11 * F20)
         mu = el.mu[t]
-        ic = 0.0
-        for r in range(3):
-            for c in range(3):
-                ic += F[r, c] * F[r, c]
+        ic = (F00 * F00 + F01 * F01 + F02 * F02 + F10 * F10 + F11 * F11 + F12 * F12
+              + F20 * F20 + F21 * F21 + F22 * F22)
         lm = el.lam[t] + mu
         total += V * (0.5 * mu * (ic - 3.0) - mu * (J - 1.0) + 0.5 * lm * (J - 1.0) ** 2 + barrier(J, lm)[0])
     return total
