@@ -221,14 +221,14 @@ def test_a_crushing_point_load_never_inverts_a_tet(hessian, monkeypatch):
     f = np.zeros_like(p)
     f[top, 2] = -0.3
     lowest = []
-    search = N._line_search
+    search = N.line_search
 
     def watched(problem, x, d, r, res):
         out = search(problem, x, d, r, res)
         lowest.append(np.linalg.det(deformation_gradients(x, *arrays(em)[:2])).min())
         return out
 
-    monkeypatch.setattr(N, "_line_search", watched)
+    monkeypatch.setattr(N, "line_search", watched)
     st = ElementState(p.copy(), np.zeros_like(p))
     solver = NewtonSolver(em, hessian=hessian)
     for _ in range(20):

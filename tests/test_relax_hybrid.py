@@ -50,7 +50,7 @@ def test_steps_that_stall_the_sweeps_end_converged_and_no_tet_ever_inverts(monke
     vbd, f = pressed("vbd", 0.3)
     hyb, _ = pressed("hybrid", 0.3)
     lowest = []
-    search = HY._line_search
+    search = HY.line_search
 
     def watched(problem, x, d, r, res):
         out = search(problem, x, d, r, res)
@@ -58,7 +58,7 @@ def test_steps_that_stall_the_sweeps_end_converged_and_no_tet_ever_inverts(monke
         lowest.append(np.linalg.det(deformation_gradients(x, hyb.em.tets[:m], hyb.em.Dminv[:m])).min())
         return out
 
-    monkeypatch.setattr(HY, "_line_search", watched)
+    monkeypatch.setattr(HY, "line_search", watched)
     vbd.advance(f, 10 * H)
     assert vbd.relax_report()["not_converged"] == 10  # the case stalls the sweeps
     atol = hyb.step_rtol * hyb.force_scale

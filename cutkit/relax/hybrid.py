@@ -36,7 +36,7 @@ from cutkit.relax import _adjacency_kernels as KA
 from cutkit.relax import _elastic_kernels as KE
 from cutkit.relax import _newton_kernels as KN
 from cutkit.relax.elastic import ElementModel, ElementState
-from cutkit.relax.newton import CHOLESKY_MAX_DOFS, _line_search, cholesky_solve, out_of_balance_nodes
+from cutkit.relax.newton import CHOLESKY_MAX_DOFS, line_search, cholesky_solve, out_of_balance_nodes
 from cutkit.relax.vbd import SolveInfo, elastic_forces
 from cutkit.threads import one_blas_thread
 
@@ -154,7 +154,7 @@ def _iterate(step, x, r, atol, rings, fraction, max_iterations, timer):
             break
         full = KN.step_bound(x, d, local.el, 1.0) > 1.0
         with timer("line_search"):
-            moved, r = _line_search(local, x, d, r, res)
+            moved, r = line_search(local, x, d, r, res)
         it += 1
         with timer("residual"):
             res = float(np.linalg.norm(r))
@@ -197,7 +197,7 @@ class _Step:
 class _Region:
     """The elements that touch a region, its nodes' terms, and the line search's view of them.
 
-    ``el`` (global node ids) serves :func:`~cutkit.relax.newton._line_search`'s step bound;
+    ``el`` (global node ids) serves :func:`~cutkit.relax.newton.line_search`'s step bound;
     :meth:`energy` is the part of G that changes when only the region's nodes move and
     :meth:`residual` the whole model's residual with the rows of those elements' nodes summed again.
     """

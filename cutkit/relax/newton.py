@@ -315,7 +315,7 @@ class NewtonSolver:
             if d is None:
                 break
             before = res
-            moved, r = _line_search(problem, x, d, r, res)
+            moved, r = line_search(problem, x, d, r, res)
             it += 1
             res = float(np.linalg.norm(r))
             if local and res > max(atol, REGION_WIDEN * before):
@@ -583,7 +583,7 @@ class _Potential:
         return float(stored(self.em, x) + kin + damp - np.sum(np.where(f, t.force * x, 0.0)))
 
 
-def _line_search(problem: _Potential, x: np.ndarray, d: np.ndarray, r: np.ndarray, res: float):
+def line_search(problem, x: np.ndarray, d: np.ndarray, r: np.ndarray, res: float):
     """Backtracking (Armijo) along d from the longest step that inverts no element.
 
     The first trial is ``min(1, INVERSION_SAFETY a0)`` with a0 the first
@@ -591,6 +591,22 @@ def _line_search(problem: _Potential, x: np.ndarray, d: np.ndarray, r: np.ndarra
     (``_newton_kernels.step_bound``); each element's volume is a cubic in
     the step length that is positive on [0, a0), so no trial inverts one.
     Returns (moved, residual at the new x); x is changed in place when moved.
+
+    Parameters
+    ----------
+    problem : object
+        ``el`` (:class:`~cutkit.relax._elastic_kernels.Elements`, the elements the step bound
+        keeps upright), ``energy(x) -> float`` (G, N mm) and ``residual(x) -> (n, 3) float64``
+        (-dG/dx, N): the whole model's step (``_Potential``) or a region's
+        (:mod:`cutkit.relax.hybrid`).
+    x : (n, 3) float64
+        mm; changed in place when moved.
+    d : (n, 3) float64
+        The direction, mm.
+    r : (n, 3) float64
+        The residual at x, N.
+    res : float
+        Its norm, N.
     """
     slope = float(np.sum(r * d))  # -dG/da at a = 0
     if not slope > 0.0:
