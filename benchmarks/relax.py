@@ -391,18 +391,13 @@ def main(argv=None):
                     help="incisions of knee.simulate, each shifted by 1 um more (the stalls vary from path to path)")
     args = ap.parse_args(argv)
     out = {}
-    if args.gmsh_slab_solvers:
-        names = tuple(args.solvers.split(",")) if args.solvers else ("newton", "vbd")
-        out["gmsh_slab"] = {"solvers": gmsh_slab_solvers(args.hold, names, repeat=args.repeat,
-                                                         to_residual=not args.no_to_residual, static=args.static,
-                                                         lift=args.lift, static_rtol=args.static_rtol)}
-        return _print(out, args.json)
-    if args.slab_solvers:
-        names = tuple(args.solvers.split(",")) if args.solvers else ("newton", "vbd")
-        out["slab"] = {"solvers": slab_solvers(args.hold, names, repeat=args.repeat,
-                                               to_residual=not args.no_to_residual, static=args.static,
-                                               lift=args.lift, static_rtol=args.static_rtol)}
-        return _print(out, args.json)
+    slabs = {"gmsh_slab": (args.gmsh_slab_solvers, gmsh_slab_solvers), "slab": (args.slab_solvers, slab_solvers)}
+    for key, (asked, solve) in slabs.items():
+        if asked:
+            names = tuple(args.solvers.split(",")) if args.solvers else ("newton", "vbd")
+            out[key] = {"solvers": solve(args.hold, names, repeat=args.repeat, to_residual=not args.no_to_residual,
+                                         static=args.static, lift=args.lift, static_rtol=args.static_rtol)}
+            return _print(out, args.json)
     if args.knee_simulate:
         from cutkit.io.model_h5 import read_model
 
