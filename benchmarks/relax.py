@@ -202,6 +202,7 @@ def knee_solvers(model, solvers=("newton", "vbd"), hold_s: float = 1.0, rtol: fl
         out[key] = {"steps": rs["count"], "steps_not_converged": rs["not_converged"],
                      "worst_step_relative_residual": rs["worst_relative_residual"],
                      "last_step_relative_residual": rs["relative_residual"][-1] if rs["relative_residual"] else None,
+                     "min_J_worst": rs.get("min_J_worst"), "steps_with_crushed_tets": rs.get("steps_with_crushed_tets"),
                      "iterations_total": rs["iterations_total"], "force_scale_N": rs["force_scale_N"],
                      "final_out_of_balance_relative": float(np.linalg.norm(elastic_forces(em, x)[free])
                                                             / rs["force_scale_N"]),

@@ -12,7 +12,7 @@ from cutkit.relax import elastic
 from cutkit.relax.materials import lame
 from cutkit.relax.elastic import ElementState, build_element_model, rest_shape
 from cutkit.relax.equilibrium import static_solve
-from cutkit.relax.vbd import elastic_energy, elastic_forces, implicit_step, local_step
+from cutkit.relax.vbd import elastic_energy, elastic_forces, implicit_step, local_step, volume_ratio_extremes
 
 
 def block(nu=0.45, prestrain=0.0, shape=(3, 2, 2)):
@@ -60,6 +60,23 @@ def test_forces_and_energy_match_the_twin(deformed):
     model, em, x = deformed
     assert elastic_energy(em, x) == pytest.approx(T.energy(x, *arrays(em)), rel=1e-12)
     assert np.allclose(elastic_forces(em, x), T.forces(x, *arrays(em)), atol=1e-14, rtol=1e-10)
+
+
+def test_volume_ratio_extremes_match_the_twin_with_removed_and_inverted_tets(deformed):
+    """The smallest J and the count below a bound, against det F of every live tet by NumPy: a
+    removed tet (volume 0) does not count, an inverted one does."""
+    model, em, x = deformed
+    x = x.copy()
+    t0 = em.tets[0]
+    x[t0[1]] = x[t0[0]] - (x[t0[1]] - x[t0[0]])  # mirror one corner through another: tet 0 inverts
+    em.remove_elements(np.array([1]))
+    tets, Dminv, volume = arrays(em)[:3]
+    J = np.linalg.det(T.deformation_gradients(x, tets, Dminv))[volume > 0]
+    assert J.min() < 0 and volume[1] == 0.0
+    for below in (0.5, 0.9, 1.1):
+        lowest, count = volume_ratio_extremes(em, x, below)
+        assert lowest == pytest.approx(J.min(), rel=1e-12) and count == int((J < below).sum())
+    assert volume_ratio_extremes(em, model.points, 0.5)[1] == 0
 
 
 def test_forces_are_minus_the_energy_gradient(deformed):

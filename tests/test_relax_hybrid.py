@@ -70,6 +70,10 @@ def test_steps_that_stall_the_sweeps_end_converged_and_no_tet_ever_inverts(monke
         assert signed_volumes(hyb.positions, hyb.cm.tets).min() > 0
     rep = hyb.relax_report()
     assert rep["not_converged"] == 0 and rep["worst_relative_residual"] <= rep["rtol"]
+    J_last = signed_volumes(hyb.positions, hyb.cm.tets) / signed_volumes(hyb.rest_positions, hyb.cm.tets)
+    assert len(rep["min_J"]) == 10 and rep["min_J"][-1] == pytest.approx(J_last.min(), rel=1e-9)
+    assert rep["min_J_worst"] == min(rep["min_J"]) and rep["crushed_J"] == 1e-3
+    assert rep["steps_with_crushed_tets"] == sum(1 for j in rep["min_J"] if j < 1e-3)
     assert rep["polished_steps"] >= 1 and rep["polish_iterations_total"] == hyb.counts["newton_iterations"] > 0
     assert len(rep["polish_iterations"]) == rep["count"] == 10 and rep["polish_calls"] >= rep["polished_steps"]
     assert {"total", "assembly", "factorisation"} <= set(rep["polish_s"])

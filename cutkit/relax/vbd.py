@@ -228,3 +228,10 @@ def elastic_forces_at(em: ElementModel, positions, nodes) -> np.ndarray:
 def elastic_energy(em: ElementModel, positions) -> float:
     """Total stored energy, N mm."""
     return float(K.element_energy(np.ascontiguousarray(positions, np.float64), em.elements))
+
+
+def volume_ratio_extremes(em: ElementModel, positions, below: float) -> tuple[float, int]:
+    """The smallest volume ratio ``J = det F`` (of each element's natural shape) at ``positions``
+    (n, 3) float64 over the live elements (1.0 without any), and how many have ``J < below``."""
+    lowest, count = K.volume_ratio_extremes(np.ascontiguousarray(positions, np.float64), em.elements, float(below))
+    return float(lowest), int(count)

@@ -36,7 +36,7 @@ from cutkit.relax.elastic import (
 from cutkit.mesh.geometry import signed_volumes_serial
 from cutkit.relax.kernels import loaded_nodes, tets_around
 from cutkit.relax.growable import append_rows
-from cutkit.relax.vbd import DEFAULT_ATOL_N, elastic_forces_at, local_step
+from cutkit.relax.vbd import DEFAULT_ATOL_N, elastic_forces_at, local_step, volume_ratio_extremes
 from cutkit.relax.materials import material_of_tets, prestress_of_tets
 from cutkit.simulate._kernels import old_shape_corners, place_through_old_shape, step_tet_sets
 from cutkit.simulate.rest_map import rest_map_radius
@@ -74,6 +74,9 @@ REST_RTOL = 1e-3
 #: each system to 1e-2 (:data:`~cutkit.relax.newton.CG_RTOL`) buys little: on the demo knee's hold
 #: with the blade in, 0.1 took the resting solves from 12.5 to 9.6 s (blade drawn out: 2.2 vs 2.5 s).
 REST_CG_RTOL = 0.1
+#: ``relax_steps`` counts the steps that ended with a tet below this volume ratio J (the issue's
+#: bound of a tet left crushed; the barrier acts below BARRIER_J = 0.1).
+CRUSHED_J = 1e-3
 
 
 #: A new or moved node within this (barycentric) distance outside the nearest tet of the
@@ -234,7 +237,7 @@ class ElasticTissue(TissueBase):
         self.counts = {"steps": 0, "sweeps": 0, "node_updates": 0, "steps_not_converged": 0}
         if solver in ("newton", "hybrid"):
             self.counts["newton_iterations"] = 0
-        self.step_log: dict[str, list] = {"iterations": [], "relative_residual": []}
+        self.step_log: dict[str, list] = {"iterations": [], "relative_residual": [], "min_J": [], "crushed_tets": []}
         #: seconds in each part of the hybrid's polishes (cutkit.relax.hybrid.TIMED)
         self.polish_timings: dict[str, float] = {}
         if solver == "hybrid":
@@ -495,6 +498,11 @@ class ElasticTissue(TissueBase):
         self.step_log["iterations"].append(int(info.iterations))
         self.step_log["relative_residual"].append(float(true_residual / self.force_scale)
                                                   if self.force_scale > 0 else 0.0)
+        # how near the step's end state came to crushing a tet (J of the natural shape); one pass
+        # like an energy's, 2-3 ms on the knee
+        lowest, crushed = volume_ratio_extremes(self.em, self.state.positions, CRUSHED_J)
+        self.step_log["min_J"].append(float(lowest))
+        self.step_log["crushed_tets"].append(int(crushed))
 
     def relax_report(self) -> dict:
         """``summary.json``'s ``relax_steps``: how the relaxation steps ended (docs/simulate.md).
@@ -503,8 +511,11 @@ class ElasticTissue(TissueBase):
         -------
         dict
             ``solver``, ``count``, ``not_converged``, ``worst_relative_residual``,
-            ``iterations_total``, ``rtol``, and per step ``iterations`` and
-            ``relative_residual`` (true final residual over the force scale);
+            ``iterations_total``, ``rtol``, ``min_J_worst`` (the smallest volume
+            ratio any step ended with), ``steps_with_crushed_tets`` (steps that
+            ended with a tet below ``crushed_J`` = :data:`CRUSHED_J`), and per step
+            ``iterations``, ``relative_residual`` (true final residual over the
+            force scale) and ``min_J``;
             ``"hybrid"`` adds ``polish_iterations_total``, ``polished_steps``
             (steps with a Newton iteration), ``polish_calls`` (steps that
             called the polish), ``polish_s`` (wall seconds of the polishes:
@@ -519,6 +530,9 @@ class ElasticTissue(TissueBase):
                 "iterations_total": int(sum(self.step_log["iterations"])), "rtol": self.step_rtol,
                 "force_scale_N": float(self.force_scale),
                 "iterations": list(self.step_log["iterations"]), "relative_residual": list(rel),
+                "min_J": list(self.step_log["min_J"]), "min_J_worst": float(min(self.step_log["min_J"], default=1.0)),
+                "crushed_J": CRUSHED_J,
+                "steps_with_crushed_tets": int(sum(1 for k in self.step_log["crushed_tets"] if k)),
                 **self._polish_report()}
 
     def _polish_report(self) -> dict:
