@@ -34,10 +34,9 @@ from cutkit.errors import InputError
 from cutkit.interrupts import check_stop, safe_points
 from cutkit.model.tetmodel import MATERIAL_MODELS
 from cutkit.simulate.tissues import SETTLE_MAX_SWEEPS, cut_model, make_tissue  # noqa: F401 (public here too)
+from cutkit.scalpel.model import HAPTIC_DT  # the force model's 1 kHz step, defined there once
 from cutkit.threads import one_blas_thread
 
-#: The haptic step, s: the force model runs at 1 kHz whatever else happens (section 6).
-HAPTIC_DT = 1e-3
 #: ``simulate --haptics`` and live sessions warn when the haptic loop reaches
 #: less than this fraction of 1 kHz.
 RATE_WARN_FRACTION = 0.9
