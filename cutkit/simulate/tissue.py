@@ -30,7 +30,6 @@ import numpy as np
 
 from cutkit.cutting import CutMesh
 from cutkit.mesh.geometry import TET_EDGES, tet_volumes
-from cutkit.mesh.topology import unique_edges
 from cutkit.relax import Control, NodeLists, build_spring_model, initial_state
 from cutkit.relax.materials import material_of_tets, prestress_of_tets
 from cutkit.relax.model import STIFFNESS_CALIBRATION
@@ -117,9 +116,10 @@ class Tissue(TissueBase):
         self.rec_sv[:self.n_orig_tets] = sv
         # rest volume of the model tet each original tet comes from (flat sub-tets: _rebuild_volume_term)
         self.model_V = V.copy()
-        edges, tet_edge = unique_edges(tets)
-        if not np.array_equal(edges, sm.springs):
-            raise RuntimeError("spring order differs from the mesh edge order")
+        # the cut mesh's edges of the original tets (one computation): the spring model numbers its
+        # springs by the same unique_edges of the same tets, so spring k is edge k
+        edges, tet_edge = cm.edges, cm.tet_edges
+        assert edges.shape == sm.springs.shape, "the springs are the mesh's edges"
         s = len(edges)
         flat = tet_edge.ravel()
         self.spring_count = np.bincount(flat, minlength=s).astype(np.int64)
