@@ -270,6 +270,41 @@ def test_a_looser_inner_tolerance_reaches_the_same_answer_with_fewer_cg_iteratio
             NewtonSolver(em, cg_rtol=bad)
 
 
+class FlagAfter:
+    """A stop flag that reads 0 for its first ``reads`` reads, then 1 (a cut that starts waiting)."""
+
+    def __init__(self, reads):
+        self.reads, self.n = reads, 0
+
+    def __getitem__(self, i):
+        self.n += 1
+        return int(self.n > self.reads)
+
+
+def test_a_waiting_cut_stops_the_conjugate_gradients_and_the_iteration_is_abandoned():
+    """The stop flag is read between conjugate-gradient iterations too: set within the first Newton
+    iteration's solve, the step is not taken (state unchanged); within the second, the step ends at
+    the first iterate, exactly where a step of one iteration ends."""
+    p, em, f, tip = cantilever()
+    f = 0.25 * f
+
+    def step(max_iterations, stop=None):
+        st = ElementState(p.copy(), np.zeros_like(p))
+        info = newton_step(em, st, 0.02, f, atol=0.0, max_iterations=max_iterations,
+                           solver=NewtonSolver(em, linear="cg"), stop=stop)
+        return info, st
+
+    _, one = step(1)
+    info, st = step(5, FlagAfter(5))  # the first read is the iteration's, the next its CG iterations'
+    assert not info.taken and info.iterations == 0 and np.array_equal(st.positions, p) and st.time == 0.0
+    counting = FlagAfter(10 ** 9)
+    step(1, counting)
+    info, st = step(5, FlagAfter(counting.n + 3))  # past one whole iteration's reads
+    assert info.taken and info.iterations == 1 and not info.converged
+    np.testing.assert_array_equal(st.positions, one.positions)
+    assert counting.n > 3  # the flag was read inside the conjugate gradients, not only between iterations
+
+
 def test_block_jacobi_inverts_each_nodes_diagonal_block(deformed):
     """node_block_inverse against the 3 x 3 diagonal blocks of the dense matrix, inverted one by one."""
     em, x = deformed

@@ -206,9 +206,10 @@ class NewtonSolver:
             KN.assemble_hessian(x, self._elements(), pat, int(project), data)
         return self._constrained(data, free, diagonal_add)
 
-    def _solve_linear(self, A, r: np.ndarray, x: np.ndarray, free: np.ndarray):
-        """d with A d = r, or None where a Cholesky factorisation finds A not positive definite
-        (x (n, 3) and free (n, 3) bool: where A was assembled, for a multigrid setup)."""
+    def _solve_linear(self, A, r: np.ndarray, x: np.ndarray, free: np.ndarray, halt=None):
+        """d with A d = r, or None where a Cholesky factorisation finds A not positive definite or
+        ``halt`` stopped the conjugate gradients (x (n, 3) and free (n, 3) bool: where A was
+        assembled, for a multigrid setup)."""
         if self.linear == "cholesky" or (self.linear == "auto" and A.shape[0] <= CHOLESKY_MAX_DOFS):
             return self._factor_solve(A, r)
         if self.preconditioner == "block_jacobi":
@@ -220,8 +221,10 @@ class NewtonSolver:
             if self._amg is None or self._amg[1] > A.shape[0]:
                 self._build_amg(A, x, free)
             M = self._preconditioner(A)
-        d, its = _pcg(A, r, M, self.cg_rtol, CG_MAX_ITERATIONS)
+        d, its = _pcg(A, r, M, self.cg_rtol, CG_MAX_ITERATIONS, halt)
         self.counts["cg_iterations"] += its
+        if d is None and halt is not None and halt[0]:
+            return None  # a waiting cut: the iteration is abandoned, x stays the last iterate
         if d is None:  # negative curvature: the exact Hessian is indefinite
             self.counts["indefinite"] += 1
             return None
@@ -278,9 +281,12 @@ class NewtonSolver:
         max_iterations : int
             Newton iterations before the solve gives up (reported, ``converged`` False).
         stop : (1,) int64, optional
-            Read before every iteration: non-zero ends the solve at the iterate
-            reached (every iterate keeps every upright element upright).
-            Stopped before its first iteration, the result says ``taken`` False.
+            Read before every iteration and before every conjugate-gradient
+            iteration: non-zero ends the solve at the iterate reached (every
+            iterate keeps every upright element upright; an iteration whose
+            linear solve it stops is abandoned, so a waiting cut waits for one
+            product with the matrix, not for a Newton iteration).  Stopped
+            before its first iteration is done, the result says ``taken`` False.
 
         Returns
         -------
@@ -310,9 +316,11 @@ class NewtonSolver:
                 d = self._local_direction(x, r, free, terms.inertia + terms.damping, atol, rings)
             local = d is not None
             if d is None:
-                d = self._direction(x, r, free, terms.inertia + terms.damping)
+                d = self._direction(x, r, free, terms.inertia + terms.damping, stop)
                 self.counts["global_iterations"] += 1
             if d is None:
+                if stop is not None and stop[0] and it == 0:  # stopped within the first iteration
+                    return SolveInfo(0, r0, r0, False, taken=False)
                 break
             before = res
             moved, r = line_search(problem, x, d, r, res)
@@ -404,11 +412,14 @@ class NewtonSolver:
         return d
 
 
-    def _direction(self, x, r, free, diagonal_add):
-        """The Newton step: exact Hessian first (``"auto"``), projected where that is indefinite."""
+    def _direction(self, x, r, free, diagonal_add, halt=None):
+        """The Newton step: exact Hessian first (``"auto"``), projected where that is indefinite;
+        None where ``halt`` ((1,) int64) stopped its conjugate gradients."""
         modes = {"auto": (0, 1), "projected": (1,), "exact": (0,)}[self.hessian]
         for mode in modes:
-            d = self._solve_linear(self.matrix(x, free, diagonal_add, mode), r.ravel(), x, free)
+            d = self._solve_linear(self.matrix(x, free, diagonal_add, mode), r.ravel(), x, free, halt)
+            if d is None and halt is not None and halt[0]:
+                return None
             if d is not None:
                 d = d.reshape(-1, 3)
                 d[~free] = 0.0
@@ -533,10 +544,11 @@ def _quiet_stderr():
         os.close(saved[1])
 
 
-def _pcg(A, b: np.ndarray, M, rtol: float, max_iterations: int):
+def _pcg(A, b: np.ndarray, M, rtol: float, max_iterations: int, halt=None):
     """Preconditioned conjugate gradients for A d = b, stopped at ``||b - A d|| <= rtol ||b||``;
     (None, iterations) at negative curvature (an indefinite exact Hessian: the caller takes the
-    projected one).  Returns (d, iterations)."""
+    projected one) and where ``halt`` ((1,) int64, a waiting cut's flag) is set, read before every
+    iteration.  Returns (d, iterations)."""
     d = np.zeros_like(b)
     r = b.copy()
     z = M @ r
@@ -544,6 +556,8 @@ def _pcg(A, b: np.ndarray, M, rtol: float, max_iterations: int):
     rz = float(r @ z)
     stop = rtol * float(np.linalg.norm(b))
     for k in range(max_iterations):
+        if halt is not None and halt[0]:
+            return None, k
         Ap = A @ p
         curvature = float(p @ Ap)
         if not curvature > 0.0:
