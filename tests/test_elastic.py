@@ -77,6 +77,8 @@ def test_volume_ratio_extremes_match_the_twin_with_removed_and_inverted_tets(def
         lowest, count = volume_ratio_extremes(em, x, below)
         assert lowest == pytest.approx(J.min(), rel=1e-12) and count == int((J < below).sum())
     assert volume_ratio_extremes(em, model.points, 0.5)[1] == 0
+    stretched = model.points * 1.1  # every J above 1.1^3: the smallest is reported, not 1
+    assert volume_ratio_extremes(em, stretched, 0.5)[0] > 1.0
 
 
 def test_forces_are_minus_the_energy_gradient(deformed):

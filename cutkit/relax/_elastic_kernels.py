@@ -456,7 +456,7 @@ def element_energy(x, el):
 def volume_ratio_extremes(x, el, below):
     """The smallest volume ratio J = det F over the elements with V > 0 (1.0 if none), and how many
     have J < ``below``: the report of how near a step's state came to crushing a tet."""
-    lowest = 1.0
+    lowest = np.inf
     count = 0
     for t in range(el.tets.shape[0]):
         if el.volume[t] <= 0.0:
@@ -467,4 +467,4 @@ def volume_ratio_extremes(x, el, below):
             lowest = J
         if J < below:
             count += 1
-    return lowest, count
+    return (lowest if lowest < np.inf else 1.0), count
