@@ -257,3 +257,28 @@ def test_a_cut_or_a_new_load_ends_the_rest_and_the_rest_tolerance_is_checked():
     for bad in (0.0, -1.0, float("nan")):
         with pytest.raises(CutkitError, match="rest_rtol must be a positive number or None"):
             ElasticTissue(model, blade_length=1.0, step_s=H, solver="hybrid", rest_rtol=bad)
+
+
+def test_what_is_written_does_not_change_a_hybrid_run_with_resting_steps(tmp_path):
+    """The hybrid's resting steps depend on the load and the cuts, never on the frames: a run
+    writing 1 frame a second and one writing 30 cut the same model and write the same forces."""
+    from test_settle_cache import _result, prestressed_block
+
+    from cutkit.cutting.trajectory import straight_incision
+    from cutkit.simulate import simulate
+
+    model = prestressed_block()
+    traj = straight_incision([3.0, 0.0, 4.3], [13.0, 0.0, 4.3], inward=[0, 1, 0], depth=3.0, approach=2.0,
+                             press_time=0.2, cut_time=0.3, rate=100)
+    fps = 1.0
+    runs = {}
+    for rate in (fps, 30.0):
+        out = tmp_path / f"fps{rate:g}"
+        runs[rate] = simulate(model, traj, out, SimulateOptions(fps=rate, hold_s=0.3, solver="hybrid"))
+    assert runs[30.0]["relax_steps"]["resting_steps"] > 0 and runs[30.0]["frames"] > runs[fps]["frames"]
+    assert runs[fps]["relax_steps"]["relative_residual"] == runs[30.0]["relax_steps"]["relative_residual"]
+    for a, b in zip(_result(tmp_path / f"fps{fps:g}"), _result(tmp_path / "fps30")):
+        if isinstance(a, str):
+            assert a == b
+        else:
+            np.testing.assert_array_equal(a, b)  # to the bit
