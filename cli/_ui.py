@@ -51,6 +51,19 @@ def overwrite_option(command):
                              "non-empty output folder is refused.")(command)
 
 
+#: ``--solver``'s choices: :data:`cutkit.simulate.elastic_tissue.SOLVERS` (kept here so that the
+#: CLI's startup imports no kernels; a test holds the two equal).
+SOLVER_CHOICES = ("newton", "vbd", "hybrid")
+
+
+def solver_option(command):
+    """The ``--solver`` option of the commands that relax an element model (simulate, demo, live)."""
+    return click.option("--solver", type=click.Choice(SOLVER_CHOICES), default=None,
+                        help="How the element model's relaxation steps are solved: projected Newton, vertex "
+                             "block descent, or vertex block descent with a local Newton polish of a step left "
+                             "unconverged and resting steps solved to 1e-3 [default: vbd].")(command)
+
+
 @contextlib.contextmanager
 def folder_guard(path):
     """Remove ``path`` again when the command fails and leaves it as it found it: missing, or created empty.

@@ -2,7 +2,7 @@
 
 import click
 
-from cutkit.cli._ui import overwrite_option
+from cutkit.cli._ui import overwrite_option, solver_option
 
 
 @click.command(name="demo")
@@ -19,10 +19,7 @@ from cutkit.cli._ui import overwrite_option
 @click.option("--movie", is_flag=True, help="Also a movie of the cut, OUT/cut.mp4.")
 @click.option("--material-model", type=click.Choice(["neohookean", "springs"]), default=None,
               help="Tissue model [default: the recipe's, neohookean].")
-@click.option("--solver", type=click.Choice(["newton", "vbd", "hybrid"]), default=None,
-              help="How the element model's relaxation steps are solved: projected Newton, vertex block "
-                   "descent, or vertex block descent with a local Newton polish of a step left unconverged "
-                   "[default: vbd].")
+@solver_option
 def command(out_dir, fps, overwrite, no_png, movie, material_model, solver):
     """Build pipelines/knee.toml (reused when unchanged), cut sample_volumes/incision.csv, take pictures."""
     import time

@@ -2,7 +2,7 @@
 
 import click
 
-from cutkit.cli._ui import overwrite_option
+from cutkit.cli._ui import overwrite_option, solver_option
 
 
 @click.command(name="live")
@@ -45,10 +45,7 @@ from cutkit.cli._ui import overwrite_option
 @click.option("--blade-length", default=None, type=float, help="Blade length, mm [default: 20].")
 @click.option("--material-model", type=click.Choice(["neohookean", "springs"]), default=None,
               help="Tissue model [default: what the model file names].")
-@click.option("--solver", type=click.Choice(["newton", "vbd", "hybrid"]), default=None,
-              help="How the element model's relaxation steps are solved: projected Newton, vertex block "
-                   "descent, or vertex block descent with a local Newton polish of a step left unconverged "
-                   "[default: vbd].")
+@solver_option
 def command(model, out_dir, overwrite, haptics, trajectory, speed, igtl_port, igtl_device, camera, no_window, fps,
             seconds, clock, until_idle, geometry_rate_hz, blade_length, material_model, solver, **igtl_opts):
     """Cut MODEL live; Ctrl-C (or closing the window) ends the session, its recording stays valid."""

@@ -2,7 +2,7 @@
 
 import click
 
-from cutkit.cli._ui import overwrite_option
+from cutkit.cli._ui import overwrite_option, solver_option
 
 
 @click.command(name="simulate")
@@ -28,10 +28,7 @@ from cutkit.cli._ui import overwrite_option
 @click.option("--material-model", type=click.Choice(["neohookean", "springs"]), default=None,
               help="Tissue model: stable neo-Hookean elements with the Poisson ratio of the materials table, "
                    "or the paper's springs [default: what the model file names, neohookean for most].")
-@click.option("--solver", type=click.Choice(["newton", "vbd", "hybrid"]), default=None,
-              help="How the element model's relaxation steps are solved: projected Newton, vertex block "
-                   "descent, or vertex block descent with a local Newton polish of a step left unconverged "
-                   "[default: vbd].")
+@solver_option
 @click.option("--element", type=click.Choice(["nh", "anp"]), default="nh", show_default=True,
               help="The element model's tetrahedron: stable neo-Hookean linear tets (nh) or the average nodal "
                    "pressure tetrahedron (anp), which does not lock near incompressibility; anp is solved by "

@@ -45,3 +45,11 @@ def test_user_error_is_one_line_without_traceback(tmp_path):
 def test_main_returns_exit_code():
     assert main(["--version"]) == 0
     assert main(["no-such-command"]) == 2
+
+
+def test_the_solver_choices_are_the_tissues_solvers():
+    """``--solver`` is one option for simulate, demo and live, its choices the element tissue's."""
+    from cutkit.cli._ui import SOLVER_CHOICES
+    from cutkit.simulate.elastic_tissue import SOLVERS
+
+    assert SOLVER_CHOICES == SOLVERS

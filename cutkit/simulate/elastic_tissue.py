@@ -383,8 +383,10 @@ class ElasticTissue(TissueBase):
         difference: a change that small cannot move the equilibrium by more than the tolerance
         lets a step miss it; the blade's load on a still blade settles geometrically, it is not
         constant to the bit).  The load is kept for the next call."""
+        if self.solver != "hybrid" or self.rest_rtol is None:
+            return False
         last, self._last_load = self._last_load, f_ext.copy()
-        if self.solver != "hybrid" or self.rest_rtol is None or last is None or last.shape != f_ext.shape:
+        if last is None or last.shape != f_ext.shape:
             return False
         if self._cut_since_step:
             return False
@@ -405,7 +407,7 @@ class ElasticTissue(TissueBase):
         atol = self._rest_atol()
         x0, v0 = self.state.positions.copy(), self.state.velocities.copy()
         r = self._residual(x0, v0, f_ext)  # at x = x0: the kept forces, nothing summed again
-        res = float(np.linalg.norm(r))
+        res = self._free_norm(r)
         if res <= atol:
             self.state.velocities[:] = 0.0
             self.state.time += self.step_s
@@ -419,7 +421,7 @@ class ElasticTissue(TissueBase):
             return info, 0.0, 0
         r = self._residual(x0, v0, f_ext)
         self.r2[:] = np.einsum("ij,ij->i", r, r)
-        res = float(np.linalg.norm(r))
+        res = self._free_norm(r)
         return SolveInfo(0, info.initial_residual, res, res <= atol, 0), res, info.iterations
 
     def _sweep_step(self, f_ext: np.ndarray, loaded: np.ndarray, atol: float, stop):
@@ -441,11 +443,10 @@ class ElasticTissue(TissueBase):
                           max_iterations=self.step_max_iterations, stop=stop)
         if not info.taken:
             return info, 0.0
-        if self.solver != "hybrid":
-            return info, self._true_residual(x0, v0, f_ext)
         r = self._residual(x0, v0, f_ext)
-        free = ~self.em.fixed & (self.em.adj_degree > 0)[:, None]
-        true_residual = float(np.linalg.norm(r[free]))
+        true_residual = self._free_norm(r)
+        if self.solver != "hybrid":
+            return info, true_residual
         polished = 0
         if not (stop is not None and stop[0]) and (true_residual > atol or not info.converged):
             info, true_residual, polished = self._polish(info, x0, v0, f_ext, r, atol)
@@ -473,9 +474,12 @@ class ElasticTissue(TissueBase):
     def _true_residual(self, x0: np.ndarray, v0: np.ndarray, f_ext: np.ndarray) -> float:
         """N: the norm over all free dofs of the backward Euler residual of the step just made from
         (x0, v0) (vertex block descent's own residual keeps each sleeping node's last value)."""
+        return self._free_norm(self._residual(x0, v0, f_ext))
+
+    def _free_norm(self, r: np.ndarray) -> float:
+        """N: the norm of r (n, 3) over the free dofs of nodes with tets."""
         em = self.em
-        free = ~em.fixed & (em.adj_degree > 0)[:, None]
-        return float(np.linalg.norm(self._residual(x0, v0, f_ext)[free]))
+        return float(np.linalg.norm(r[~em.fixed & (em.adj_degree > 0)[:, None]]))
 
     def _residual(self, x0: np.ndarray, v0: np.ndarray, f_ext: np.ndarray) -> np.ndarray:
         """(n, 3) float64 N: the backward Euler residual of the step just made from (x0, v0), 0 at

@@ -163,8 +163,10 @@ class SimulateOptions:
             raise InputError(f"blade-length must be a positive number, got {self.blade_length}")
         if not (np.isfinite(self.volume_stiffness) and self.volume_stiffness >= 0):
             raise InputError(f"volume-stiffness must be a number >= 0, got {self.volume_stiffness}")
-        if self.solver is not None and self.solver not in ("newton", "vbd", "hybrid"):
-            raise InputError(f"solver must be newton, vbd or hybrid, not {self.solver!r}")
+        from cutkit.simulate.elastic_tissue import SOLVERS
+
+        if self.solver is not None and self.solver not in SOLVERS:
+            raise InputError(f"solver must be {', '.join(SOLVERS[:-1])} or {SOLVERS[-1]}, not {self.solver!r}")
         from cutkit.scalpel import SCALPEL_MODELS
 
         if self.scalpel not in SCALPEL_MODELS:
