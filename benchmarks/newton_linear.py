@@ -12,10 +12,14 @@ Newton system of a backward Euler step of ``--step`` s from the model as built
                                     near 0 the inertia does not condition the system (the step is
                                     as hard as a static solve); near 1 or above Jacobi is enough
   pattern_s, assemble_s             sparsity pattern (after a cut), projected Hessian values
-  spmv_ms                           one product with the assembled matrix
+  spmv_ms                           one product with the assembled matrix (scipy's scalar CSR)
+  block_spmv_ms                     the same product on the symmetric block form the solver's CG
+                                    uses (``cutkit.relax._block_cg_kernels``)
   cg.<preconditioner>               CG to a relative residual of 1e-2 (the Newton steps' inexact
                                     solve) and 1e-6: iterations, seconds, and the setup's seconds,
-                                    for jacobi, block_jacobi (3 x 3 node blocks), amg (pyamg
+                                    for jacobi, block_jacobi (3 x 3 node blocks, scipy's products),
+                                    block_kernel (the same in the solver's kernel: its setup is
+                                    the gather into the block form and the inverses), amg (pyamg
                                     smoothed aggregation with the rigid-body modes, the ``linear="cg"`` path) and, where
                                     pypardiso is installed, an earlier factor (the factor of the
                                     Hessian of a state 10 um away, as reusing a step's factor
@@ -46,12 +50,12 @@ def _timed(fn):
 
 def _cg(A, r, make_preconditioner) -> dict:
     """CG with one preconditioner to 1e-2 and 1e-6: iterations and seconds, setup seconds."""
-    from cutkit.relax.newton import _pcg
+    from cutkit.relax.newton import pcg
 
     M, setup = _timed(make_preconditioner)
     out = {"setup_s": setup}
     for rtol in (1e-2, 1e-6):
-        (d, its), t = _timed(lambda: _pcg(A, r, M, rtol, 2000))
+        (d, its), t = _timed(lambda: pcg(A, r, M, rtol, 2000))
         out[f"rtol_{rtol:.0e}"] = {"iterations": int(its), "s": t}
     return out
 
@@ -71,6 +75,33 @@ class _FactorSolve:
 
     def __matmul__(self, v):
         return self.solver.solve(self.upper, v)
+
+
+def _block_kernel(A, r, pattern):
+    """(one product in ms, CG as :func:`_cg` reports it) on the block form of the solver's kernel."""
+    from cutkit.relax import _block_cg_kernels as KB
+
+    n = A.shape[0] // 3
+
+    def setup():
+        ptr, col, src = KB.upper_blocks(pattern.node_ptr, pattern.node_idx)
+        blocks = KB.BlockMatrix(np.empty((n, 3, 3)), ptr, col, np.empty((col.shape[0], 3, 3)))
+        KB.gather_blocks(pattern.node_ptr, pattern.diagonal, src, A.data, blocks.diag, ptr, blocks.off)
+        inv = np.empty((n, 3, 3))
+        KB.block_jacobi(blocks.diag, inv)
+        return blocks, inv
+
+    setup()  # compiled (or loaded from the cache) outside the timings
+    (blocks, inv), setup_s = _timed(setup)
+    b, y, d, flag = r.reshape(n, 3).copy(), np.empty((n, 3)), np.empty((n, 3)), np.zeros(1, np.int64)
+    KB.block_product(blocks, b, y)
+    KB.block_pcg(blocks, inv, b, 0.5, 1, flag, d)
+    _, spmv = _timed(lambda: [KB.block_product(blocks, b, y) for _ in range(10)])
+    out = {"setup_s": setup_s}
+    for rtol in (1e-2, 1e-6):
+        (_, its), t = _timed(lambda: KB.block_pcg(blocks, inv, b, rtol, 2000, flag, d))
+        out[f"rtol_{rtol:.0e}"] = {"iterations": int(its), "s": t}
+    return 100.0 * spmv, out
 
 
 def knee_linear(path: str, step_s: float, cholespy: bool) -> dict:
@@ -95,6 +126,7 @@ def knee_linear(path: str, step_s: float, cholespy: bool) -> dict:
            "pattern_s": pattern_s, "assemble_s": assemble_s, "spmv_ms": 100.0 * spmv}
     cg = {"jacobi": _cg(A, r, lambda: sp.diags(1.0 / A.diagonal()).tocsr()),
           "block_jacobi": _cg(A, r, lambda: node_block_inverse(A, solver.pattern()))}
+    out["block_spmv_ms"], cg["block_kernel"] = _block_kernel(A, r, solver.pattern())
 
     def amg():
         solver._build_amg(A, x0, free)

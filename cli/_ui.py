@@ -51,9 +51,10 @@ def overwrite_option(command):
                              "non-empty output folder is refused.")(command)
 
 
-#: ``--solver``'s choices: :data:`cutkit.simulate.elastic_tissue.SOLVERS` (kept here so that the
-#: CLI's startup imports no kernels; a test holds the two equal).
+#: ``--solver``'s choices and default: :data:`cutkit.simulate.elastic_tissue.SOLVERS` and
+#: ``DEFAULT_SOLVER`` (kept here so that the CLI's startup imports no kernels; a test holds them equal).
 SOLVER_CHOICES = ("newton", "vbd", "hybrid")
+SOLVER_DEFAULT = "hybrid"
 
 
 def solver_option(command):
@@ -61,7 +62,8 @@ def solver_option(command):
     return click.option("--solver", type=click.Choice(SOLVER_CHOICES), default=None,
                         help="How the element model's relaxation steps are solved: projected Newton, vertex "
                              "block descent, or vertex block descent with a local Newton polish of a step left "
-                             "unconverged and resting steps solved to 1e-3 [default: vbd].")(command)
+                             "unconverged and resting steps solved by Newton to 3e-4 of the force scale "
+                             f"[default: {SOLVER_DEFAULT}].")(command)
 
 
 @contextlib.contextmanager

@@ -48,8 +48,10 @@ def test_main_returns_exit_code():
 
 
 def test_the_solver_choices_are_the_tissues_solvers():
-    """``--solver`` is one option for simulate, demo and live, its choices the element tissue's."""
-    from cutkit.cli._ui import SOLVER_CHOICES
-    from cutkit.simulate.elastic_tissue import SOLVERS
+    """``--solver`` is one option for simulate, demo and live, its choices and the default its help
+    names the element tissue's."""
+    from cutkit.cli._ui import SOLVER_CHOICES, SOLVER_DEFAULT
+    from cutkit.simulate.elastic_tissue import DEFAULT_SOLVER, REST_RTOL, SOLVERS
 
-    assert SOLVER_CHOICES == SOLVERS
+    assert SOLVER_CHOICES == SOLVERS and SOLVER_DEFAULT == DEFAULT_SOLVER
+    assert REST_RTOL == 3e-4  # the --solver help says so

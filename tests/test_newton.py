@@ -270,39 +270,105 @@ def test_a_looser_inner_tolerance_reaches_the_same_answer_with_fewer_cg_iteratio
             NewtonSolver(em, cg_rtol=bad)
 
 
-class FlagAfter:
-    """A stop flag that reads 0 for its first ``reads`` reads, then 1 (a cut that starts waiting)."""
+class FlagInCG(NewtonSolver):
+    """A solver whose stop flag ((1,) int64) is set as its ``solve``-th conjugate-gradient solve
+    starts (a cut that starts waiting while that solve runs); the kernel reads it there."""
 
-    def __init__(self, reads):
-        self.reads, self.n = reads, 0
+    def __init__(self, em, flag, solve):
+        super().__init__(em, linear="cg")
+        self.flag, self.solve_at, self.solves = flag, solve, 0
 
-    def __getitem__(self, i):
-        self.n += 1
-        return int(self.n > self.reads)
+    def _block_cg(self, A, r, rtol, halt=None):
+        self.solves += 1
+        if self.solves == self.solve_at:
+            self.flag[0] = 1
+        return super()._block_cg(A, r, rtol, halt)
 
 
 def test_a_waiting_cut_stops_the_conjugate_gradients_and_the_iteration_is_abandoned():
-    """The stop flag is read between conjugate-gradient iterations too: set within the first Newton
-    iteration's solve, the step is not taken (state unchanged); within the second, the step ends at
-    the first iterate, exactly where a step of one iteration ends."""
+    """The stop flag is read inside the conjugate gradients too: set while the first Newton
+    iteration's system is solved, the step is not taken (state unchanged); while the second's, the
+    step ends at the first iterate, exactly where a step of one iteration ends."""
     p, em, f, tip = cantilever()
     f = 0.25 * f
 
-    def step(max_iterations, stop=None):
+    def step(max_iterations, solver, stop=None):
         st = ElementState(p.copy(), np.zeros_like(p))
-        info = newton_step(em, st, 0.02, f, atol=0.0, max_iterations=max_iterations,
-                           solver=NewtonSolver(em, linear="cg"), stop=stop)
+        info = newton_step(em, st, 0.02, f, atol=0.0, max_iterations=max_iterations, solver=solver, stop=stop)
         return info, st
 
-    _, one = step(1)
-    info, st = step(5, FlagAfter(5))  # the first read is the iteration's, the next its CG iterations'
+    _, one = step(1, NewtonSolver(em, linear="cg"))
+    flag = np.zeros(1, np.int64)
+    info, st = step(5, FlagInCG(em, flag, 1), flag)
     assert not info.taken and info.iterations == 0 and np.array_equal(st.positions, p) and st.time == 0.0
-    counting = FlagAfter(10 ** 9)
-    step(1, counting)
-    info, st = step(5, FlagAfter(counting.n + 3))  # past one whole iteration's reads
+    flag = np.zeros(1, np.int64)
+    solver = FlagInCG(em, flag, 2)
+    info, st = step(5, solver, flag)
     assert info.taken and info.iterations == 1 and not info.converged
     np.testing.assert_array_equal(st.positions, one.positions)
-    assert counting.n > 3  # the flag was read inside the conjugate gradients, not only between iterations
+
+
+def _block_system(em, x):
+    """A Newton matrix of (em, x) with held dofs (scipy CSR), and its block form and inverse
+    diagonal blocks (:mod:`cutkit.relax._block_cg_kernels`)."""
+    from cutkit.relax import _block_cg_kernels as KB
+
+    n = em.n_nodes
+    fixed = np.zeros((n, 3), bool)
+    fixed[:2] = True
+    fixed[7, 1] = True
+    solver = NewtonSolver(em)
+    A = solver.matrix(x, ~fixed, np.linspace(1.0, 2.0, n), 1)
+    pat = solver.pattern()
+    ptr, col, src = KB.upper_blocks(pat.node_ptr, pat.node_idx)
+    blocks = KB.BlockMatrix(np.empty((n, 3, 3)), ptr, col, np.empty((col.shape[0], 3, 3)))
+    KB.gather_blocks(pat.node_ptr, pat.diagonal, src, A.data, blocks.diag, ptr, blocks.off)
+    inv = np.empty((n, 3, 3))
+    assert KB.block_jacobi(blocks.diag, inv)
+    return A, blocks, inv, solver
+
+
+def test_block_form_products_equal_the_scalar_matrix(deformed):
+    """The symmetric block form (upper blocks used twice) multiplies like scipy's CSR of the same
+    matrix, and its inverse diagonal blocks are node_block_inverse's."""
+    from cutkit.relax import _block_cg_kernels as KB
+
+    em, x = deformed
+    A, blocks, inv, solver = _block_system(em, x)
+    p = np.random.default_rng(5).normal(size=(em.n_nodes, 3))
+    y = np.empty_like(p)
+    KB.block_product(blocks, p, y)
+    np.testing.assert_allclose(y.ravel(), A @ p.ravel(), rtol=1e-12, atol=1e-12 * np.abs(A @ p.ravel()).max())
+    M = node_block_inverse(A, solver.pattern())
+    np.testing.assert_allclose(M @ p.ravel(), np.einsum("iab,ib->ia", inv, p).ravel(), rtol=1e-10,
+                               atol=1e-12 * np.abs(M @ p.ravel()).max())
+
+
+def test_block_cg_equals_the_scalar_twin_and_reads_its_halt_flag(deformed):
+    """block_pcg against pcg (NumPy, scipy's products, the same preconditioner): the same
+    iterations and solution to rounding; with its flag set it makes no iteration and says so."""
+    from cutkit.relax import _block_cg_kernels as KB
+    from cutkit.relax.newton import pcg
+
+    em, x = deformed
+    A, blocks, inv, solver = _block_system(em, x)
+    n = em.n_nodes
+    b = np.random.default_rng(3).normal(size=(n, 3))
+    b[:2] = 0.0
+    b[7, 1] = 0.0
+    d = np.empty((n, 3))
+    assert KB.block_pcg(blocks, inv, b, 1e-8, 500, np.ones(1, np.int64), d) == (KB.CG_HALTED, 0)
+    status, its = KB.block_pcg(blocks, inv, b, 1e-8, 500, np.zeros(1, np.int64), d)
+    twin, twin_its = pcg(A, b.ravel(), node_block_inverse(A, solver.pattern()), 1e-8, 500)
+    assert status == KB.CG_DONE and its == twin_its and 0 < its < 500
+    np.testing.assert_allclose(d.ravel(), twin, rtol=1e-8, atol=1e-10 * np.abs(twin).max())
+    assert np.linalg.norm(b.ravel() - A @ d.ravel()) <= 1.01e-8 * np.linalg.norm(b)
+    A.data[solver.pattern().diagonal[3 * 5 + 1]] *= -1.0  # an indefinite diagonal block
+    blocks2 = _block_system(em, x)[1]
+    KB.gather_blocks(solver.pattern().node_ptr, solver.pattern().diagonal,
+                     KB.upper_blocks(solver.pattern().node_ptr, solver.pattern().node_idx)[2], A.data,
+                     blocks2.diag, blocks2.ptr, blocks2.off)
+    assert not KB.block_jacobi(blocks2.diag, np.empty((n, 3, 3)))
 
 
 def test_block_jacobi_inverts_each_nodes_diagonal_block(deformed):
@@ -348,3 +414,37 @@ def test_a_static_solve_is_the_same_to_the_bit_whatever_blas_threads_the_process
         runs.append((x, info.iterations))
     assert runs[0][1] == runs[1][1] > 0
     assert np.array_equal(runs[0][0], runs[1][0])
+
+
+def test_the_assembly_is_the_same_to_the_bit_at_any_thread_count_and_chunk(monkeypatch):
+    """The Hessians are computed in parallel blocks, a chunk at a time, and added in element order:
+    one thread or two, one chunk or many, the matrix is the same to the bit, and it equals the
+    element Hessians (element_terms) added one by one in a dense matrix."""
+    import numba
+    import scipy.sparse as sp
+
+    from cutkit.relax import _elastic_kernels as KE
+
+    p, t = kuhn_box((3.0, 2.0, 2.0), (4, 3, 3))
+    em = build_element_model(model_of(p, t, prestrain=0.05))
+    x = p + np.random.default_rng(4).normal(scale=0.05, size=p.shape)
+    solver = NewtonSolver(em)
+    m = em.n_elements
+    pat, el = solver.pattern(), KE.Elements(em.tets[:m], em.Dminv[:m], em.volume[:m], em.mu[:m], em.lam[:m])
+    out = []
+    for threads, chunk in ((1, KN.ASSEMBLY_CHUNK), (min(2, numba.config.NUMBA_NUM_THREADS), 7)):
+        numba.set_num_threads(threads)
+        monkeypatch.setattr(KN, "ASSEMBLY_CHUNK", chunk)
+        data = np.empty(pat.indices.shape[0])
+        KN.assemble_hessian(x, el, pat, KN.CLAMP, data)
+        out.append(data)
+    numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
+    assert np.array_equal(out[0], out[1])
+    grads, hessians = np.empty((m, 12)), np.empty((m, 12, 12))
+    KN.element_terms(x, el, np.arange(m), KN.CLAMP, grads, hessians)
+    dense = np.zeros((3 * em.n_nodes, 3 * em.n_nodes))
+    for e in range(m):
+        dofs = (3 * el.tets[e][:, None] + np.arange(3)).ravel()
+        dense[np.ix_(dofs, dofs)] += hessians[e]
+    A = sp.csr_matrix((out[0], pat.indices, pat.indptr), shape=dense.shape).toarray()
+    np.testing.assert_allclose(A, dense, rtol=1e-12, atol=1e-12 * np.abs(dense).max())

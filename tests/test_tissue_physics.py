@@ -18,7 +18,7 @@ def test_tissue_models_implement_the_protocol(module, name):
 
     cls = getattr(importlib.import_module(module), name)
     members = _members()
-    assert {"settle", "advance", "apply_delta", "rebase", "bearing_nodes", "positions"} <= set(members)
+    assert {"settle", "advance", "apply_delta", "rebase", "load_shares", "masses", "positions"} <= set(members)
     for m in members:
         assert hasattr(cls, m), f"{name} has no {m}"
         want = getattr(TissuePhysics, m)

@@ -452,19 +452,69 @@ def element_energy(x, el):
     return total
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, parallel=True)
 def volume_ratio_extremes(x, el, below):
     """The smallest volume ratio J = det F over the elements with V > 0 (1.0 if none), and how many
-    have J < ``below``: the report of how near a step's state came to crushing a tet."""
-    lowest = np.inf
-    count = 0
-    for t in range(el.tets.shape[0]):
-        if el.volume[t] <= 0.0:
-            continue
-        F00, F01, F02, F10, F11, F12, F20, F21, F22 = _deformation(x, el, t)
-        J = F00 * (F11 * F22 - F12 * F21) - F01 * (F10 * F22 - F12 * F20) + F02 * (F10 * F21 - F11 * F20)
-        if J < lowest:
-            lowest = J
-        if J < below:
-            count += 1
-    return (lowest if lowest < np.inf else 1.0), count
+    have J < ``below``: the report of how near a step's state came to crushing a tet.  A minimum
+    and a count do not depend on the order they are taken in, so the blocks run in parallel."""
+    m = el.tets.shape[0]
+    lowest = np.full(SWEEP_BLOCKS, np.inf)
+    counts = np.zeros(SWEEP_BLOCKS, np.int64)
+    for b in prange(SWEEP_BLOCKS):
+        for t in range(m * b // SWEEP_BLOCKS, m * (b + 1) // SWEEP_BLOCKS):
+            if el.volume[t] <= 0.0:
+                continue
+            F00, F01, F02, F10, F11, F12, F20, F21, F22 = _deformation(x, el, t)
+            J = F00 * (F11 * F22 - F12 * F21) - F01 * (F10 * F22 - F12 * F20) + F02 * (F10 * F21 - F11 * F20)
+            if J < lowest[b]:
+                lowest[b] = J
+            if J < below:
+                counts[b] += 1
+    least = lowest.min()
+    return (least if least < np.inf else 1.0), counts.sum()
+
+
+@njit(cache=True, nogil=True)
+def refresh_forces(x, adj, at, stale, most, mark, forces):
+    """Sum again the kept elastic forces ``forces`` (n, 3) that a change can reach: the nodes whose
+    position in ``x`` (n, 3) differs from ``at`` (n, 3, where the forces were summed; NaN: never),
+    the ``stale`` (k,) int64 nodes, and every node sharing a tet with one of them; ``at`` is
+    brought up to ``x`` there.  Each force is :func:`forces_at`'s sum, so the kept forces stay
+    the whole pass's, bit for bit.  ``mark`` (n,) bool is scratch (all False on entry and exit).
+
+    Returns the nodes summed again, or -1 (nothing changed) where more than ``most`` nodes moved
+    or were stale (the caller then sums the whole model: cheaper than the gather).
+    """
+    n = at.shape[0]
+    seeds = np.empty(n, np.int64)
+    k = 0
+    for i in range(n):
+        if x[i, 0] != at[i, 0] or x[i, 1] != at[i, 1] or x[i, 2] != at[i, 2]:
+            mark[i] = True
+            seeds[k] = i
+            k += 1
+    for q in range(stale.shape[0]):
+        if not mark[stale[q]]:
+            mark[stale[q]] = True
+            seeds[k] = stale[q]
+            k += 1
+    if k > most:
+        for q in range(k):
+            mark[seeds[q]] = False
+        return -1
+    for q in range(k):  # the seeds' neighbours (the other corners of their tets)
+        i = seeds[q]
+        for r in range(adj.start[i], adj.start[i] + adj.degree[i]):
+            for c in range(3):
+                mark[adj.opposite[r, c]] = True
+    nodes = np.flatnonzero(mark)
+    out = np.empty((nodes.shape[0], 3))
+    if nodes.shape[0]:
+        forces_at(x, adj, nodes, out)
+    for q in range(nodes.shape[0]):
+        i = nodes[q]
+        mark[i] = False
+        for c in range(3):
+            forces[i, c] = out[q, c]
+            at[i, c] = x[i, c]
+    return nodes.shape[0]

@@ -209,17 +209,34 @@ def element_terms(x, el, ids, project, grads, hessians):
         element_gradient_hessian(x, el, ids[q], project, grads[q], hessians[q])
 
 
+#: Elements whose Hessians :func:`assemble_hessian` computes at once (in parallel) before adding
+#: them into the matrix in element order: 4096 x 12 x 12 float64 is 4.7 MB of scratch.
+ASSEMBLY_CHUNK = 4096
+#: Parallel blocks of one chunk: a fixed count, so no sum depends on the number of threads.
+ASSEMBLY_BLOCKS = 64
+
+
+@njit(cache=True, parallel=True, nogil=True)
+def element_hessians(x, el, first, project, H):
+    """H (k, 12, 12): the (projected, ``project``) Hessians of elements ``first .. first + k - 1``
+    (inactive ones are not written), computed in :data:`ASSEMBLY_BLOCKS` parallel blocks."""
+    k = H.shape[0]
+    for b in prange(ASSEMBLY_BLOCKS):
+        g = np.empty(12)
+        for q in range(k * b // ASSEMBLY_BLOCKS, k * (b + 1) // ASSEMBLY_BLOCKS):
+            if el.volume[first + q] > 0.0:
+                element_gradient_hessian(x, el, first + q, project, g, H[q])
+
+
 @njit(cache=True, nogil=True)
-def assemble_hessian(x, el, pattern, project, data):
-    """The (projected) Hessian of the elastic energy into the CSR ``data`` (9 nb,) (zeroed here)."""
-    data[:] = 0.0
-    g = np.empty(12)
-    H = np.empty((12, 12))
+def add_element_blocks(el, pattern, first, H, data):
+    """Add the Hessians H (k, 12, 12) of elements ``first ..`` into the CSR ``data``, element by
+    element (the order of the sums is the elements', whatever the thread count)."""
     ptr = pattern.node_ptr
-    for t in range(el.tets.shape[0]):
+    for q in range(H.shape[0]):
+        t = first + q
         if el.volume[t] <= 0.0:
             continue
-        element_gradient_hessian(x, el, t, project, g, H)
         for a in range(4):
             i = el.tets[t, a]
             deg = ptr[i + 1] - ptr[i]
@@ -228,7 +245,20 @@ def assemble_hessian(x, el, pattern, project, data):
                 base = 9 * ptr[i] + 3 * (k - ptr[i])
                 for r in range(3):
                     for c in range(3):
-                        data[base + 3 * r * deg + c] += H[3 * a + r, 3 * b + c]
+                        data[base + 3 * r * deg + c] += H[q, 3 * a + r, 3 * b + c]
+
+
+def assemble_hessian(x, el, pattern, project, data):
+    """The (projected) Hessian of the elastic energy into the CSR ``data`` (9 nb,) (zeroed here):
+    :data:`ASSEMBLY_CHUNK` elements' Hessians at a time in parallel
+    (:func:`element_hessians`), added in element order (:func:`add_element_blocks`)."""
+    data[:] = 0.0
+    m = el.tets.shape[0]
+    H = np.empty((min(ASSEMBLY_CHUNK, m), 12, 12))
+    for first in range(0, m, ASSEMBLY_CHUNK):
+        part = H[:min(ASSEMBLY_CHUNK, m - first)]
+        element_hessians(x, el, first, project, part)
+        add_element_blocks(el, pattern, first, part, data)
 
 
 @njit(cache=True, nogil=True)
@@ -244,7 +274,7 @@ def constrain(pattern, fixed, diagonal_add, data):
         data[d] = 1.0 if fixed[row] else data[d] + diagonal_add[row]
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, parallel=True)
 def node_neighbours(tets, volume, n):
     """Node rows of the pattern: ``node_ptr`` (n + 1,) and sorted ``node_idx``; every node has its
     own diagonal block, the others come from active elements."""
@@ -269,27 +299,31 @@ def node_neighbours(tets, volume, n):
                 for b in range(4):
                     raw[fill[i]] = tets[t, b]
                     fill[i] += 1
-    ptr = np.zeros(n + 1, np.int64)
-    for i in range(n):  # sort and drop repeats, in place
-        row = np.sort(raw[start[i]:start[i + 1]])
+    unique = np.empty(n, np.int64)
+    for i in prange(n):  # sort and drop repeats, in place (rows are independent)
+        row = raw[start[i]:start[i + 1]]
+        row.sort()
         u = 0
         for q in range(row.shape[0]):
             if q == 0 or row[q] != row[q - 1]:
-                raw[start[i] + u] = row[q]
+                row[u] = row[q]
                 u += 1
-        ptr[i + 1] = ptr[i] + u
-    idx = np.empty(ptr[n], np.int64)
+        unique[i] = u
+    ptr = np.zeros(n + 1, np.int64)
     for i in range(n):
-        idx[ptr[i]:ptr[i + 1]] = raw[start[i]:start[i] + ptr[i + 1] - ptr[i]]
+        ptr[i + 1] = ptr[i] + unique[i]
+    idx = np.empty(ptr[n], np.int64)
+    for i in prange(n):
+        idx[ptr[i]:ptr[i + 1]] = raw[start[i]:start[i] + unique[i]]
     return ptr, idx
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, parallel=True)
 def element_blocks(tets, volume, ptr, idx):
     """(m, 4, 4) int64: the block of (corner a, corner b) of each element in its node row (-1: inactive)."""
     m = tets.shape[0]
     out = np.full((m, 4, 4), -1, np.int64)
-    for t in range(m):
+    for t in prange(m):
         if volume[t] <= 0.0:
             continue
         for a in range(4):

@@ -43,6 +43,7 @@ import numpy as np
 
 from cutkit.errors import InputError
 from cutkit.relax import _elastic_kernels as KE
+from cutkit.relax import _block_cg_kernels as KB
 from cutkit.relax import _newton_kernels as KN
 from cutkit.relax import anp
 from cutkit.relax.elastic import ElementModel, ElementState
@@ -76,6 +77,12 @@ STATIC_SHIFT = 1e-10
 HESSIANS = ("auto", "projected", "exact")
 #: Relative tolerance of a CG solve (inexact Newton: the outer iteration corrects what it leaves).
 CG_RTOL = 1e-2
+#: No oversolving (Eisenstat & Walker, SIAM J. Sci. Comput. 17, 1996, section 2.3): an iteration
+#: from residual ``res`` solves its system only to ``NO_OVERSOLVE * atol / res`` where that is looser
+#: than the solver's ``cg_rtol`` (a linear model that good already lands within the tolerance) ...
+NO_OVERSOLVE = 0.5
+#: ... but never looser than this.
+CG_RTOL_MAX = 0.5
 #: CG iterations of one linear solve at most.
 CG_MAX_ITERATIONS = 500
 #: The multigrid hierarchy is built again after a solve that took more CG iterations than this
@@ -120,7 +127,8 @@ class NewtonSolver:
         One of :data:`PRECONDITIONERS`: what preconditions the CG solves.
     cg_rtol : float
         Relative residual each conjugate-gradient solve stops at (inexact
-        Newton; default :data:`CG_RTOL`).
+        Newton; default :data:`CG_RTOL`), or looser near the end of a solve
+        (:data:`NO_OVERSOLVE`).
     region_rings : int, optional
         None: every iteration solves the whole model.  k >= 0: each iteration
         solves on :func:`newton_region` grown by k rings (doubled after an
@@ -160,6 +168,7 @@ class NewtonSolver:
         appends nodes, so it still preconditions the dofs it was built on (:meth:`_preconditioner`)."""
         self._pattern = None
         self._key = None
+        self._upper = None  # the pattern's blocks above the diagonal (_block_cg_kernels.upper_blocks)
 
     # ------------------------------------------------------------ the linear system
     def _elements(self) -> KE.Elements:
@@ -181,6 +190,7 @@ class NewtonSolver:
                 indptr, indices, diagonal = KN.scalar_pattern(ptr, idx)
                 self._pattern = KN.Pattern(ptr, idx, blocks, indptr, indices, diagonal)
             self._key = key
+            self._upper = None
             self.counts["pattern_builds"] += 1
         return self._pattern
 
@@ -206,22 +216,17 @@ class NewtonSolver:
             KN.assemble_hessian(x, self._elements(), pat, int(project), data)
         return self._constrained(data, free, diagonal_add)
 
-    def _solve_linear(self, A, r: np.ndarray, x: np.ndarray, free: np.ndarray, halt=None):
-        """d with A d = r, or None where a Cholesky factorisation finds A not positive definite or
+    def _solve_linear(self, A, r: np.ndarray, x: np.ndarray, free: np.ndarray, rtol: float, halt=None):
+        """d with A d = r (conjugate gradients to ``rtol``), or None where a Cholesky factorisation finds A not positive definite or
         ``halt`` stopped the conjugate gradients (x (n, 3) and free (n, 3) bool: where A was
         assembled, for a multigrid setup)."""
         if self.linear == "cholesky" or (self.linear == "auto" and A.shape[0] <= CHOLESKY_MAX_DOFS):
             return self._factor_solve(A, r)
         if self.preconditioner == "block_jacobi":
-            M = node_block_inverse(A, self.pattern())
-            if M is None:  # a diagonal block is not positive definite, so neither is A
-                self.counts["indefinite"] += 1
-                return None
-        else:
-            if self._amg is None or self._amg[1] > A.shape[0]:
-                self._build_amg(A, x, free)
-            M = self._preconditioner(A)
-        d, its = _pcg(A, r, M, self.cg_rtol, CG_MAX_ITERATIONS, halt)
+            return self._block_cg(A, r, rtol, halt)
+        if self._amg is None or self._amg[1] > A.shape[0]:
+            self._build_amg(A, x, free)
+        d, its = pcg(A, r, self._preconditioner(A), rtol, CG_MAX_ITERATIONS, halt)
         self.counts["cg_iterations"] += its
         if d is None and halt is not None and halt[0]:
             return None  # a waiting cut: the iteration is abandoned, x stays the last iterate
@@ -231,6 +236,33 @@ class NewtonSolver:
         if its > AMG_REBUILD_ITERATIONS:  # the hierarchy has aged (or misses the appended dofs): build it again
             self._amg = None
         return d
+
+    def _block_cg(self, A, r: np.ndarray, rtol: float, halt=None):
+        """d with A d = r by block-Jacobi conjugate gradients on A's symmetric block form
+        (:mod:`cutkit.relax._block_cg_kernels`); None where a diagonal block or a search direction
+        shows A is not positive definite, or ``halt`` stopped it."""
+        pat = self.pattern()
+        if self._upper is None:
+            self._upper = KB.upper_blocks(pat.node_ptr, pat.node_idx)
+        ptr, col, src = self._upper
+        n = self.em.n_nodes
+        blocks = KB.BlockMatrix(np.empty((n, 3, 3)), ptr, col, np.empty((col.shape[0], 3, 3)))
+        KB.gather_blocks(pat.node_ptr, pat.diagonal, src, A.data, blocks.diag, ptr, blocks.off)
+        inv = np.empty((n, 3, 3))
+        if not KB.block_jacobi(blocks.diag, inv):  # a diagonal block is not positive definite, so neither is A
+            self.counts["indefinite"] += 1
+            return None
+        d = np.empty((n, 3))
+        flag = halt if halt is not None else np.zeros(1, np.int64)
+        status, its = KB.block_pcg(blocks, inv, np.ascontiguousarray(r.reshape(n, 3)), rtol,
+                                   CG_MAX_ITERATIONS, flag, d)
+        self.counts["cg_iterations"] += its
+        if status == KB.CG_HALTED:
+            return None  # a waiting cut: the iteration is abandoned, x stays the last iterate
+        if status == KB.CG_NEGATIVE_CURVATURE:  # the exact Hessian is indefinite
+            self.counts["indefinite"] += 1
+            return None
+        return d.ravel()
 
     def _build_amg(self, A, x: np.ndarray, free: np.ndarray) -> None:
         """Smoothed-aggregation multigrid of A (pyamg), kept across iterations, steps and cuts.
@@ -316,7 +348,8 @@ class NewtonSolver:
                 d = self._local_direction(x, r, free, terms.inertia + terms.damping, atol, rings)
             local = d is not None
             if d is None:
-                d = self._direction(x, r, free, terms.inertia + terms.damping, stop)
+                rtol = min(CG_RTOL_MAX, max(self.cg_rtol, NO_OVERSOLVE * atol / res))
+                d = self._direction(x, r, free, terms.inertia + terms.damping, rtol, stop)
                 self.counts["global_iterations"] += 1
             if d is None:
                 if stop is not None and stop[0] and it == 0:  # stopped within the first iteration
@@ -412,12 +445,13 @@ class NewtonSolver:
         return d
 
 
-    def _direction(self, x, r, free, diagonal_add, halt=None):
-        """The Newton step: exact Hessian first (``"auto"``), projected where that is indefinite;
-        None where ``halt`` ((1,) int64) stopped its conjugate gradients."""
+    def _direction(self, x, r, free, diagonal_add, rtol: float, halt=None):
+        """The Newton step, its linear system solved to ``rtol``: exact Hessian first (``"auto"``),
+        projected where that is indefinite; None where ``halt`` ((1,) int64) stopped its conjugate
+        gradients."""
         modes = {"auto": (0, 1), "projected": (1,), "exact": (0,)}[self.hessian]
         for mode in modes:
-            d = self._solve_linear(self.matrix(x, free, diagonal_add, mode), r.ravel(), x, free, halt)
+            d = self._solve_linear(self.matrix(x, free, diagonal_add, mode), r.ravel(), x, free, rtol, halt)
             if d is None and halt is not None and halt[0]:
                 return None
             if d is not None:
@@ -544,7 +578,7 @@ def _quiet_stderr():
         os.close(saved[1])
 
 
-def _pcg(A, b: np.ndarray, M, rtol: float, max_iterations: int, halt=None):
+def pcg(A, b: np.ndarray, M, rtol: float, max_iterations: int, halt=None):
     """Preconditioned conjugate gradients for A d = b, stopped at ``||b - A d|| <= rtol ||b||``;
     (None, iterations) at negative curvature (an indefinite exact Hessian: the caller takes the
     projected one) and where ``halt`` ((1,) int64, a waiting cut's flag) is set, read before every

@@ -225,6 +225,34 @@ def elastic_forces_at(em: ElementModel, positions, nodes) -> np.ndarray:
     return out
 
 
+def refresh_forces(em: ElementModel, positions, at: np.ndarray, stale, most: int, mark: np.ndarray,
+                   forces: np.ndarray) -> int:
+    """Sum again the kept elastic forces a change can reach (the kernel's docstring:
+    ``_elastic_kernels.refresh_forces``), in place.
+
+    Parameters
+    ----------
+    em : ElementModel
+    positions : (n, 3) float64
+    at : (n, 3) float64
+        Where ``forces`` were summed (NaN: never); brought up to ``positions`` where summed again.
+    stale : (k,) int
+        Nodes to sum again whatever their position (their tets changed).
+    most : int
+        More moved or stale nodes than this: nothing is done and -1 returned.
+    mark : (n,) bool
+        Scratch, all False.
+    forces : (n, 3) float64
+
+    Returns
+    -------
+    int
+        The nodes summed again, or -1.
+    """
+    return int(K.refresh_forces(np.ascontiguousarray(positions, np.float64), em.adjacency, at,
+                                np.ascontiguousarray(stale, np.int64), int(most), mark, forces))
+
+
 def elastic_energy(em: ElementModel, positions) -> float:
     """Total stored energy, N mm."""
     return float(K.element_energy(np.ascontiguousarray(positions, np.float64), em.elements))

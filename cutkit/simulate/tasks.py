@@ -262,11 +262,11 @@ class CutTask:
         self.last_proxy = np.array(proxy, np.float64)
         f_ext = np.zeros((self.tis.n_nodes, 3))
         if code == CUTTING and cm.active_tets.size:
-            # the tissue along the blade feels the reaction of the cut force (eqs. 16-18);
-            # before the blade enters the surface is not indented (docs/simulate.md)
-            nodes = self.tis.bearing_nodes(np.unique(cm.orig_tets[cm.active_tets]))
-            if nodes.size:
-                f_ext[nodes] -= out[O_CUT:O_CUT + 3] / len(nodes)
+            # the tissue around the blade carries the reaction of the cut force (eqs. 16-18), each
+            # node by its mass (cutkit.tissue.BLADE_LOAD_RINGS); before the blade enters the surface
+            # is not indented (docs/simulate.md)
+            nodes, shares = self.tis.load_shares(cm.orig_tets[cm.active_tets])
+            f_ext[nodes] -= shares[:, None] * out[O_CUT:O_CUT + 3]
         return f_ext
 
     def leave(self) -> None:

@@ -422,6 +422,20 @@ class Tissue(TissueBase):
         self.lists.list_time[:] = 0.0
         return {"iterations": int(iterations), "relative_residual": r / r0 if r0 > 0 else 0.0}
 
+    @property
+    def masses(self) -> np.ndarray:
+        """(n,) float64 lumped masses (rho V / 4 per node and tet)."""
+        return self.springs.masses
+
+    def node_ring(self, nodes: np.ndarray) -> np.ndarray:
+        """``nodes`` and their neighbours along springs (every pair of a tet's corners is a spring)."""
+        sm = self.springs
+        nodes = np.asarray(nodes, np.int64)
+        start, stop = sm.adj_offsets[nodes], sm.adj_offsets[nodes + 1]
+        counts = stop - start
+        slots = np.repeat(start - np.cumsum(counts) + counts, counts) + np.arange(int(counts.sum()))
+        return np.union1d(nodes, sm.adj_nodes[slots])
+
     def bearing_nodes(self, nodes: np.ndarray) -> np.ndarray:
         """The nodes of ``nodes`` (k,) int64 in a piece of tissue that is held (has a fixed node).
 

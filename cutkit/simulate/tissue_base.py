@@ -111,6 +111,26 @@ class TissueBase:
         nodes, d2 = hood.nodes(self.cm, self.positions, active_tets, point, axis)
         return nodes, blade_weights(d2, self.rest_map_radius)
 
+    def load_shares(self, nodes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`cutkit.tissue.TissuePhysics.load_shares`: ``nodes`` grown by
+        :data:`~cutkit.tissue.BLADE_LOAD_RINGS` rings (:meth:`node_ring`), those
+        :meth:`bearing_nodes` keeps, each in proportion to its mass."""
+        from cutkit.tissue import BLADE_LOAD_RINGS
+
+        nodes = np.unique(np.asarray(nodes, np.int64))
+        for _ in range(BLADE_LOAD_RINGS):
+            nodes = self.node_ring(nodes)
+        nodes = self.bearing_nodes(nodes)
+        m = self.masses[nodes]
+        total = float(m.sum())
+        if not total > 0.0:
+            return nodes[:0], np.empty(0)
+        return nodes, m / total
+
+    def node_ring(self, nodes: np.ndarray) -> np.ndarray:
+        """(j,) int64 ascending: ``nodes`` (k,) int64 and every node sharing a live tet with one of them."""
+        raise NotImplementedError
+
     def bearing_nodes(self, nodes: np.ndarray) -> np.ndarray:
         """The nodes of ``nodes`` (k,) int64 that bear the blade's reaction (all, unless a model says otherwise)."""
         return nodes

@@ -6,6 +6,6 @@ removed, added and moved); the physics consume only it.
 """
 
 from cutkit.tissue.delta import TopologyDelta
-from cutkit.tissue.physics import TissuePhysics
+from cutkit.tissue.physics import BLADE_LOAD_RINGS, TissuePhysics
 
-__all__ = ["TopologyDelta", "TissuePhysics"]
+__all__ = ["BLADE_LOAD_RINGS", "TopologyDelta", "TissuePhysics"]
