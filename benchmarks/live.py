@@ -216,7 +216,7 @@ def _session_views(window: bool, igtl_rate: float):
 
 
 def run_session(model, trajectory_path: str, priority: str, window: bool, igtl_rate: float,
-                solver: str = "vbd") -> dict:
+                solver: str | None = None) -> dict:
     """`cutkit haptics play` streams ``trajectory_path`` through the service into a live session on ``model``
     (element ``solver``); ``step_walls`` is, for each tissue stepped, the perf_counter at the end of
     each of its relaxation steps."""
@@ -289,7 +289,7 @@ def rest_to_balance(relax: dict, walls_of_tissues: list) -> dict | None:
 
 
 def session_rate(model_path: str, priority: str, window: bool, which: str = "two", igtl_rate: float = 30.0,
-                 solver: str = "vbd") -> dict:
+                 solver: str | None = None) -> dict:
     """A live session on ``model_path`` with the strokes ``which`` (:func:`strokes`): rates, gaps, tets cut."""
     import tempfile
 
@@ -323,7 +323,7 @@ def session_rate(model_path: str, priority: str, window: bool, which: str = "two
               "latency_outside_rebase_ms": live.get("latency_outside_rebase_ms"),
               "geometry_updates_skipped": live.get("geometry_updates_skipped"),
               "device_rate_hz": run["device"].get("rate_hz"), "window": window, "recording": run["recording"],
-              "solver": solver, "relax_not_converged": s["relax_steps"]["not_converged"],
+              "solver": s["relax_steps"].get("solver", solver), "relax_not_converged": s["relax_steps"]["not_converged"],
               "rest_to_balance": rest_to_balance(s["relax_steps"], run["step_walls"])}
     at = live.get("tets_cut_at_rebases") or []
     if which == "two" and at:
@@ -349,8 +349,8 @@ def main() -> None:
     ap.add_argument("--igtl-rate", type=float, default=30.0,
                     help="OpenIGTLink surfaces per second to the stamping client (0: no OpenIGTLink view).")
     ap.add_argument("--skip-periphery", action="store_true", help="Only the session (no window or play benchmark).")
-    ap.add_argument("--solver", choices=["vbd", "hybrid", "newton"], default="vbd",
-                    help="The session's element solver (SimulateOptions.solver).")
+    ap.add_argument("--solver", choices=["vbd", "hybrid", "newton"], default=None,
+                    help="The session's element solver (SimulateOptions.solver; default: the runtime's).")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args()
     result = {"machine": platform.machine(), "python": platform.python_version(),

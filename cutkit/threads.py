@@ -137,6 +137,39 @@ def parse_threads(value) -> int | None:
     return n
 
 
+#: The threads :func:`configure_threads` chose (None: not called).  numba's thread count is
+#: thread-local: a thread started later runs its parallel kernels on all of numba's threads
+#: unless it sets its own (:func:`use_threads_in_this_thread`).
+_configured: int | None = None
+
+
+def configured_threads() -> int:
+    """The threads :func:`configure_threads` chose, or numba's count on this thread if it was not called."""
+    if _configured is not None:
+        return _configured
+    import numba
+
+    return int(numba.get_num_threads())
+
+
+def worker_threads() -> int:
+    """Threads for the numba kernels of a live session's workers (relaxation, rebase): one core
+    fewer than :func:`configured_threads` (at least one), so that the threads that draw, serve
+    OpenIGTLink and read poses keep a core.  On the 2-core machine, the hybrid knee session with
+    the relaxation on two threads drew 26-27 fps with a pose-to-picture p95 of 234-478 ms, on one
+    28.5-28.8 fps and 63-86 ms (``benchmarks/live.py --json --session knee.h5 --strokes one``)."""
+    return max(1, configured_threads() - 1)
+
+
+def use_threads_in_this_thread(n: int) -> int:
+    """Run this thread's numba kernels on ``n`` threads (at most numba's pool); returns the count."""
+    import numba
+
+    threads = max(1, min(int(n), int(numba.config.NUMBA_NUM_THREADS)))
+    numba.set_num_threads(threads)
+    return threads
+
+
 def configure_threads(n: int | None = None) -> int:
     """Set the number of numba threads for this process and return it.
 
@@ -164,8 +197,10 @@ def configure_threads(n: int | None = None) -> int:
         asked = default_threads()
     import numba
 
+    global _configured
     threads = max(1, min(int(asked), int(numba.config.NUMBA_NUM_THREADS)))
     numba.set_num_threads(threads)
+    _configured = threads
     return threads
 
 

@@ -159,3 +159,31 @@ def test_a_first_run_is_told_that_kernels_compile(tmp_path, monkeypatch):
     assert kernels_compiled(tmp_path) is True
     monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))
     assert kernels_compiled(tmp_path) is None  # the cache lives elsewhere: unknown
+
+
+def test_a_worker_thread_takes_the_configured_count_less_one(monkeypatch):
+    """numba's thread count is per thread: a thread started after configure_threads runs on all of
+    numba's threads unless it sets its own; the live workers set worker_threads(), one fewer than
+    the configured count (at least one)."""
+    import threading
+
+    import cutkit.threads as T
+
+    monkeypatch.setattr(T, "_configured", None)
+    pool = numba.config.NUMBA_NUM_THREADS
+    configure_threads(pool)
+    assert T.configured_threads() == pool and T.worker_threads() == max(1, pool - 1)
+    seen = {}
+
+    def worker():
+        seen["before"] = numba.get_num_threads()
+        T.use_threads_in_this_thread(T.worker_threads())
+        seen["after"] = numba.get_num_threads()
+
+    configure_threads(1)
+    assert T.worker_threads() == 1
+    t = threading.Thread(target=worker)
+    t.start()
+    t.join()
+    assert seen["before"] == pool  # what a thread starts with, whatever the main thread chose
+    assert seen["after"] == 1

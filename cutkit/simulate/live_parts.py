@@ -152,6 +152,9 @@ class RelaxThread(threading.Thread):
         self.error: BaseException | None = None
 
     def run(self) -> None:
+        from cutkit.threads import use_threads_in_this_thread, worker_threads
+
+        use_threads_in_this_thread(worker_threads())  # numba's thread count is per thread
         s = self.session
         try:
             while not self.stop.is_set():

@@ -90,6 +90,9 @@ class BackgroundRebase:
         self.thread.start()
 
     def _run(self) -> None:
+        from cutkit.threads import use_threads_in_this_thread, worker_threads
+
+        use_threads_in_this_thread(worker_threads())  # numba's thread count is per thread
         s = self.session
         t0, w0 = self.clock(), time.perf_counter()
         try:
