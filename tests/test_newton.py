@@ -308,23 +308,24 @@ def test_a_waiting_cut_stops_the_conjugate_gradients_and_the_iteration_is_abando
     np.testing.assert_array_equal(st.positions, one.positions)
 
 
-def _block_system(em, x):
-    """A Newton matrix of (em, x) with held dofs (scipy CSR), and its block form and inverse
-    diagonal blocks (:mod:`cutkit.relax._block_cg_kernels`)."""
-    from cutkit.relax import _block_cg_kernels as KB
-
+def _held_matrix(em, x):
+    """The projected Newton matrix of (em, x) with a few held dofs (scipy CSR), and its solver."""
     n = em.n_nodes
     fixed = np.zeros((n, 3), bool)
     fixed[:2] = True
     fixed[7, 1] = True
     solver = NewtonSolver(em)
-    A = solver.matrix(x, ~fixed, np.linspace(1.0, 2.0, n), 1)
-    pat = solver.pattern()
-    ptr, col, src = KB.upper_blocks(pat.node_ptr, pat.node_idx)
-    blocks = KB.BlockMatrix(np.empty((n, 3, 3)), ptr, col, np.empty((col.shape[0], 3, 3)))
-    KB.gather_blocks(pat.node_ptr, pat.diagonal, src, A.data, blocks.diag, ptr, blocks.off)
-    inv = np.empty((n, 3, 3))
-    assert KB.block_jacobi(blocks.diag, inv)
+    return solver.matrix(x, ~fixed, np.linspace(1.0, 2.0, n), 1), solver
+
+
+def _block_system(em, x):
+    """A Newton matrix of (em, x) with held dofs (scipy CSR), and its block form and inverse
+    diagonal blocks (:mod:`cutkit.relax._block_cg_kernels`)."""
+    from cutkit.relax.newton import block_system
+
+    A, solver = _held_matrix(em, x)
+    blocks, inv = block_system(A, solver.pattern())
+    assert inv is not None
     return A, blocks, inv, solver
 
 
@@ -348,7 +349,7 @@ def test_block_cg_equals_the_scalar_twin_and_reads_its_halt_flag(deformed):
     """block_pcg against pcg (NumPy, scipy's products, the same preconditioner): the same
     iterations and solution to rounding; with its flag set it makes no iteration and says so."""
     from cutkit.relax import _block_cg_kernels as KB
-    from cutkit.relax.newton import pcg
+    from cutkit.relax.newton import block_system, pcg
 
     em, x = deformed
     A, blocks, inv, solver = _block_system(em, x)
@@ -364,22 +365,14 @@ def test_block_cg_equals_the_scalar_twin_and_reads_its_halt_flag(deformed):
     np.testing.assert_allclose(d.ravel(), twin, rtol=1e-8, atol=1e-10 * np.abs(twin).max())
     assert np.linalg.norm(b.ravel() - A @ d.ravel()) <= 1.01e-8 * np.linalg.norm(b)
     A.data[solver.pattern().diagonal[3 * 5 + 1]] *= -1.0  # an indefinite diagonal block
-    blocks2 = _block_system(em, x)[1]
-    KB.gather_blocks(solver.pattern().node_ptr, solver.pattern().diagonal,
-                     KB.upper_blocks(solver.pattern().node_ptr, solver.pattern().node_idx)[2], A.data,
-                     blocks2.diag, blocks2.ptr, blocks2.off)
-    assert not KB.block_jacobi(blocks2.diag, np.empty((n, 3, 3)))
+    assert block_system(A, solver.pattern())[1] is None
 
 
 def test_block_jacobi_inverts_each_nodes_diagonal_block(deformed):
     """node_block_inverse against the 3 x 3 diagonal blocks of the dense matrix, inverted one by one."""
     em, x = deformed
     n = em.n_nodes
-    fixed = np.zeros((n, 3), bool)
-    fixed[:2] = True
-    fixed[7, 1] = True
-    solver = NewtonSolver(em)
-    A = solver.matrix(x, ~fixed, np.linspace(1.0, 2.0, n), 1)
+    A, solver = _held_matrix(em, x)
     M = node_block_inverse(A, solver.pattern()).toarray()
     dense = A.toarray()
     expected = np.zeros_like(dense)

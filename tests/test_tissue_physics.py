@@ -28,3 +28,61 @@ def test_tissue_models_implement_the_protocol(module, name):
             params = inspect.signature(got).parameters.values()
             required = sum(p.default is inspect.Parameter.empty for p in params)
             assert required <= n_want <= len(params), f"{name}.{m}"
+
+
+def _two_touching_boxes():
+    """Two 4 x 2 x 2 mm boxes of 1 mm cells side by side at x = 4, sharing no node (as the two
+    walls of a cut do), each held at its far end."""
+    import numpy as np
+
+    from cutkit.assign.defaults import DEFAULT_MATERIALS
+    from cutkit.mesh.generate import box_mesh
+    from cutkit.model.tetmodel import BoundaryConditions, Materials, TetModel
+
+    p, t = box_mesh((4, 2, 2), spacing=(1.0, 1.0, 1.0))
+    points = np.concatenate([p, p + [4.0, 0.0, 0.0]])
+    tets = np.concatenate([t, t + len(p)])
+    held = np.flatnonzero((points[:, 0] == 0.0) | (points[:, 0] == 8.0))
+    row = dict(label=1, name="muscle", **DEFAULT_MATERIALS["muscle"])
+    return TetModel.from_arrays(points, tets, materials=Materials.from_rows([row]),
+                                boundary=BoundaryConditions(fixed_nodes=held)), len(p)
+
+
+def _rings(tets, seeds, k):
+    """Nodes within k rings of tets of ``seeds``, by a plain breadth-first search over the tets."""
+    import numpy as np
+
+    nodes = set(int(v) for v in seeds)
+    for _ in range(k):
+        nodes |= {int(v) for row in tets if nodes & set(row.tolist()) for v in row}
+    return np.array(sorted(nodes))
+
+
+@pytest.mark.parametrize("material", ["neohookean", "springs"])
+def test_the_blade_load_goes_by_mass_over_two_rings_and_never_across_a_cut(material):
+    """load_shares: the nodes within BLADE_LOAD_RINGS rings of tets of the given ones (a breadth-first
+    search over the tets here), none of the other box however close, each share its lumped mass over
+    the sum (one material: V / 4 per node and tet, computed here), the shares summing to 1."""
+    import numpy as np
+
+    from cutkit.tissue import BLADE_LOAD_RINGS
+
+    model, n_first = _two_touching_boxes()
+    if material == "springs":
+        from cutkit.simulate.tissue import Tissue
+
+        tis = Tissue(model, blade_length=10.0, dt0=1e-3, n_lists=1, tolerance_fraction=1e-3)
+    else:
+        from cutkit.simulate.elastic_tissue import ElasticTissue
+
+        tis = ElasticTissue(model, blade_length=10.0, step_s=0.004)
+    x = model.points
+    seeds = np.flatnonzero((x[:, 0] == 3.0) & (x[:, 1] == 1.0) & (x[:, 2] == 1.0))  # 1 mm from the other box
+    nodes, shares = tis.load_shares(seeds)
+    assert BLADE_LOAD_RINGS == 2
+    np.testing.assert_array_equal(nodes, _rings(model.tets, seeds, BLADE_LOAD_RINGS))
+    assert nodes.max() < n_first  # x = 5 is 2 mm away, in the other box: not reached
+    assert shares.sum() == pytest.approx(1.0, abs=1e-12)
+    V = np.abs(np.linalg.det(x[model.tets[:, 1:]] - x[model.tets[:, :1]])) / 6.0
+    lumped = np.bincount(model.tets.ravel(), weights=np.repeat(V / 4.0, 4), minlength=len(x))
+    np.testing.assert_allclose(shares, lumped[nodes] / lumped[nodes].sum(), rtol=1e-9)

@@ -244,14 +244,11 @@ class NewtonSolver:
         pat = self.pattern()
         if self._upper is None:
             self._upper = KB.upper_blocks(pat.node_ptr, pat.node_idx)
-        ptr, col, src = self._upper
-        n = self.em.n_nodes
-        blocks = KB.BlockMatrix(np.empty((n, 3, 3)), ptr, col, np.empty((col.shape[0], 3, 3)))
-        KB.gather_blocks(pat.node_ptr, pat.diagonal, src, A.data, blocks.diag, ptr, blocks.off)
-        inv = np.empty((n, 3, 3))
-        if not KB.block_jacobi(blocks.diag, inv):  # a diagonal block is not positive definite, so neither is A
+        blocks, inv = block_system(A, pat, self._upper)
+        if inv is None:  # a diagonal block is not positive definite, so neither is A
             self.counts["indefinite"] += 1
             return None
+        n = self.em.n_nodes
         d = np.empty((n, 3))
         flag = halt if halt is not None else np.zeros(1, np.int64)
         status, its = KB.block_pcg(blocks, inv, np.ascontiguousarray(r.reshape(n, 3)), rtol,
@@ -459,6 +456,31 @@ class NewtonSolver:
                 d[~free] = 0.0
                 return d
         return None
+
+
+def block_system(A, pattern: KN.Pattern, upper=None):
+    """A Newton matrix in the symmetric block form of :mod:`cutkit.relax._block_cg_kernels` and its
+    block-Jacobi inverse.
+
+    Parameters
+    ----------
+    A : (3n, 3n) scipy CSR float64
+        A matrix of :meth:`NewtonSolver.matrix` (its ``data`` laid out by ``pattern``).
+    pattern : Pattern
+    upper : tuple, optional
+        ``_block_cg_kernels.upper_blocks`` of the pattern (computed here if not given).
+
+    Returns
+    -------
+    blocks : BlockMatrix
+    inverse : (n, 3, 3) float64, or None where a diagonal block is not positive definite.
+    """
+    n = A.shape[0] // 3
+    ptr, col, src = upper if upper is not None else KB.upper_blocks(pattern.node_ptr, pattern.node_idx)
+    blocks = KB.BlockMatrix(np.empty((n, 3, 3)), ptr, col, np.empty((col.shape[0], 3, 3)))
+    KB.gather_blocks(pattern.node_ptr, pattern.diagonal, src, A.data, blocks.diag, ptr, blocks.off)
+    inverse = np.empty((n, 3, 3))
+    return blocks, (inverse if KB.block_jacobi(blocks.diag, inverse) else None)
 
 
 def cholesky_solve(A, b: np.ndarray):
