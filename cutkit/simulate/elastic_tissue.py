@@ -247,6 +247,7 @@ class ElasticTissue(TissueBase):
         self._rest_newton = None  # the hybrid's resting steps' solver (its pattern), built on first use
         self._last_load: np.ndarray | None = None
         self._cut_since_step = False  # tets or nodes added or removed since the last step
+        self.resting_in_balance = False  # the last step rested within the rest tolerance (at_rest)
         self.force_scale = self._force_scale()
         # last squared residual of every node and the nodes a cut or a load wakes (vbd.local_step)
         self.r2 = np.zeros(em.n_nodes)
@@ -384,6 +385,11 @@ class ElasticTissue(TissueBase):
             self._count(info, true_residual)
         return sweeps
 
+    def at_rest(self) -> bool:
+        """Whether the last step was a resting step that ended within the rest tolerance (the hybrid;
+        a live session starts a stroke's rebase then, cutkit.simulate.live_loop)."""
+        return self.resting_in_balance
+
     def _resting(self, f_ext: np.ndarray) -> bool:
         """Whether the coming step rests: the hybrid, no tet or node added or removed since the last
         step (nodes that follow a still blade may have moved), and a load
@@ -437,8 +443,10 @@ class ElasticTissue(TissueBase):
         residual N).  With the ``"hybrid"`` solver, a step not stopped that the sweeps leave out of
         balance (their own test failed at the cap, or the true residual is above ``atol``) is
         finished by :meth:`_polish`."""
+        self.resting_in_balance = False
         if self._resting(f_ext):
             info, true_residual, newton = self._rest_step(f_ext, stop)
+            self.resting_in_balance = bool(info.taken and info.converged)
             if info.taken:
                 self.counts["newton_iterations"] += newton
                 self.counts["resting_steps"] += 1
@@ -612,6 +620,7 @@ class ElasticTissue(TissueBase):
         # a step that only moved the nodes that follow the blade (a still blade re-places them
         # every step) cut nothing: the next step may rest
         self._cut_since_step |= bool(n_new > n_old or added.size or removed.size)
+        self.resting_in_balance &= not self._cut_since_step
         return {"nodes_added": int(n_new - n_old), "elements_added": int(added.size),
                 "elements_removed": int(removed.size)}
 

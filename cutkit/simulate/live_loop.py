@@ -20,6 +20,11 @@ from cutkit.simulate.run import HAPTIC_DT, RATE_WARN_FRACTION, SimulateOptions
 #: The loop's pause when it has nothing to do, s: poses come at 1 kHz and each pass takes
 #: all that arrived, so a pose waits at most this long before its tick.
 LOOP_IDLE_S = 0.0005
+#: A stroke's rebase waits, on the wall clock, until the tissue comes to rest (``at_rest``: the
+#: hybrid's resting step ended within its tolerance), the blade touches the tissue again, or this
+#: many seconds have passed: the rebase holds the relaxation for about a second on the knee, so
+#: started at once it kept the wound from its equilibrium that long (docs/live.md, "Between strokes").
+REBASE_WAIT_MAX_S = 2.0
 #: Behind the poses (a backlog after a rebase, or slow cut steps), a due pose gets its own cut only
 #: once the blade has moved this far since the last cut, mm: the cut of the newest then sweeps at most
 #: about this far (one sweep from a held stroke's first pose to one 8 mm deep went through uncut).
@@ -136,6 +141,7 @@ class LiveLoop:
         # (on a stepped clock it is waited for at once: _start_rebase)
         self.rebaser = BackgroundRebase(s, clock=self.clock.now)
         s.rebase_runner = self._start_rebase
+        self.rebase_waiting_since: float | None = None  # a stroke ended: its rebase waits (_rebase_due)
         self.still: StillPicture | None = None  # the tissue drawn while a rebase runs
         self.held: collections.deque = collections.deque()  # in-process ticks: poses not yet ticked
         self.cut_tip = None  # the blade's tip at the last geometry update
@@ -204,8 +210,11 @@ class LiveLoop:
         return summary
 
     def _finish_rebase(self):
-        """Wait for a rebase in flight (the recording needs its cut mesh); returns its error or None."""
+        """Run a waiting rebase, wait for one in flight (the recording needs its cut mesh); returns its
+        error or None."""
         try:
+            if self.rebase_waiting_since is not None:
+                self._begin_rebase()
             self.rebaser.wait()
         except BaseException as err:
             return err
@@ -233,6 +242,8 @@ class LiveLoop:
                 self._on_pose(pose)
             if self.rebaser.busy and self.rebaser.done():
                 self._rebased()
+            if self._rebase_due(now):
+                self._begin_rebase()
             if self.rebaser.busy:
                 pass  # the session's state is the rebase's: poses wait (held, or in the service's queue)
             elif self.service:
@@ -266,7 +277,7 @@ class LiveLoop:
         idle = (until_idle_s is not None and self.pose is not None
                 and self.session.tis.time - self.pose[3] > until_idle_s
                 and not (self.meter is not None and self.meter.queue))
-        behind = self.rebaser.busy or self.held
+        behind = self.rebaser.busy or self.held or self.rebase_waiting_since is not None
         return bool((self.source.finished or idle) and not behind)
 
     def _stepped_loop(self, max_seconds, idle_end_s, stop, on_frame, until_idle_s) -> None:
@@ -328,16 +339,33 @@ class LiveLoop:
         self.pose = (pose.tip, pose.a, pose.n, arrival)
 
     def _start_rebase(self) -> None:
-        """The session's :attr:`~cutkit.simulate.session.Session.rebase_runner`: the picture stays
-        as the stroke left it, and the rebase starts in its own thread."""
-        s = self.session
-        points = np.array(s.tis.positions, np.float64)
-        self.still = StillPicture(points, self.colours.get(points.shape[0]), s.tets_cut)
-        self.tets_at_rebases.append(s.tets_cut)
-        self.rebaser.start()
+        """The session's :attr:`~cutkit.simulate.session.Session.rebase_runner`.  On a stepped clock the
+        rebase runs at once and is waited for (as offline); on the wall clock it waits
+        (:meth:`_rebase_due`) while the relaxation brings the wound to rest."""
+        self.tets_at_rebases.append(self.session.tets_cut)
         if self.stepped:  # in step with the loop: the next pass sees the rebased tissue, as offline
+            self._begin_rebase()
             self.rebaser.wait()
             self._rebased()
+        else:
+            self.rebase_waiting_since = self.now()
+
+    def _rebase_due(self, now: float) -> bool:
+        """Whether a waiting rebase starts now: the blade is in the tissue again (its next cut needs the
+        rebased mesh), the tissue is at rest, or :data:`REBASE_WAIT_MAX_S` have passed."""
+        if self.rebase_waiting_since is None or self.rebaser.busy:
+            return False
+        s = self.session
+        return (s.scalpel.code != FREE or s.tis.at_rest()
+                or now - self.rebase_waiting_since >= REBASE_WAIT_MAX_S)
+
+    def _begin_rebase(self) -> None:
+        """The picture stays as the tissue is now, and the rebase starts in its own thread."""
+        s = self.session
+        self.rebase_waiting_since = None
+        points = np.array(s.tis.positions, np.float64)
+        self.still = StillPicture(points, self.colours.get(points.shape[0]), s.tets_cut)
+        self.rebaser.start()
 
     def _rebased(self) -> None:
         """The rebase is done: the poses that came meanwhile are ticked and cut next."""

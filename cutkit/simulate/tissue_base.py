@@ -127,6 +127,10 @@ class TissueBase:
             return nodes[:0], np.empty(0)
         return nodes, m / total
 
+    def at_rest(self) -> bool:
+        """Whether the tissue has come to rest after the blade left (a model that cannot tell: False)."""
+        return False
+
     def node_ring(self, nodes: np.ndarray) -> np.ndarray:
         """(j,) int64 ascending: ``nodes`` (k,) int64 and every node sharing a live tet with one of them."""
         raise NotImplementedError

@@ -86,6 +86,11 @@ class TissuePhysics(Protocol):
         """Renumber the tets after the cut mesh's rebase: (m,) int64 old tet id and old origin of each new one."""
         ...
 
+    def at_rest(self) -> bool:
+        """Whether the last step ended at rest within the model's rest tolerance (False where the model
+        has none): a live session starts a stroke's rebase then."""
+        ...
+
     @property
     def masses(self) -> np.ndarray:
         """(n,) float64: each node's lumped mass (0 for a node without tets)."""
