@@ -8,13 +8,13 @@ from cutkit.model.tetmodel import Materials, TetModel
 from cutkit.simulate.elastic_tissue import ElasticTissue
 
 
-def tissue():
+def tissue(solver="hybrid"):
     p, t = box_mesh((3, 3, 3), spacing=(1.0, 1.0, 1.0))
     row = dict(label=1, name="m", E=30e3, poisson_ratio=0.45, density=1090.0, damping=8.0, F_enter=0.8,
                mu_static=1e-6, mu_dynamic=1e-6, rho_dynamic=1e-8, alpha_static=0.1, alpha_dynamic=0.1,
                c_edge=1.0, c_shape=1.0)
     model = TetModel.from_arrays(p, t, materials=Materials.from_rows([row]))
-    return ElasticTissue(model, blade_length=10.0, step_s=0.004)
+    return ElasticTissue(model, blade_length=10.0, step_s=0.004, solver=solver)
 
 
 def interior_node(tis):
@@ -202,3 +202,18 @@ def test_the_kept_forces_are_the_whole_models_at_every_step_of_a_cut(monkeypatch
                                                                      write_model=False))
     assert summary["cut_tets"] > 0 and summary["relax_steps"]["polish_calls"] > 0
     assert calls["kept"] > 20 and calls["whole"] <= 2  # summed whole at the first step (and a rebase)
+
+
+def test_at_rest_after_a_resting_step_in_balance_only_with_the_hybrid():
+    """at_rest: the hybrid's last step rested within its tolerance (a live session starts a stroke's
+    rebase then); never before a step, never with the sweeps alone."""
+    for solver in ("hybrid", "vbd"):
+        tis = tissue(solver)
+        assert not tis.at_rest()
+        f = np.zeros((tis.n_nodes, 3))
+        f[interior_node(tis), 2] = -1e-4  # a small load, held: the steps after the first rest
+        tis.advance(f, tis.time + tis.step_s)
+        assert not tis.at_rest()  # the first step cannot rest: no load before it to compare with
+        tis.advance(f, tis.time + 3 * tis.step_s)
+        assert tis.at_rest() == (solver == "hybrid")
+        assert tis.counts.get("resting_steps", 0) >= (solver == "hybrid")
