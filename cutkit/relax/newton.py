@@ -758,6 +758,58 @@ def newton_step(em: ElementModel, state: ElementState, h: float, f_ext=None, gra
     return info
 
 
+def rest_step(em: ElementModel, state: ElementState, h: float, f_ext, *, atol: float, sweeps: int,
+              max_iterations: int, solver: NewtonSolver, stop=None) -> tuple[SolveInfo, int]:
+    """One backward Euler step of ``h`` s from ``state``, for a tissue at rest: up to ``sweeps``
+    vertex block descent sweeps of the whole model (:func:`~cutkit.relax.vbd.iterate`), which
+    settle a small local change in milliseconds, then projected Newton on the same step until the
+    whole model's true residual is at most ``atol`` (N), which the soft global modes need.
+
+    Parameters
+    ----------
+    em : ElementModel
+    state : ElementState
+        Changed in place (positions, velocities, time) where the step is taken.
+    h : float
+        s, > 0.
+    f_ext : (n, 3) float64
+        N.
+    atol : float
+        N.
+    sweeps : int
+        Sweeps at most before Newton (0: Newton only, as :func:`newton_step`).
+    max_iterations : int
+        Newton iterations at most.
+    solver : NewtonSolver
+    stop : (1,) int64, optional
+        Read before every sweep and as :meth:`NewtonSolver.solve` reads it.
+
+    Returns
+    -------
+    info : SolveInfo
+        The Newton solve's (``iterations`` Newton iterations, ``residual`` the true one);
+        ``taken`` False where nothing moved.
+    swept : int
+        The sweeps made.
+    """
+    from cutkit.relax.vbd import iterate
+
+    x0 = state.positions.copy()
+    free = ~em.fixed
+    terms = _free_terms(em, x0, h, f_ext, None, np.where(free, x0 + h * state.velocities, x0))
+    swept = 0
+    while swept < sweeps and not (stop is not None and stop[0]):
+        swept += 1
+        if iterate(em, state.positions, terms, rtol=0.0, atol=float(atol), max_iterations=1).converged:
+            break
+    info = solver.solve(state.positions, terms, atol=float(atol), max_iterations=int(max_iterations), stop=stop)
+    if not info.taken and swept == 0:
+        return info, 0
+    state.velocities[:] = np.where(free, (state.positions - x0) / h, 0.0)
+    state.time += h
+    return SolveInfo(info.iterations, info.initial_residual, info.residual, info.converged), swept
+
+
 def newton_static(em: ElementModel, positions, f_ext=None, gravity=None, *, rtol: float = 1e-6,
                   atol: float = DEFAULT_ATOL_N, max_iterations: int = DEFAULT_MAX_ITERATIONS,
                   solver: NewtonSolver | None = None) -> SolveInfo:
