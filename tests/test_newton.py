@@ -441,3 +441,11 @@ def test_the_assembly_is_the_same_to_the_bit_at_any_thread_count_and_chunk(monke
         dense[np.ix_(dofs, dofs)] += hessians[e]
     A = sp.csr_matrix((out[0], pat.indices, pat.indptr), shape=dense.shape).toarray()
     np.testing.assert_allclose(A, dense, rtol=1e-12, atol=1e-12 * np.abs(dense).max())
+
+
+def test_the_warm_up_runs_the_conjugate_gradients_kernel():
+    """The run side's warm-up (before a live session's clock starts) solves by the block CG kernel too:
+    the warm-up slab is small enough to factorise, a knee's resting steps are not."""
+    from cutkit.simulate.warmup import warm_up_conjugate_gradients
+
+    assert warm_up_conjugate_gradients() > 0

@@ -57,3 +57,18 @@ def warm_up(outputs: bool = True, material_model: str | None = None) -> None:
     with tempfile.TemporaryDirectory() as d:
         simulate(warm_up_model(), traj, d, SimulateOptions(frames=outputs, fps=2, write_model=outputs, hold_s=0.05,
                                                            settle_iterations=2, material_model=material_model))
+    warm_up_conjugate_gradients()
+
+
+def warm_up_conjugate_gradients() -> int:
+    """One static Newton iteration of the warm-up slab by conjugate gradients: a large model's resting
+    steps solve by them (``newton.CHOLESKY_MAX_DOFS``), which the small slab's factorisations skip.
+    Returns the conjugate-gradient iterations made."""
+    from cutkit.relax.elastic import build_element_model
+    from cutkit.relax.newton import NewtonSolver, newton_static
+
+    model = warm_up_model()
+    em = build_element_model(model)
+    solver = NewtonSolver(em, linear="cg", hessian="projected")
+    newton_static(em, model.points.copy(), max_iterations=1, solver=solver)
+    return int(solver.counts["cg_iterations"])
