@@ -86,3 +86,18 @@ def test_the_blade_load_goes_by_mass_over_two_rings_and_never_across_a_cut(mater
     V = np.abs(np.linalg.det(x[model.tets[:, 1:]] - x[model.tets[:, :1]])) / 6.0
     lumped = np.bincount(model.tets.ravel(), weights=np.repeat(V / 4.0, 4), minlength=len(x))
     np.testing.assert_allclose(shares, lumped[nodes] / lumped[nodes].sum(), rtol=1e-9)
+
+
+def test_node_rings_kernel_equals_a_breadth_first_search():
+    """cutkit.relax.kernels.node_rings against _rings (a plain search over the tets), 0 to 3 rings."""
+    import numpy as np
+
+    from cutkit.relax.kernels import node_rings
+    from cutkit.simulate.elastic_tissue import ElasticTissue
+
+    model, _ = _two_touching_boxes()
+    tis = ElasticTissue(model, blade_length=10.0, step_s=0.004)
+    seeds = np.array([3, 40, 3], np.int64)
+    for rings in range(4):
+        got = node_rings(tis.em.adjacency, seeds, rings, tis.em.n_nodes)
+        np.testing.assert_array_equal(got, _rings(model.tets, seeds, rings))

@@ -244,6 +244,35 @@ def tets_around(adj, nodes):
     return np.unique(found)
 
 
+@njit(cache=True, nogil=True)
+def node_rings(adj, nodes, rings, n):
+    """``nodes`` (k,) int64 grown by ``rings`` rings of tets (each ring: every node sharing a tet
+    with one found so far, read from the adjacency rows' ``opposite`` corners), ascending and each
+    once: (j,) int64.  ``n`` is the node count."""
+    mark = np.zeros(n, np.bool_)
+    found = np.empty(n, np.int64)
+    k = 0
+    for q in range(nodes.shape[0]):
+        if not mark[nodes[q]]:
+            mark[nodes[q]] = True
+            found[k] = nodes[q]
+            k += 1
+    lo = 0
+    for _ in range(rings):
+        hi = k
+        for f in range(lo, hi):
+            i = found[f]
+            for r in range(adj.start[i], adj.start[i] + adj.degree[i]):
+                for c in range(3):
+                    j = adj.opposite[r, c]
+                    if not mark[j]:
+                        mark[j] = True
+                        found[k] = j
+                        k += 1
+        lo = hi
+    return np.sort(found[:k])
+
+
 #: Blocks the nodes of :func:`awake_after_sweep` are split into for its threads.
 AWAKE_BLOCKS = 16
 

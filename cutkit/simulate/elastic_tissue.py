@@ -34,7 +34,7 @@ from cutkit.relax.elastic import (
     node_damping,
 )
 from cutkit.mesh.geometry import signed_volumes_serial
-from cutkit.relax.kernels import loaded_nodes, tets_around
+from cutkit.relax.kernels import loaded_nodes, node_rings, tets_around
 from cutkit.relax.growable import append_rows
 from cutkit.relax.vbd import DEFAULT_ATOL_N, local_step, refresh_forces, volume_ratio_extremes
 from cutkit.relax.materials import material_of_tets, prestress_of_tets
@@ -302,10 +302,10 @@ class ElasticTissue(TissueBase):
         """(n,) float64 lumped masses (the element model's)."""
         return self.em.masses[:self.em.n_nodes]
 
-    def node_ring(self, nodes: np.ndarray) -> np.ndarray:
-        """``nodes`` and the corners of the live tets around them (the element model's adjacency)."""
-        nodes = np.asarray(nodes, np.int64)
-        return np.union1d(nodes, self.em.tets[tets_around(self.em.adjacency, nodes)].ravel())
+    def node_rings(self, nodes: np.ndarray, rings: int) -> np.ndarray:
+        """``nodes`` grown by ``rings`` rings of live tets, through the element model's adjacency."""
+        em = self.em
+        return node_rings(em.adjacency, np.ascontiguousarray(nodes, np.int64), int(rings), em.n_nodes)
 
     @property
     def fixed(self) -> np.ndarray:

@@ -427,14 +427,17 @@ class Tissue(TissueBase):
         """(n,) float64 lumped masses (rho V / 4 per node and tet)."""
         return self.springs.masses
 
-    def node_ring(self, nodes: np.ndarray) -> np.ndarray:
-        """``nodes`` and their neighbours along springs (every pair of a tet's corners is a spring)."""
+    def node_rings(self, nodes: np.ndarray, rings: int) -> np.ndarray:
+        """``nodes`` grown by ``rings`` rings of neighbours along springs (every pair of a tet's corners
+        is a spring)."""
         sm = self.springs
-        nodes = np.asarray(nodes, np.int64)
-        start, stop = sm.adj_offsets[nodes], sm.adj_offsets[nodes + 1]
-        counts = stop - start
-        slots = np.repeat(start - np.cumsum(counts) + counts, counts) + np.arange(int(counts.sum()))
-        return np.union1d(nodes, sm.adj_nodes[slots])
+        nodes = np.unique(np.asarray(nodes, np.int64))
+        for _ in range(rings):
+            start, stop = sm.adj_offsets[nodes], sm.adj_offsets[nodes + 1]
+            counts = stop - start
+            slots = np.repeat(start - np.cumsum(counts) + counts, counts) + np.arange(int(counts.sum()))
+            nodes = np.union1d(nodes, sm.adj_nodes[slots])
+        return nodes
 
     def bearing_nodes(self, nodes: np.ndarray) -> np.ndarray:
         """The nodes of ``nodes`` (k,) int64 in a piece of tissue that is held (has a fixed node).

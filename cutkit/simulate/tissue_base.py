@@ -113,14 +113,11 @@ class TissueBase:
 
     def load_shares(self, nodes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`cutkit.tissue.TissuePhysics.load_shares`: ``nodes`` grown by
-        :data:`~cutkit.tissue.BLADE_LOAD_RINGS` rings (:meth:`node_ring`), those
+        :data:`~cutkit.tissue.BLADE_LOAD_RINGS` rings (:meth:`node_rings`), those
         :meth:`bearing_nodes` keeps, each in proportion to its mass."""
         from cutkit.tissue import BLADE_LOAD_RINGS
 
-        nodes = np.unique(np.asarray(nodes, np.int64))
-        for _ in range(BLADE_LOAD_RINGS):
-            nodes = self.node_ring(nodes)
-        nodes = self.bearing_nodes(nodes)
+        nodes = self.bearing_nodes(self.node_rings(np.unique(np.asarray(nodes, np.int64)), BLADE_LOAD_RINGS))
         m = self.masses[nodes]
         total = float(m.sum())
         if not total > 0.0:
@@ -131,8 +128,9 @@ class TissueBase:
         """Whether the tissue has come to rest after the blade left (a model that cannot tell: False)."""
         return False
 
-    def node_ring(self, nodes: np.ndarray) -> np.ndarray:
-        """(j,) int64 ascending: ``nodes`` (k,) int64 and every node sharing a live tet with one of them."""
+    def node_rings(self, nodes: np.ndarray, rings: int) -> np.ndarray:
+        """(j,) int64 ascending: ``nodes`` (k,) int64 grown by ``rings`` rings of live tets (each ring adds
+        every node sharing a tet with one found so far)."""
         raise NotImplementedError
 
     def bearing_nodes(self, nodes: np.ndarray) -> np.ndarray:
