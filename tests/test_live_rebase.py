@@ -169,15 +169,16 @@ def test_twins_are_the_rows_whose_nodes_have_the_same_representatives():
 
 
 def test_a_strokes_rebase_waits_for_rest_the_blade_or_the_time_limit():
-    """On the wall clock a stroke's rebase starts when the tissue is at rest, when the blade is in the
-    tissue again, or REBASE_WAIT_MAX_S after the stroke ended; not while one runs or none waits."""
+    """On the wall clock a stroke's rebase starts when the tissue is at rest (in a step after the stroke
+    ended), when the blade is in the tissue again, or REBASE_WAIT_MAX_S after the stroke ended; not
+    while one runs or none waits."""
     from types import SimpleNamespace
 
     from cutkit.scalpel import CUTTING, FREE
     from cutkit.simulate.live_loop import REBASE_WAIT_MAX_S
 
-    def loop(waiting_since, code=FREE, at_rest=False, busy=False):
-        tis = SimpleNamespace(at_rest=lambda: at_rest)
+    def loop(waiting_since, code=FREE, at_rest=False, busy=False, tissue_time=10.0):
+        tis = SimpleNamespace(at_rest=lambda: at_rest, time=tissue_time)
         return SimpleNamespace(rebase_waiting_since=waiting_since, rebaser=SimpleNamespace(busy=busy),
                                session=SimpleNamespace(scalpel=SimpleNamespace(code=code), tis=tis))
 
@@ -185,6 +186,7 @@ def test_a_strokes_rebase_waits_for_rest_the_blade_or_the_time_limit():
     assert not due(loop(None, at_rest=True), 10.0)  # no stroke ended
     assert not due(loop(1.0), 1.0 + 0.5 * REBASE_WAIT_MAX_S)  # the wound still moving, the blade out
     assert due(loop(1.0, at_rest=True), 1.1)
+    assert not due(loop(1.0, at_rest=True, tissue_time=0.9), 1.1)  # a rest from before the stroke ended
     assert due(loop(1.0, code=CUTTING), 1.1)  # the blade back in: its cut needs the rebased mesh
     assert due(loop(1.0), 1.0 + REBASE_WAIT_MAX_S)
     assert not due(loop(1.0, at_rest=True, busy=True), 5.0)  # one is running already

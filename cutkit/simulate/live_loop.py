@@ -352,12 +352,14 @@ class LiveLoop:
 
     def _rebase_due(self, now: float) -> bool:
         """Whether a waiting rebase starts now: the blade is in the tissue again (its next cut needs the
-        rebased mesh), the tissue is at rest, or :data:`REBASE_WAIT_MAX_S` have passed."""
+        rebased mesh), the tissue is at rest since the stroke ended (the relaxation thread runs behind
+        the clock: a step at rest from before the stroke's end does not count), or
+        :data:`REBASE_WAIT_MAX_S` have passed."""
         if self.rebase_waiting_since is None or self.rebaser.busy:
             return False
         s = self.session
-        return (s.scalpel.code != FREE or s.tis.at_rest()
-                or now - self.rebase_waiting_since >= REBASE_WAIT_MAX_S)
+        rested = s.tis.time > self.rebase_waiting_since and s.tis.at_rest()
+        return s.scalpel.code != FREE or rested or now - self.rebase_waiting_since >= REBASE_WAIT_MAX_S
 
     def _begin_rebase(self) -> None:
         """The picture stays as the tissue is now, and the rebase starts in its own thread."""
