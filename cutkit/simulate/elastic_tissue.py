@@ -64,16 +64,17 @@ NEWTON_STEP_MAX_ITERATIONS = 30
 #: (:class:`~cutkit.relax.newton.NewtonSolver`'s ``region_rings``; docs/relaxation.md, "Local Newton").
 NEWTON_REGION_RINGS: int | None = None
 #: A resting step of the hybrid (nothing cut since the last step and the last step's load, to within
-#: this tolerance: the blade still or gone) is solved to this fraction of the force scale, by projected Newton on the
-#: whole model (:meth:`ElasticTissue._rest_step`): the wound's gaping is a soft mode whose force is
-#: within the cutting steps' tolerance almost at once, so only a tighter solve brings it to its
-#: equilibrium (docs/relaxation.md, "Resting steps").
+#: this tolerance: the blade still or gone) is solved to this fraction of the force scale by a few
+#: sweeps and projected Newton on the whole model (:meth:`ElasticTissue._rest_step`): the wound's
+#: gaping is a soft mode whose force is within the cutting steps' tolerance almost at once, so only
+#: a tighter solve brings it to its equilibrium; at 1e-3 the demo knee's wound ended 0.8 % short of
+#: a static solve's opening, at 3e-4 0.17 % (docs/relaxation.md, "Resting steps").
 REST_RTOL = 3e-4
 #: The relative tolerance of a resting step's conjugate gradients (inexact Newton; looser near the
 #: end of a solve, :data:`~cutkit.relax.newton.NO_OVERSOLVE`).  On the demo knee's hold with the
-#: blade drawn out, 0.03 brings the first resting step to 1e-3 of the force scale in 2 Newton
-#: iterations (219 CG iterations, 1.2 s on one core) where 0.1 takes 3 (210, 1.6 s); with the blade
-#: held in, where the step bound cuts most steps short near the crushed tets, the two cost the same.
+#: blade drawn out (measured before the blade's load went by mass), 0.03 brought the first resting
+#: step to 1e-3 of the force scale in 2 Newton iterations (219 CG iterations, 1.2 s on one core)
+#: where 0.1 took 3 (210, 1.6 s); with the blade held in the two cost the same.
 REST_CG_RTOL = 0.03
 #: Whole-model vertex block descent sweeps a resting step makes before its Newton solve: a small
 #: change (the blade pausing mid incision) settles in a few sweeps, 13 ms each on the knee on one
