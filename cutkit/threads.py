@@ -170,6 +170,20 @@ def use_threads_in_this_thread(n: int) -> int:
     return threads
 
 
+@contextlib.contextmanager
+def threads_in_this_thread(n: int):
+    """Run this thread's numba kernels on ``n`` threads for the block (:func:`use_threads_in_this_thread`),
+    then on as many as before."""
+    import numba
+
+    before = int(numba.get_num_threads())
+    use_threads_in_this_thread(n)
+    try:
+        yield
+    finally:
+        numba.set_num_threads(before)
+
+
 def configure_threads(n: int | None = None) -> int:
     """Set the number of numba threads for this process and return it.
 

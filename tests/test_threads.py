@@ -187,3 +187,7 @@ def test_a_worker_thread_takes_the_configured_count_less_one(monkeypatch):
     t.join()
     assert seen["before"] == pool  # what a thread starts with, whatever the main thread chose
     assert seen["after"] == 1
+    configure_threads(pool)
+    with T.threads_in_this_thread(1):
+        assert numba.get_num_threads() == 1
+    assert numba.get_num_threads() == pool  # restored after the block

@@ -49,7 +49,7 @@ from cutkit.relax import anp
 from cutkit.relax.elastic import ElementModel, ElementState
 from cutkit.threads import one_blas_thread
 from cutkit.relax.settle import rigid_modes
-from cutkit.relax.vbd import DEFAULT_ATOL_N, SolveInfo, _node_terms, elastic_energy, elastic_forces
+from cutkit.relax.vbd import DEFAULT_ATOL_N, SolveInfo, _node_terms, elastic_energy, elastic_forces, iterate
 
 #: Newton iterations one solve makes before it reports that it did not converge.
 DEFAULT_MAX_ITERATIONS = 50
@@ -792,8 +792,6 @@ def rest_step(em: ElementModel, state: ElementState, h: float, f_ext, *, atol: f
     swept : int
         The sweeps made.
     """
-    from cutkit.relax.vbd import iterate
-
     x0 = state.positions.copy()
     free = ~em.fixed
     terms = _free_terms(em, x0, h, f_ext, None, np.where(free, x0 + h * state.velocities, x0))

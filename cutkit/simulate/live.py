@@ -77,24 +77,13 @@ def run_live(model, source, views, out_dir, opt=None, *, max_seconds: float | No
     summary : dict
         What ``summary.json`` holds: the simulate keys and ``live`` (rates, latency).
     """
-    from cutkit.threads import use_threads_in_this_thread, worker_threads
+    from cutkit.threads import threads_in_this_thread, worker_threads
 
-    before = numba_threads_now()
-    use_threads_in_this_thread(worker_threads())  # a core stays for drawing (cutkit.threads.worker_threads)
-    try:
-        with one_blas_thread():  # the same sums on every machine: docs/relaxation.md
-            return _run_live(model, source, views, out_dir, opt, max_seconds=max_seconds, fps=fps,
-                             idle_end_s=idle_end_s, stop=stop, model_path=model_path, on_frame=on_frame,
-                             until_idle_s=until_idle_s, on_start=on_start, clock=clock)
-    finally:
-        use_threads_in_this_thread(before)
-
-
-def numba_threads_now() -> int:
-    """The numba threads of this thread."""
-    import numba
-
-    return int(numba.get_num_threads())
+    # a core stays for drawing (cutkit.threads.worker_threads); the same sums on every machine (BLAS)
+    with threads_in_this_thread(worker_threads()), one_blas_thread():
+        return _run_live(model, source, views, out_dir, opt, max_seconds=max_seconds, fps=fps,
+                         idle_end_s=idle_end_s, stop=stop, model_path=model_path, on_frame=on_frame,
+                         until_idle_s=until_idle_s, on_start=on_start, clock=clock)
 
 
 def _run_live(model, source, views, out_dir, opt, *, max_seconds, fps, idle_end_s, stop, model_path, on_frame,
