@@ -245,8 +245,8 @@ def run_session(model, trajectory_path: str, priority: str, window: bool, igtl_r
         step_walls = {}  # id of each tissue -> perf_counter at the end of each of its steps
         count = ElasticTissue._count
 
-        def counted(self, info, true_residual):  # the wall time each step ends (the benchmark's own record)
-            count(self, info, true_residual)
+        def counted(self, info, true_residual, stop=None):  # the wall time each step ends (the benchmark's own record)
+            count(self, info, true_residual, stop)
             step_walls.setdefault(id(self), []).append(time.perf_counter())
 
         ElasticTissue._count = counted

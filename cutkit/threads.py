@@ -141,6 +141,7 @@ def parse_threads(value) -> int | None:
 #: thread-local: a thread started later runs its parallel kernels on all of numba's threads
 #: unless it sets its own (:func:`use_threads_in_this_thread`).
 _configured: int | None = None
+_blas = None  # the process's BLAS libraries (threadpoolctl), looked up at the first one_blas_thread
 
 
 def configured_threads() -> int:
@@ -229,9 +230,17 @@ def one_blas_thread():
     The solvers whose steps depend on such sums (projected Newton's
     conjugate gradients and residual norms) run inside this, so what they
     compute does not depend on the machine's cores (``tests/test_threads.py``).
-    """
-    import scipy.linalg  # noqa: F401  scipy's own BLAS, loaded now so that the limit reaches it too
-    from threadpoolctl import threadpool_limits
 
-    with threadpool_limits(limits=1, user_api="blas"):
+    The BLAS libraries are looked up once per process (a lookup walks every
+    loaded library: about 1 ms, several in a live session with the window's
+    libraries loaded, on the thread a cut waits for); setting the limit then
+    costs about 20 us.
+    """
+    global _blas
+    if _blas is None:
+        import scipy.linalg  # noqa: F401  scipy's own BLAS, loaded now so that the limit reaches it too
+        from threadpoolctl import ThreadpoolController
+
+        _blas = ThreadpoolController()
+    with _blas.limit(limits=1, user_api="blas"):
         yield

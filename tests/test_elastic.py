@@ -79,6 +79,10 @@ def test_volume_ratio_extremes_match_the_twin_with_removed_and_inverted_tets(def
     assert volume_ratio_extremes(em, model.points, 0.5)[1] == 0
     stretched = model.points * 1.1  # every J above 1.1^3: the smallest is reported, not 1
     assert volume_ratio_extremes(em, stretched, 0.5)[0] > 1.0
+    # a waiting cut (the stop flag up) ends the pass: not measured; down, the same as without one
+    lowest, count = volume_ratio_extremes(em, x, 0.5, np.ones(1, np.int64))
+    assert np.isnan(lowest) and count == 0
+    assert volume_ratio_extremes(em, x, 0.5, np.zeros(1, np.int64)) == volume_ratio_extremes(em, x, 0.5)
 
 
 def test_forces_are_minus_the_energy_gradient(deformed):

@@ -63,6 +63,29 @@ def test_a_raised_stop_flag_leaves_the_step_untaken():
     assert tis.time > t0 and not np.array_equal(tis.positions, x0)
 
 
+def test_a_cut_waiting_at_the_end_of_a_step_leaves_its_smallest_volume_ratio_unmeasured():
+    """The per-step report pass (the smallest J) does not make a waiting cut wait: a flag raised once
+    the step is made leaves that step's min_J None (counted in steps_without_min_J), the step itself
+    taken; the worst is taken over the steps measured."""
+    class RaisedAfterTheStep(ElasticTissue):
+        def _sweep_step(self, f_ext, loaded, atol, stop):
+            out = super()._sweep_step(f_ext, loaded, atol, stop)
+            if stop is not None and self.step_log["min_J"]:
+                stop[0] = 1
+            return out
+
+    tis = tissue()
+    tis.__class__ = RaisedAfterTheStep
+    f = np.zeros((tis.n_nodes, 3))
+    f[interior_node(tis), 2] = 5.0
+    stop = np.zeros(1, np.int64)
+    tis.advance(f, tis.time + tis.step_s + 1e-9, stop)  # one step, measured
+    assert tis.advance(f, tis.time + tis.step_s + 1e-9, stop) > 0  # taken, its report pass stopped
+    rep = tis.relax_report()
+    assert rep["count"] == 2 and rep["min_J"][1] is None and rep["steps_without_min_J"] == 1
+    assert rep["min_J_worst"] == rep["min_J"][0] < 1.0
+
+
 def test_the_sweep_kernel_reads_the_stop_flag_before_each_colour_class():
     from cutkit.relax import _elastic_kernels as K
     from cutkit.relax.vbd import _node_terms

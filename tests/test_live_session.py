@@ -430,3 +430,23 @@ def test_a_cut_is_preceded_by_a_frame_when_the_newest_frame_is_half_a_period_old
     assert _geometry_loop(pending=True, frame_age_periods=0.8) == (["frame", "cut"], [1.0])
     assert _geometry_loop(pending=True, frame_age_periods=0.2) == (["cut"], [1.0])
     assert _geometry_loop(pending=False, frame_age_periods=0.8) == (["cut"], [])
+
+
+def test_the_warm_up_loads_the_kernels_a_stroke_needs_that_its_short_cut_misses():
+    """Before a live session's clock starts: the T-cone kernel of a tet the tip has left and the swept
+    triangle query, each with the argument types a cut passes (C-contiguous float64 / int64 arrays),
+    so the first stroke loads neither mid-cut."""
+    from numba import types
+
+    from cutkit.collision import _swept_kernels as SK
+    from cutkit.cutting import _kernels_step as KS
+    from cutkit.cutting.resubdivision import load_cone_kernel
+    from cutkit.simulate.warmup import warm_up_missed_kernels
+
+    warm_up_missed_kernels()
+    f2, i1, i2 = types.float64[:, ::1], types.int64[::1], types.int64[:, ::1]
+    f1 = types.float64[::1]
+    assert (f2, i1, f1, f1, i2, types.float64, types.int64) in KS.best_cone_apex.signatures
+    assert any(sig[:3] == (f2, i2, types.boolean[::1]) for sig in SK.query_triangle.signatures)
+    # the unit tet's cone over one face: the regular corner's own angles bound it
+    assert 0.0 < load_cone_kernel() <= 90.0

@@ -308,6 +308,24 @@ def test_a_waiting_cut_stops_the_conjugate_gradients_and_the_iteration_is_abando
     np.testing.assert_array_equal(st.positions, one.positions)
 
 
+def test_a_waiting_cut_stops_the_assembly_and_the_resting_sweeps():
+    """The flag is read between the assembly's chunks of elements and by a resting step's whole-model
+    sweeps: up, no matrix is made (None) and a resting step moves nothing and takes no time; down,
+    the matrix is the one made without a flag."""
+    from cutkit.relax.newton import rest_step
+
+    p, em, f, tip = cantilever()
+    solver = NewtonSolver(em)
+    free, add = np.ones((em.n_nodes, 3), bool), np.ones(em.n_nodes)
+    assert solver.matrix(p, free, add, 1, np.ones(1, np.int64)) is None
+    A, B = solver.matrix(p, free, add, 1), solver.matrix(p, free, add, 1, np.zeros(1, np.int64))
+    assert np.array_equal(A.data, B.data) and np.array_equal(A.indices, B.indices)
+    st = ElementState(p.copy(), np.zeros_like(p))
+    info, swept = rest_step(em, st, 0.02, f, atol=0.0, sweeps=3, max_iterations=2, solver=NewtonSolver(em),
+                            stop=np.ones(1, np.int64))
+    assert not info.taken and swept == 0 and np.array_equal(st.positions, p) and st.time == 0.0
+
+
 def _held_matrix(em, x):
     """The projected Newton matrix of (em, x) with a few held dofs (scipy CSR), and its solver."""
     n = em.n_nodes

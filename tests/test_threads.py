@@ -191,3 +191,20 @@ def test_a_worker_thread_takes_the_configured_count_less_one(monkeypatch):
     with T.threads_in_this_thread(1):
         assert numba.get_num_threads() == 1
     assert numba.get_num_threads() == pool  # restored after the block
+
+
+def test_one_blas_thread_limits_every_blas_and_restores_it_each_time():
+    """The BLAS libraries are looked up once; every later block still runs on one BLAS thread and
+    gives the threads back after."""
+    import scipy.linalg  # noqa: F401
+    from threadpoolctl import threadpool_info, threadpool_limits
+
+    from cutkit.threads import one_blas_thread
+
+    with threadpool_limits(limits=2, user_api="blas"):
+        outside = [lib["num_threads"] for lib in threadpool_info() if lib["user_api"] == "blas"]
+        for _ in range(2):
+            with one_blas_thread():
+                inside = [lib["num_threads"] for lib in threadpool_info() if lib["user_api"] == "blas"]
+            assert inside and set(inside) == {1}
+            assert [lib["num_threads"] for lib in threadpool_info() if lib["user_api"] == "blas"] == outside

@@ -133,3 +133,15 @@ def _best_T(cm, v, tb, tris, free):
     b, angle = K.best_cone_apex(cm._x, np.asarray(v, np.int64), np.asarray(tb, np.float64),
                                 _T_BLENDS if free else _T_AT_CENTROID, tris, TET_BARY_MIN, cm.n_points)
     return b, float(angle)
+
+
+def load_cone_kernel() -> float:
+    """Load (or compile) the T-cone scoring kernel that :func:`resubdivide` calls when no tip is
+    inside a cut tet, on one unit tetrahedron; a live session calls it before its clock starts
+    (the warm-up's short cut never frees a tip).  Returns the best cone's smallest dihedral
+    angle, degrees."""
+    x = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [0.0, 0.0, 0.0]])
+    tris = np.array([[0, 1, 2]], np.int64)
+    _, angle = K.best_cone_apex(x, np.arange(4, dtype=np.int64), np.full(4, 0.25), _T_BLENDS, tris,
+                                TET_BARY_MIN, 4)
+    return float(angle)

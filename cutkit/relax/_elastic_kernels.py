@@ -50,6 +50,9 @@ INCIDENCE_TERMS = 6
 #: A sweep splits each colour class into this many blocks (at most), each with its own scratch
 #: row: a fixed count, so the result does not depend on the number of threads.
 SWEEP_BLOCKS = 64
+#: A report pass (:func:`volume_ratio_extremes`) reads its stop flag every this many elements
+#: (about 20 us of work on one core).
+STOP_EVERY = 1024
 
 
 @njit(cache=True, nogil=True)
@@ -453,15 +456,21 @@ def element_energy(x, el):
 
 
 @njit(cache=True, nogil=True, parallel=True)
-def volume_ratio_extremes(x, el, below):
-    """The smallest volume ratio J = det F over the elements with V > 0 (1.0 if none), and how many
-    have J < ``below``: the report of how near a step's state came to crushing a tet.  A minimum
-    and a count do not depend on the order they are taken in, so the blocks run in parallel."""
+def volume_ratio_extremes(x, el, below, stop):
+    """The smallest volume ratio J = det F over the elements with V > 0 (1.0 if none), how many
+    have J < ``below``, and whether every element was seen: the report of how near a step's state
+    came to crushing a tet.  A minimum and a count do not depend on the order they are taken in,
+    so the blocks run in parallel.  ``stop`` ((1,) int64) is read every :data:`STOP_EVERY`
+    elements: non-zero ends the pass unfinished (a waiting cut does not wait for a report)."""
     m = el.tets.shape[0]
     lowest = np.full(SWEEP_BLOCKS, np.inf)
     counts = np.zeros(SWEEP_BLOCKS, np.int64)
+    seen = np.ones(SWEEP_BLOCKS, np.bool_)
     for b in prange(SWEEP_BLOCKS):
         for t in range(m * b // SWEEP_BLOCKS, m * (b + 1) // SWEEP_BLOCKS):
+            if t % STOP_EVERY == 0 and stop[0] != 0:
+                seen[b] = False
+                break
             if el.volume[t] <= 0.0:
                 continue
             F00, F01, F02, F10, F11, F12, F20, F21, F22 = _deformation(x, el, t)
@@ -471,7 +480,7 @@ def volume_ratio_extremes(x, el, below):
             if J < below:
                 counts[b] += 1
     least = lowest.min()
-    return (least if least < np.inf else 1.0), counts.sum()
+    return (least if least < np.inf else 1.0), counts.sum(), seen.all()
 
 
 @njit(cache=True, nogil=True)

@@ -248,17 +248,22 @@ def add_element_blocks(el, pattern, first, H, data):
                         data[base + 3 * r * deg + c] += H[q, 3 * a + r, 3 * b + c]
 
 
-def assemble_hessian(x, el, pattern, project, data):
+def assemble_hessian(x, el, pattern, project, data, halt=None):
     """The (projected) Hessian of the elastic energy into the CSR ``data`` (9 nb,) (zeroed here):
     :data:`ASSEMBLY_CHUNK` elements' Hessians at a time in parallel
-    (:func:`element_hessians`), added in element order (:func:`add_element_blocks`)."""
+    (:func:`element_hessians`), added in element order (:func:`add_element_blocks`).  ``halt``
+    ((1,) int64, optional) is read before each chunk: non-zero ends the assembly, and the result
+    is False (``data`` unfinished); True otherwise."""
     data[:] = 0.0
     m = el.tets.shape[0]
     H = np.empty((min(ASSEMBLY_CHUNK, m), 12, 12))
     for first in range(0, m, ASSEMBLY_CHUNK):
+        if halt is not None and halt[0]:
+            return False
         part = H[:min(ASSEMBLY_CHUNK, m - first)]
         element_hessians(x, el, first, project, part)
         add_element_blocks(el, pattern, first, part, data)
+    return True
 
 
 @njit(cache=True, nogil=True)

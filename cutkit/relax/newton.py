@@ -194,8 +194,9 @@ class NewtonSolver:
             self.counts["pattern_builds"] += 1
         return self._pattern
 
-    def matrix(self, x: np.ndarray, free: np.ndarray, diagonal_add: np.ndarray, project: int = 1):
-        """The Hessian of G at x: (3n, 3n) scipy CSR, identity rows at held dofs.
+    def matrix(self, x: np.ndarray, free: np.ndarray, diagonal_add: np.ndarray, project: int = 1, halt=None):
+        """The Hessian of G at x: (3n, 3n) scipy CSR, identity rows at held dofs; None where ``halt``
+        stopped the assembly.
 
         Parameters
         ----------
@@ -206,14 +207,17 @@ class NewtonSolver:
         project : int
             0: exact element Hessians; 1: negative eigenvalues clamped to 0 (analytic
             eigensystem); ``_newton_kernels.CLAMP_EIGH``: the same by LAPACK's eigh.
+        halt : (1,) int64, optional
+            Read between chunks of elements (the neo-Hookean element): non-zero ends the assembly
+            (a waiting cut waits for one chunk, not for the whole matrix).
         """
 
         pat = self.pattern()
         data = np.empty(pat.indices.shape[0])
         if self.em.element == "anp":
             anp.assemble_anp_hessian(self.em, x, pat, int(project), data)
-        else:
-            KN.assemble_hessian(x, self._elements(), pat, int(project), data)
+        elif not KN.assemble_hessian(x, self._elements(), pat, int(project), data, halt):
+            return None
         return self._constrained(data, free, diagonal_add)
 
     def _solve_linear(self, A, r: np.ndarray, x: np.ndarray, free: np.ndarray, rtol: float, halt=None):
@@ -448,7 +452,10 @@ class NewtonSolver:
         gradients."""
         modes = {"auto": (0, 1), "projected": (1,), "exact": (0,)}[self.hessian]
         for mode in modes:
-            d = self._solve_linear(self.matrix(x, free, diagonal_add, mode), r.ravel(), x, free, rtol, halt)
+            A = self.matrix(x, free, diagonal_add, mode, halt)
+            if A is None:
+                return None
+            d = self._solve_linear(A, r.ravel(), x, free, rtol, halt)
             if d is None and halt is not None and halt[0]:
                 return None
             if d is not None:
@@ -798,7 +805,7 @@ def rest_step(em: ElementModel, state: ElementState, h: float, f_ext, *, atol: f
     swept = 0
     while swept < sweeps and not (stop is not None and stop[0]):
         swept += 1
-        if iterate(em, state.positions, terms, rtol=0.0, atol=float(atol), max_iterations=1).converged:
+        if iterate(em, state.positions, terms, rtol=0.0, atol=float(atol), max_iterations=1, stop=stop).converged:
             break
     info = solver.solve(state.positions, terms, atol=float(atol), max_iterations=int(max_iterations), stop=stop)
     if not info.taken and swept == 0:

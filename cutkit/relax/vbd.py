@@ -60,13 +60,17 @@ def _node_terms(em: ElementModel, x, h, f_ext, gravity, y=None):
 
 
 def iterate(em: ElementModel, x, terms, *, rtol=DEFAULT_RTOL, atol=DEFAULT_ATOL_N,
-            max_iterations=DEFAULT_MAX_ITERATIONS, min_iterations=1, chebyshev=None) -> SolveInfo:
+            max_iterations=DEFAULT_MAX_ITERATIONS, min_iterations=1, chebyshev=None, stop=None) -> SolveInfo:
     """Vertex block descent sweeps on ``x`` (in place) until the residual criterion holds.
 
     ``chebyshev`` (a spectral radius estimate in (0, 1)) turns on the
     Chebyshev semi-iterative acceleration that vertex block descent uses
-    (Wang 2015): ``x = w (x_sweep - x_prev2) + x_prev2``.
+    (Wang 2015): ``x = w (x_sweep - x_prev2) + x_prev2``.  ``stop`` ((1,)
+    int64, optional) is read before each colour class: non-zero ends the
+    sweep there (every node moved so far keeps its move) and the solve,
+    not converged.
     """
+    halt = NEVER_STOP if stop is None else stop
     offsets, nodes = em.colour_classes()
     r2 = np.zeros(em.n_nodes)
     adj = em.adjacency
@@ -77,9 +81,11 @@ def iterate(em: ElementModel, x, terms, *, rtol=DEFAULT_RTOL, atol=DEFAULT_ATOL_
     while it < max_iterations:
         if chebyshev is not None:
             prev2, prev = prev, x.copy()
-        K.vbd_sweep(x, adj, terms, offsets, nodes, r2, NEVER_STOP)
+        K.vbd_sweep(x, adj, terms, offsets, nodes, r2, halt)
         it += 1
         res = float(np.sqrt(r2.sum()))
+        if halt[0]:
+            return SolveInfo(it, r0 if it > 1 else res, res, False)
         if it == 1:
             r0 = res
         if it >= min_iterations and (res <= rtol * r0 or res <= atol):
@@ -258,8 +264,13 @@ def elastic_energy(em: ElementModel, positions) -> float:
     return float(K.element_energy(np.ascontiguousarray(positions, np.float64), em.elements))
 
 
-def volume_ratio_extremes(em: ElementModel, positions, below: float) -> tuple[float, int]:
+def volume_ratio_extremes(em: ElementModel, positions, below: float, stop=None) -> tuple[float, int]:
     """The smallest volume ratio ``J = det F`` (of each element's natural shape) at ``positions``
-    (n, 3) float64 over the live elements (1.0 without any), and how many have ``J < below``."""
-    lowest, count = K.volume_ratio_extremes(np.ascontiguousarray(positions, np.float64), em.elements, float(below))
-    return float(lowest), int(count)
+    (n, 3) float64 over the live elements (1.0 without any), and how many have ``J < below``.
+
+    ``stop`` ((1,) int64, optional) is read every ``STOP_EVERY`` elements:
+    non-zero ends the pass, and the result is (NaN, 0): not measured.
+    """
+    lowest, count, seen = K.volume_ratio_extremes(np.ascontiguousarray(positions, np.float64), em.elements,
+                                                  float(below), NEVER_STOP if stop is None else stop)
+    return (float(lowest), int(count)) if seen else (float("nan"), 0)

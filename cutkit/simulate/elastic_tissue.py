@@ -388,7 +388,7 @@ class ElasticTissue(TissueBase):
             self._seeds = []
             self._cut_since_step = False
             sweeps += info.iterations
-            self._count(info, true_residual)
+            self._count(info, true_residual, stop)
         return sweeps
 
     def at_rest(self) -> bool:
@@ -512,8 +512,9 @@ class ElasticTissue(TissueBase):
         r[em.fixed | (em.adj_degree == 0)[:, None]] = 0.0
         return r
 
-    def _count(self, info, true_residual: float) -> None:
-        """Book one relaxation step: the counters and the per-step log (the true residual)."""
+    def _count(self, info, true_residual: float, stop=None) -> None:
+        """Book one relaxation step: the counters and the per-step log (the true residual; the
+        smallest volume ratio, not measured (NaN) where ``stop`` says a cut is waiting)."""
         self.counts["steps"] += 1
         if self.solver == "newton":
             self.counts["newton_iterations"] += info.iterations
@@ -525,8 +526,8 @@ class ElasticTissue(TissueBase):
         self.step_log["relative_residual"].append(float(true_residual / self.force_scale)
                                                   if self.force_scale > 0 else 0.0)
         # how near the step's end state came to crushing a tet (J of the natural shape); one pass
-        # like an energy's, 2-3 ms on the knee
-        lowest, crushed = volume_ratio_extremes(self.em, self.state.positions, CRUSHED_J)
+        # like an energy's, 2-3 ms on the knee, that a waiting cut does not wait for
+        lowest, crushed = volume_ratio_extremes(self.em, self.state.positions, CRUSHED_J, stop)
         self.step_log["min_J"].append(float(lowest))
         self.step_log["crushed_tets"].append(int(crushed))
 
@@ -539,9 +540,11 @@ class ElasticTissue(TissueBase):
             ``solver``, ``count``, ``not_converged``, ``worst_relative_residual``,
             ``iterations_total``, ``rtol``, ``min_J_worst`` (the smallest volume
             ratio any step ended with), ``steps_with_crushed_tets`` (steps that
-            ended with a tet below ``crushed_J`` = :data:`CRUSHED_J`), and per step
-            ``iterations``, ``relative_residual`` (true final residual over the
-            force scale) and ``min_J``;
+            ended with a tet below ``crushed_J`` = :data:`CRUSHED_J`),
+            ``steps_without_min_J`` (live steps whose report pass a waiting cut
+            ended: :meth:`_count`), and per step ``iterations``,
+            ``relative_residual`` (true final residual over the force scale) and
+            ``min_J`` (None where not measured);
             ``"hybrid"`` adds ``polish_iterations_total``, ``polished_steps``
             (steps with a Newton iteration), ``polish_calls`` (steps that
             called the polish), ``polish_s`` (wall seconds of the polishes:
@@ -556,7 +559,9 @@ class ElasticTissue(TissueBase):
                 "iterations_total": int(sum(self.step_log["iterations"])), "rtol": self.step_rtol,
                 "force_scale_N": float(self.force_scale),
                 "iterations": list(self.step_log["iterations"]), "relative_residual": list(rel),
-                "min_J": list(self.step_log["min_J"]), "min_J_worst": float(min(self.step_log["min_J"], default=1.0)),
+                "min_J": [None if np.isnan(j) else j for j in self.step_log["min_J"]],
+                "min_J_worst": float(min((j for j in self.step_log["min_J"] if not np.isnan(j)), default=1.0)),
+                "steps_without_min_J": int(sum(1 for j in self.step_log["min_J"] if np.isnan(j))),
                 "crushed_J": CRUSHED_J,
                 "steps_with_crushed_tets": int(sum(1 for k in self.step_log["crushed_tets"] if k)),
                 **self._polish_report()}

@@ -142,6 +142,7 @@ class LiveLoop:
         self.rebaser = BackgroundRebase(s, clock=self.clock.now)
         s.rebase_runner = self._start_rebase
         self.rebase_waiting_since: float | None = None  # a stroke ended: its rebase waits (_rebase_due)
+        self.strokes_joined = 0  # strokes begun while the previous one's rebase waited (_rebase_due)
         self.still: StillPicture | None = None  # the tissue drawn while a rebase runs
         self.held: collections.deque = collections.deque()  # in-process ticks: poses not yet ticked
         self.cut_tip = None  # the blade's tip at the last geometry update
@@ -351,15 +352,22 @@ class LiveLoop:
             self.rebase_waiting_since = self.now()
 
     def _rebase_due(self, now: float) -> bool:
-        """Whether a waiting rebase starts now: the blade is in the tissue again (its next cut needs the
-        rebased mesh), the tissue is at rest since the stroke ended (the relaxation thread runs behind
-        the clock: a step at rest from before the stroke's end does not count), or
-        :data:`REBASE_WAIT_MAX_S` have passed."""
+        """Whether a waiting rebase starts now: the tissue is at rest since the stroke ended (the
+        relaxation thread runs behind the clock: a step at rest from before the stroke's end does
+        not count), or :data:`REBASE_WAIT_MAX_S` have passed.  A blade back in the tissue before
+        then goes on in this cut state, as offline a blade back before the next geometry update
+        does (:meth:`Session.rebase_if_left <cutkit.simulate.session.Session.rebase_if_left>`): the
+        rebase no longer waits, and comes when that stroke ends; a rebase started holds the poses
+        for its whole length (a second of the demo knee), a stroke going on holds none."""
         if self.rebase_waiting_since is None or self.rebaser.busy:
             return False
         s = self.session
+        if s.scalpel.code != FREE:
+            self.rebase_waiting_since = None
+            self.strokes_joined += 1
+            return False
         rested = s.tis.time > self.rebase_waiting_since and s.tis.at_rest()
-        return s.scalpel.code != FREE or rested or now - self.rebase_waiting_since >= REBASE_WAIT_MAX_S
+        return rested or now - self.rebase_waiting_since >= REBASE_WAIT_MAX_S
 
     def _begin_rebase(self) -> None:
         """The picture stays as the tissue is now, and the rebase starts in its own thread."""
@@ -587,6 +595,7 @@ class LiveLoop:
                  "rebase_s_max": float(max(rebase_s)) if rebase_s else None,
                  "rebase_windows_s": [[a - self.t0, b - self.t0] for a, b in self.rebaser.windows],
                  "tets_cut_at_rebases": list(self.tets_at_rebases),
+                 "strokes_joined": self.strokes_joined,
                  "relax_passes_per_s": self.session.counts["relax_passes"] / wall,
                  "relax_steps_per_s": self.relax.steps / wall,
                  "relax_step_ms_p50_p95_max": ([float(np.percentile(self.relax.step_s, q)) * 1e3 for q in (50, 95, 100)]

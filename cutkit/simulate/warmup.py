@@ -58,6 +58,20 @@ def warm_up(outputs: bool = True, material_model: str | None = None) -> None:
         simulate(warm_up_model(), traj, d, SimulateOptions(frames=outputs, fps=2, write_model=outputs, hold_s=0.05,
                                                            settle_iterations=2, material_model=material_model))
     warm_up_conjugate_gradients()
+    warm_up_missed_kernels()
+
+
+def warm_up_missed_kernels() -> None:
+    """The kernels a stroke calls that the warm-up's short cut misses: the T-cone of a tet the tip
+    has left (:func:`~cutkit.cutting.resubdivision.load_cone_kernel`) and the swept blade's
+    triangle against the surface hierarchy (an entry edge first); 10-30 ms each at a first call."""
+    from cutkit.collision import SurfaceBVH, query_triangle
+    from cutkit.cutting.resubdivision import load_cone_kernel
+
+    load_cone_kernel()
+    points = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+    bvh = SurfaceBVH.build(points, np.array([[0, 1, 2]], np.int64))
+    query_triangle(bvh, points, np.array([[0.2, 0.2, -1.0], [0.2, 0.2, 1.0], [0.3, 0.3, 1.0]]))
 
 
 def warm_up_conjugate_gradients() -> int:
