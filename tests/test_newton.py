@@ -309,15 +309,19 @@ def test_a_waiting_cut_stops_the_conjugate_gradients_and_the_iteration_is_abando
 
 
 def test_a_waiting_cut_stops_the_assembly_and_the_resting_sweeps():
-    """The flag is read between the assembly's chunks of elements and by a resting step's whole-model
-    sweeps: up, no matrix is made (None) and a resting step moves nothing and takes no time; down,
-    the matrix is the one made without a flag."""
+    """The flag is read by the pattern's build, between the assembly's chunks of elements and by a
+    resting step's whole-model sweeps: up, no pattern is kept, no matrix is made (None) and a resting
+    step moves nothing and takes no time; down, the matrix is the one made without a flag."""
     from cutkit.relax.newton import rest_step
 
     p, em, f, tip = cantilever()
     solver = NewtonSolver(em)
     free, add = np.ones((em.n_nodes, 3), bool), np.ones(em.n_nodes)
-    assert solver.matrix(p, free, add, 1, np.ones(1, np.int64)) is None
+    up = np.ones(1, np.int64)
+    assert solver.pattern(up) is None and solver.counts["pattern_builds"] == 0
+    assert solver.matrix(p, free, add, 1, up) is None and solver.counts["pattern_builds"] == 0
+    assert solver.pattern() is not None and solver.counts["pattern_builds"] == 1
+    assert solver.matrix(p, free, add, 1, up) is None  # the pattern kept, the assembly stopped
     A, B = solver.matrix(p, free, add, 1), solver.matrix(p, free, add, 1, np.zeros(1, np.int64))
     assert np.array_equal(A.data, B.data) and np.array_equal(A.indices, B.indices)
     st = ElementState(p.copy(), np.zeros_like(p))
@@ -467,3 +471,32 @@ def test_the_warm_up_runs_the_conjugate_gradients_kernel():
     from cutkit.simulate.warmup import warm_up_conjugate_gradients
 
     assert warm_up_conjugate_gradients() > 0
+
+
+def test_every_kernel_that_takes_the_stop_flag_reads_it_atomically():
+    """A live cut raises the flag from another thread; a plain load may be read once and kept for
+    the whole kernel (LLVM assumes no other thread writes without atomics: the pattern build ran
+    55 ms past a raised flag).  Every kernel that takes the flag reads it by an atomic load, in its
+    serial part and in its parallel loops' bodies."""
+    import numba
+
+    from cutkit.relax import _block_cg_kernels as KB
+    from cutkit.relax import _elastic_kernels as KE
+    from cutkit.relax.newton import rest_step
+    from cutkit.relax.vbd import volume_ratio_extremes
+
+    p, em, f, tip = cantilever()
+    solver = NewtonSolver(em, linear="cg", preconditioner="block_jacobi")
+    st = ElementState(p.copy(), np.zeros_like(p))
+    rest_step(em, st, 0.02, f, atol=1e-9, sweeps=1, max_iterations=1, solver=solver, stop=np.zeros(1, np.int64))
+    volume_ratio_extremes(em, st.positions, 0.5, np.zeros(1, np.int64))
+    kernels = {"node_neighbours": KN.node_neighbours, "element_blocks": KN.element_blocks,
+               "vbd_sweep": KE.vbd_sweep, "volume_ratio_extremes": KE.volume_ratio_extremes,
+               "block_pcg": KB.block_pcg}
+    for name, kernel in kernels.items():
+        assert kernel.signatures, name
+        options = {k: v for k, v in kernel.targetoptions.items() if k != "cache"}  # cached code has no IR
+        fresh = numba.njit(**options)(kernel.py_func)
+        for sig in kernel.signatures:
+            fresh.compile(sig)
+            assert "load atomic" in fresh.inspect_llvm(sig), name

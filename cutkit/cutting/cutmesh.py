@@ -40,6 +40,12 @@ from cutkit.cutting.tolerances import EDGE_SNAP, FACE_BARY_MIN, TET_BARY_MIN, cl
 _TET_EDGES_L = TET_EDGES.tolist()
 #: Texture coordinates placeholder for :func:`_kernels_step.set_node` (no texture).
 _NO_UVW = np.zeros((0, 3))
+#: Spare tet rows a cut state starts with: this fraction of its original tets, at least
+#: :data:`TET_ROOM_MIN`.  A stroke that cuts a few hundred tets adds a few thousand, and growing
+#: the rows copies every tet array of the cut mesh and of the tissue (76 ms on the demo knee's
+#: 172k tets, on the thread a live cut waits for), so two or three strokes fit without it.
+TET_ROOM_FRACTION = 0.125
+TET_ROOM_MIN = 4096
 
 
 def _vol(x, t):
@@ -106,7 +112,7 @@ class CutMesh:
         self._def_nodes = -np.ones((cap, 4), np.int64)
         self._def_w = np.zeros((cap, 4))
         # ---- state: tets (growable, with alive flag); tet i < m0 is original i
-        tcap = m0 + 4096
+        tcap = m0 + max(TET_ROOM_MIN, int(TET_ROOM_FRACTION * m0))
         self._tets = np.zeros((tcap, 4), np.int64); self._tets[:m0] = tets
         self._alive = np.zeros(tcap, bool); self._alive[:m0] = True
         self._tet_orig = np.zeros(tcap, np.int64); self._tet_orig[:m0] = np.arange(m0)

@@ -26,6 +26,8 @@ from collections import namedtuple
 import numpy as np
 from numba import njit
 
+from cutkit.relax._stop_flag import flag_up
+
 #: The symmetric block form of a Newton matrix: ``diag`` (n, 3, 3) float64 the diagonal blocks;
 #: ``ptr`` (n + 1,) int64 and ``col`` (nu,) int64 the blocks above the diagonal of each node row
 #: (columns sorted), their values ``off`` (nu, 3, 3) float64 (row i's block of column col[q]).
@@ -196,7 +198,7 @@ def block_pcg(A, inv, b, rtol, max_iterations, halt, d):
     p = z.copy()
     stop2 = rtol * rtol * _dot(b, b)
     for k in range(max_iterations):
-        if halt[0] != 0:
+        if flag_up(halt):
             return CG_HALTED, k
         block_product(A, p, Ap)
         curvature = _dot(p, Ap)

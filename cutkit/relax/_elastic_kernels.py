@@ -31,6 +31,7 @@ import numpy as np
 from numba import njit, prange
 
 from cutkit.mesh.geometry import TET_EDGES, TET_FACES_INWARD
+from cutkit.relax._stop_flag import flag_up
 
 #: tets (m, 4) int64, Dminv (m, 3, 3) float64, volume (m,) float64 (0: inactive), mu, lam (m,) float64 MPa
 Elements = namedtuple("Elements", ["tets", "Dminv", "volume", "mu", "lam"])
@@ -365,7 +366,7 @@ def vbd_sweep(x, adj, nt, colour_offsets, colour_nodes, r2, stop):
     """
     n_classes = colour_offsets.shape[0] - 1
     for c in range(n_classes):
-        if stop[0] != 0:
+        if flag_up(stop):
             return c
         lo, hi = colour_offsets[c], colour_offsets[c + 1]
         blocks = min(SWEEP_BLOCKS, hi - lo)
@@ -468,7 +469,7 @@ def volume_ratio_extremes(x, el, below, stop):
     seen = np.ones(SWEEP_BLOCKS, np.bool_)
     for b in prange(SWEEP_BLOCKS):
         for t in range(m * b // SWEEP_BLOCKS, m * (b + 1) // SWEEP_BLOCKS):
-            if t % STOP_EVERY == 0 and stop[0] != 0:
+            if t % STOP_EVERY == 0 and flag_up(stop):
                 seen[b] = False
                 break
             if el.volume[t] <= 0.0:

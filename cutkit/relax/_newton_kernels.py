@@ -35,7 +35,8 @@ import numpy as np
 from numba import njit, prange
 
 from cutkit.relax._eigen_kernels import _cofactor, project_stress_hessian
-from cutkit.relax._elastic_kernels import barrier
+from cutkit.relax._elastic_kernels import STOP_EVERY, barrier
+from cutkit.relax._stop_flag import flag_up
 
 #: The sparsity pattern of the global matrix: node rows ``node_ptr`` (n + 1,) int64 and their
 #: sorted block columns ``node_idx`` (nb,) int64; each element's 16 blocks ``element_blocks``
@@ -280,24 +281,32 @@ def constrain(pattern, fixed, diagonal_add, data):
 
 
 @njit(cache=True, nogil=True, parallel=True)
-def node_neighbours(tets, volume, n):
+def node_neighbours(tets, volume, n, halt):
     """Node rows of the pattern: ``node_ptr`` (n + 1,) and sorted ``node_idx``; every node has its
-    own diagonal block, the others come from active elements."""
+    own diagonal block, the others come from active elements.  ``halt`` ((1,) int64) is read
+    every ``STOP_EVERY`` elements of a pass and before each row's sort: non-zero ends the build,
+    and the third result (whether the rows are whole) is False."""
     m = tets.shape[0]
     count = np.ones(n, np.int64)
     for t in range(m):
+        if t % STOP_EVERY == 0 and flag_up(halt):
+            return count, np.empty(0, np.int64), False
         if volume[t] > 0.0:
             for a in range(4):
                 count[tets[t, a]] += 4
     start = np.zeros(n + 1, np.int64)
     for i in range(n):
         start[i + 1] = start[i] + count[i]
+    if flag_up(halt):
+        return start, np.empty(0, np.int64), False
     raw = np.empty(start[n], np.int64)
     fill = start[:n].copy()
     for i in range(n):
         raw[fill[i]] = i
         fill[i] += 1
     for t in range(m):
+        if t % STOP_EVERY == 0 and flag_up(halt):
+            return start, np.empty(0, np.int64), False
         if volume[t] > 0.0:
             for a in range(4):
                 i = tets[t, a]
@@ -306,6 +315,8 @@ def node_neighbours(tets, volume, n):
                     fill[i] += 1
     unique = np.empty(n, np.int64)
     for i in prange(n):  # sort and drop repeats, in place (rows are independent)
+        if flag_up(halt):
+            continue
         row = raw[start[i]:start[i + 1]]
         row.sort()
         u = 0
@@ -314,29 +325,33 @@ def node_neighbours(tets, volume, n):
                 row[u] = row[q]
                 u += 1
         unique[i] = u
+    if flag_up(halt):
+        return start, np.empty(0, np.int64), False
     ptr = np.zeros(n + 1, np.int64)
     for i in range(n):
         ptr[i + 1] = ptr[i] + unique[i]
     idx = np.empty(ptr[n], np.int64)
     for i in prange(n):
         idx[ptr[i]:ptr[i + 1]] = raw[start[i]:start[i] + unique[i]]
-    return ptr, idx
+    return ptr, idx, True
 
 
 @njit(cache=True, nogil=True, parallel=True)
-def element_blocks(tets, volume, ptr, idx):
-    """(m, 4, 4) int64: the block of (corner a, corner b) of each element in its node row (-1: inactive)."""
+def element_blocks(tets, volume, ptr, idx, halt):
+    """(m, 4, 4) int64: the block of (corner a, corner b) of each element in its node row (-1: inactive),
+    and whether every element was done: ``halt`` ((1,) int64) is read before each element, and
+    non-zero skips the rest (False)."""
     m = tets.shape[0]
     out = np.full((m, 4, 4), -1, np.int64)
     for t in prange(m):
-        if volume[t] <= 0.0:
+        if volume[t] <= 0.0 or flag_up(halt):
             continue
         for a in range(4):
             i = tets[t, a]
             row = idx[ptr[i]:ptr[i + 1]]
             for b in range(4):
                 out[t, a, b] = ptr[i] + np.searchsorted(row, tets[t, b])
-    return out
+    return out, not flag_up(halt)
 
 
 @njit(cache=True, nogil=True)

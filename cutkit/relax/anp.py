@@ -39,6 +39,7 @@ from cutkit.errors import InputError
 from cutkit.relax import _anp_kernels as KP
 from cutkit.relax import _elastic_kernels as KE
 from cutkit.relax import _newton_kernels as KN
+from cutkit.relax.vbd import NEVER_STOP
 
 #: The element choices of the element model: ``"nh"`` stable neo-Hookean linear tets (one
 #: volumetric energy per element), ``"anp"`` the average nodal pressure tetrahedron.
@@ -175,7 +176,7 @@ def anp_pattern(em, el: KE.Elements | None = None) -> KN.Pattern:
     """The sparsity pattern of the ANP Hessian, in :mod:`cutkit.relax._newton_kernels`'s layout."""
     el = active_elements(em) if el is None else el
     ptr, idx = patch_neighbours(el.tets, el.volume, em.n_nodes)
-    blocks = KN.element_blocks(el.tets, el.volume, ptr, idx)
+    blocks, _ = KN.element_blocks(el.tets, el.volume, ptr, idx, NEVER_STOP)
     indptr, indices, diagonal = KN.scalar_pattern(ptr, idx)
     return KN.Pattern(ptr, idx, blocks, indptr, indices, diagonal)
 

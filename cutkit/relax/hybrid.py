@@ -37,7 +37,7 @@ from cutkit.relax import _elastic_kernels as KE
 from cutkit.relax import _newton_kernels as KN
 from cutkit.relax.elastic import ElementModel, ElementState
 from cutkit.relax.newton import CHOLESKY_MAX_DOFS, line_search, cholesky_solve, out_of_balance_nodes
-from cutkit.relax.vbd import SolveInfo, elastic_forces
+from cutkit.relax.vbd import NEVER_STOP, SolveInfo, elastic_forces
 from cutkit.threads import one_blas_thread
 
 #: Rings of the tet graph a polish grows its region by around the nodes out of balance (doubled
@@ -218,8 +218,9 @@ class _Region:
         k = self.nodes.shape[0]
         with timer("assembly"):
             el = self.el._replace(tets=self.local_tets)
-            ptr, idx = KN.node_neighbours(el.tets, el.volume, k)
-            pat = KN.Pattern(ptr, idx, KN.element_blocks(el.tets, el.volume, ptr, idx), *KN.scalar_pattern(ptr, idx))
+            ptr, idx, _ = KN.node_neighbours(el.tets, el.volume, k, NEVER_STOP)
+            pat = KN.Pattern(ptr, idx, KN.element_blocks(el.tets, el.volume, ptr, idx, NEVER_STOP)[0],
+                             *KN.scalar_pattern(ptr, idx))
             held = ~self.moves.ravel()
             add = np.repeat((self.step.a + self.step.c)[self.nodes, 0], 3)
             xl = np.ascontiguousarray(x[self.nodes])

@@ -49,7 +49,8 @@ from cutkit.relax import anp
 from cutkit.relax.elastic import ElementModel, ElementState
 from cutkit.threads import one_blas_thread
 from cutkit.relax.settle import rigid_modes
-from cutkit.relax.vbd import DEFAULT_ATOL_N, SolveInfo, _node_terms, elastic_energy, elastic_forces, iterate
+from cutkit.relax.vbd import (DEFAULT_ATOL_N, NEVER_STOP, SolveInfo, _node_terms, elastic_energy, elastic_forces,
+                              iterate)
 
 #: Newton iterations one solve makes before it reports that it did not converge.
 DEFAULT_MAX_ITERATIONS = 50
@@ -176,20 +177,26 @@ class NewtonSolver:
         m = em.n_elements
         return KE.Elements(em.tets[:m], em.Dminv[:m], em.volume[:m], em.mu[:m], em.lam[:m])
 
-    def pattern(self) -> KN.Pattern:
-        """The sparsity pattern of the model's Hessian (built on first use after :meth:`reset`)."""
+    def pattern(self, halt=None) -> KN.Pattern | None:
+        """The sparsity pattern of the model's Hessian (built on first use after :meth:`reset`);
+        None where ``halt`` ((1,) int64, optional: a waiting cut) stopped the build (nothing kept)."""
         em = self.em
         key = (em.n_nodes, em.n_elements, em.element)  # the element sets the stencil
         if self._pattern is None or key != self._key:
             el = self._elements()
+            flag = NEVER_STOP if halt is None else halt
             if em.element == "anp":  # the nodal volume terms couple each node's patch
-                self._pattern = anp.anp_pattern(em, el)
+                pattern = anp.anp_pattern(em, el)
             else:
-                ptr, idx = KN.node_neighbours(el.tets, el.volume, em.n_nodes)
-                blocks = KN.element_blocks(el.tets, el.volume, ptr, idx)
+                ptr, idx, whole = KN.node_neighbours(el.tets, el.volume, em.n_nodes, flag)
+                if not whole:
+                    return None
+                blocks, whole = KN.element_blocks(el.tets, el.volume, ptr, idx, flag)
+                if not whole:
+                    return None
                 indptr, indices, diagonal = KN.scalar_pattern(ptr, idx)
-                self._pattern = KN.Pattern(ptr, idx, blocks, indptr, indices, diagonal)
-            self._key = key
+                pattern = KN.Pattern(ptr, idx, blocks, indptr, indices, diagonal)
+            self._pattern, self._key = pattern, key
             self._upper = None
             self.counts["pattern_builds"] += 1
         return self._pattern
@@ -212,7 +219,9 @@ class NewtonSolver:
             (a waiting cut waits for one chunk, not for the whole matrix).
         """
 
-        pat = self.pattern()
+        pat = self.pattern(halt)
+        if pat is None:
+            return None
         data = np.empty(pat.indices.shape[0])
         if self.em.element == "anp":
             anp.assemble_anp_hessian(self.em, x, pat, int(project), data)
