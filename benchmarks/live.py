@@ -23,8 +23,8 @@
   (server ticks), frames per second, relaxation passes per second, the
   latency from a pose arriving to the drawn frame showing its cut, the
   longest gaps between frames and between OpenIGTLink messages (over the
-  session, and from half a second before the first stroke's end to two
-  seconds after its rebase), the rebases' wall time, and the tets each
+  session, and across every stroke's end: from half a second before it to
+  two seconds after it or after its rebase), the rebases' wall time, and the tets each
   stroke cut; with ``two`` the second stroke is then run alone in a fresh
   session (``second_alone_cut_tets``).
 """
@@ -196,6 +196,12 @@ def _gaps_ms(times, lo=-np.inf, hi=np.inf):
     return float((ends - starts)[over].max() * 1e3) if over.any() else None
 
 
+def _gaps_in(times, spans):
+    """Longest gap (ms) between consecutive times (s) that overlaps one of ``spans`` [(lo, hi), ...]."""
+    gaps = [g for g in (_gaps_ms(times, lo, hi) for lo, hi in spans) if g is not None]
+    return max(gaps) if gaps else None
+
+
 def _session_views(window: bool, igtl_rate: float):
     views, closers, clock = [], [], None
     if window:
@@ -218,8 +224,8 @@ def _session_views(window: bool, igtl_rate: float):
 def run_session(model, trajectory_path: str, priority: str, window: bool, igtl_rate: float,
                 solver: str | None = None) -> dict:
     """`cutkit haptics play` streams ``trajectory_path`` through the service into a live session on ``model``
-    (element ``solver``); ``step_walls`` is, for each tissue stepped, the perf_counter at the end of
-    each of its relaxation steps."""
+    (element ``solver``); ``step_walls`` is, for each tissue stepped, (perf_counter, tissue time) at
+    the end of each of its relaxation steps."""
     import subprocess
     import sys
     import tempfile
@@ -242,12 +248,12 @@ def run_session(model, trajectory_path: str, priority: str, window: bool, igtl_r
                    "--port", str(port), "--json", "--priority", priority]
             plays.append(subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True))
 
-        step_walls = {}  # id of each tissue -> perf_counter at the end of each of its steps
+        step_walls = {}  # id of each tissue -> (perf_counter, tissue time) at the end of each of its steps
         count = ElasticTissue._count
 
         def counted(self, info, true_residual, stop=None):  # the wall time each step ends (the benchmark's own record)
             count(self, info, true_residual, stop)
-            step_walls.setdefault(id(self), []).append(time.perf_counter())
+            step_walls.setdefault(id(self), []).append((time.perf_counter(), self.time))
 
         ElasticTissue._count = counted
         try:
@@ -264,27 +270,24 @@ def run_session(model, trajectory_path: str, priority: str, window: bool, igtl_r
             "device": device, "recording": str(out), "step_walls": list(step_walls.values())}
 
 
-def rest_to_balance(relax: dict, walls_of_tissues: list) -> dict | None:
-    """After the last step that was not resting (the blade's last move or cut), the wall seconds
-    until a step ends within ``within`` of the force scale (the rest tolerance; the issue's 1e-3 for
-    vertex block descent, which has none), and the residual then; None without such a step."""
+def rest_to_balance(relax: dict, steps_of_tissues: list, stroke_end: float | None, perf_at_zero: float) -> dict | None:
+    """After the hand's last stroke ended (``stroke_end``, session seconds; ``perf_at_zero`` the
+    perf_counter at session time 0), the wall seconds until a step that simulates the tissue after
+    that moment ends within ``within`` of the force scale (the rest tolerance; the issue's 1e-3 for
+    vertex block descent, which has none), and the residual then; None without a stroke end.
+    ``steps_of_tissues`` holds, for each tissue stepped, (perf_counter, tissue time) at the end of
+    each of its steps: the relaxation thread runs behind the clock, so a step that ends after the
+    stroke in wall time may still simulate the tissue before it."""
     rel = relax.get("relative_residual") or []
     # the session's tissue: the one with as many steps (the session also steps a small warm-up tissue)
-    walls = next((w for w in walls_of_tissues if len(w) == len(rel)), None)
-    if walls is None or not rel:
+    steps = next((w for w in steps_of_tissues if len(w) == len(rel)), None)
+    if steps is None or not rel or stroke_end is None:
         return None
     within = relax.get("rest_rtol") or 1e-3
-    resting = relax.get("resting")
-    if resting is not None:
-        moving = [k for k, r in enumerate(resting) if not r]
-        if not moving:
-            return None
-        last = moving[-1]
-    else:  # vertex block descent: after the last step of the last stroke's cut (its residual's peak)
-        last = int(np.argmax(rel))
-    done = next((k for k in range(last + 1, len(rel)) if rel[k] <= within), None)
-    return {"within": within, "after_step": last, "steps": len(rel) - last - 1,
-            "wall_s": None if done is None else walls[done] - walls[last],
+    end_wall = perf_at_zero + stroke_end
+    done = next((k for k, (wall, t) in enumerate(steps) if t > stroke_end and rel[k] <= within), None)
+    return {"within": within, "stroke_end_s": stroke_end,
+            "wall_s": None if done is None else steps[done][0] - end_wall,
             "residual_then": None if done is None else rel[done], "final_residual": rel[-1]}
 
 
@@ -308,23 +311,27 @@ def session_rate(model_path: str, priority: str, window: bool, which: str = "two
     span = (frames[0, 1], frames[-1, 1]) if len(frames) else (0.0, 0.0)
     messages = [t - t0 for t, _ in run["messages"] if span[0] <= t - t0 <= span[1]]
     windows = live.get("rebase_windows_s") or []
-    lo, hi = (windows[0][0] - 0.5, windows[0][1] + 2.0) if windows else (np.inf, -np.inf)
+    # across every stroke's end: from half a second before it to two seconds after it, and after
+    # each rebase (a stroke begun before the last one's rebase started goes on without one)
+    spans = [(e - 0.5, e + 2.0) for e in live.get("stroke_ends_s") or []] + [(a - 0.5, b + 2.0) for a, b in windows]
     result = {"model": str(model_path), "strokes": which, "tets": s["tets_initial"], "cut_tets": s["cut_tets"],
               "tets_cut_at_rebases": live.get("tets_cut_at_rebases"), "rebase_s": [b - a for a, b in windows],
               "opening_mean_mm": s["cut_opening_mm"]["final_mean"], "haptic_hz": live["haptic_hz"],
               "haptic_period_p99_ms": live.get("period_p99_ms"),
               "haptic_periods_over_2ms": live.get("periods_over_2ms"), "fps": live["fps"],
-              "frame_gap_max_ms": _gaps_ms(frames[:, 1]), "frame_gap_max_ms_at_stroke_end": _gaps_ms(frames[:, 1], lo, hi),
+              "frame_gap_max_ms": _gaps_ms(frames[:, 1]), "frame_gap_max_ms_at_stroke_end": _gaps_in(frames[:, 1], spans),
               "igtl_rate_hz": igtl_rate, "igtl_messages": len(messages),
               "igtl_gap_max_ms": _gaps_ms(messages),
-              "igtl_gap_max_ms_at_stroke_end": _gaps_ms(messages, lo, hi),
+              "igtl_gap_max_ms_at_stroke_end": _gaps_in(messages, spans),
+              "stroke_ends_s": live.get("stroke_ends_s"), "strokes_joined": live.get("strokes_joined"),
               "relax_passes_per_s": live["relax_passes_per_s"], "relax_steps_per_s": live["relax_steps_per_s"],
               "latency_p50_ms": lat.get("p50"), "latency_p95_ms": lat.get("p95"),
               "latency_outside_rebase_ms": live.get("latency_outside_rebase_ms"),
               "geometry_updates_skipped": live.get("geometry_updates_skipped"),
               "device_rate_hz": run["device"].get("rate_hz"), "window": window, "recording": run["recording"],
               "solver": s["relax_steps"].get("solver", solver), "relax_not_converged": s["relax_steps"]["not_converged"],
-              "rest_to_balance": rest_to_balance(s["relax_steps"], run["step_walls"])}
+              "rest_to_balance": rest_to_balance(s["relax_steps"], run["step_walls"],
+                                                 (live.get("stroke_ends_s") or [None])[-1], t0)}
     at = live.get("tets_cut_at_rebases") or []
     if which == "two" and at:
         result["second_stroke_cut_tets"] = s["cut_tets"] - at[0]

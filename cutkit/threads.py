@@ -162,6 +162,26 @@ def worker_threads() -> int:
     return max(1, configured_threads() - 1)
 
 
+#: The nice value a live session's worker threads (relaxation, rebase) run at: where the machine's
+#: cores are all busy, the threads that draw, send and feel get the processor first.
+WORKER_NICE = 10
+
+
+def yield_cpu_in_this_thread() -> bool:
+    """Lower this thread's scheduling priority to :data:`WORKER_NICE` (Linux: per thread); returns
+    whether it was set (other systems, or a priority already lower: left as it is)."""
+    import threading
+
+    try:
+        tid = threading.get_native_id()
+        if os.getpriority(os.PRIO_PROCESS, tid) < WORKER_NICE:
+            os.setpriority(os.PRIO_PROCESS, tid, WORKER_NICE)
+            return True
+    except (AttributeError, OSError):
+        pass
+    return False
+
+
 def use_threads_in_this_thread(n: int) -> int:
     """Run this thread's numba kernels on ``n`` threads (at most numba's pool); returns the count."""
     import numba

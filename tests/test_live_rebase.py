@@ -223,6 +223,8 @@ def test_a_stroke_begun_before_the_last_ones_rebase_goes_on_without_holding_a_po
     live = summary["live"]
     assert live["strokes_joined"] == 1 and seen["most_held"] == 0
     assert live["rebases"] == 1 and len(live["tets_cut_at_rebases"]) == 2
+    ends = live["stroke_ends_s"]
+    assert len(ends) == 2 and ends[0] < ends[1] <= live["rebase_windows_s"][0][0]
     first, total = live["tets_cut_at_rebases"]
     assert seen["tets_before"] == total == summary["cut_tets"]
     stepped, stepped_seen = stepped_two_strokes

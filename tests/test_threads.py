@@ -1,5 +1,7 @@
 """numba threads: --threads, CUTKIT_THREADS, the default, and identical results with 1 and 2 threads."""
 
+import os
+
 import numba
 import numpy as np
 import pytest
@@ -208,3 +210,24 @@ def test_one_blas_thread_limits_every_blas_and_restores_it_each_time():
                 inside = [lib["num_threads"] for lib in threadpool_info() if lib["user_api"] == "blas"]
             assert inside and set(inside) == {1}
             assert [lib["num_threads"] for lib in threadpool_info() if lib["user_api"] == "blas"] == outside
+
+
+@pytest.mark.skipif(not hasattr(os, "setpriority"), reason="per-thread priorities are a Linux feature here")
+def test_a_live_worker_yields_the_cpu_in_its_own_thread_only():
+    """The relaxation and rebase threads run at WORKER_NICE; the thread that called it alone."""
+    import threading
+
+    from cutkit.threads import WORKER_NICE, yield_cpu_in_this_thread
+
+    main_before = os.getpriority(os.PRIO_PROCESS, threading.get_native_id())
+    seen = {}
+
+    def worker():
+        seen["set"] = yield_cpu_in_this_thread()
+        seen["nice"] = os.getpriority(os.PRIO_PROCESS, threading.get_native_id())
+
+    t = threading.Thread(target=worker)
+    t.start()
+    t.join()
+    assert seen["nice"] == max(WORKER_NICE, main_before) and seen["set"] == (main_before < WORKER_NICE)
+    assert os.getpriority(os.PRIO_PROCESS, threading.get_native_id()) == main_before

@@ -148,6 +148,7 @@ class LiveLoop:
         self.cut_tip = None  # the blade's tip at the last geometry update
         self.newest = None  # the newest pose (tip, a, n): the drawn blade
         self.tets_at_rebases: list[int] = []  # tets cut when each stroke ended
+        self.stroke_ends: list[float] = []  # session seconds when each stroke that cut ended
         self.frame_period = 1.0 / float(fps)
         self.geo_period = 1.0 / self.opt.geometry_rate_hz
         self.pose = None  # newest (tip, a, n, arrival)
@@ -344,6 +345,7 @@ class LiveLoop:
         rebase runs at once and is waited for (as offline); on the wall clock it waits
         (:meth:`_rebase_due`) while the relaxation brings the wound to rest."""
         self.tets_at_rebases.append(self.session.tets_cut)
+        self.stroke_ends.append(self.now())
         if self.stepped:  # in step with the loop: the next pass sees the rebased tissue, as offline
             self._begin_rebase()
             self.rebaser.wait()
@@ -596,6 +598,7 @@ class LiveLoop:
                  "rebase_windows_s": [[a - self.t0, b - self.t0] for a, b in self.rebaser.windows],
                  "tets_cut_at_rebases": list(self.tets_at_rebases),
                  "strokes_joined": self.strokes_joined,
+                 "stroke_ends_s": list(self.stroke_ends),
                  "relax_passes_per_s": self.session.counts["relax_passes"] / wall,
                  "relax_steps_per_s": self.relax.steps / wall,
                  "relax_step_ms_p50_p95_max": ([float(np.percentile(self.relax.step_s, q)) * 1e3 for q in (50, 95, 100)]
