@@ -285,9 +285,14 @@ def rest_to_balance(relax: dict, steps_of_tissues: list, stroke_end: float | Non
         return None
     within = relax.get("rest_rtol") or 1e-3
     end_wall = perf_at_zero + stroke_end
-    done = next((k for k, (wall, t) in enumerate(steps) if t > stroke_end and rel[k] <= within), None)
+
+    def first_within(bound):
+        return next((k for k, (wall, t) in enumerate(steps) if t > stroke_end and rel[k] <= bound), None)
+
+    done, loose = first_within(within), first_within(1e-3)
     return {"within": within, "stroke_end_s": stroke_end,
             "wall_s": None if done is None else steps[done][0] - end_wall,
+            "wall_s_within_1e-3": None if loose is None else steps[loose][0] - end_wall,
             "residual_then": None if done is None else rel[done], "final_residual": rel[-1]}
 
 
