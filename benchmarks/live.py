@@ -272,12 +272,14 @@ def run_session(model, trajectory_path: str, priority: str, window: bool, igtl_r
 
 def rest_to_balance(relax: dict, steps_of_tissues: list, stroke_end: float | None, perf_at_zero: float) -> dict | None:
     """After the hand's last stroke ended (``stroke_end``, session seconds; ``perf_at_zero`` the
-    perf_counter at session time 0), the wall seconds until a step that simulates the tissue after
-    that moment ends within ``within`` of the force scale (the rest tolerance; the issue's 1e-3 for
-    vertex block descent, which has none), and the residual then; None without a stroke end.
-    ``steps_of_tissues`` holds, for each tissue stepped, (perf_counter, tissue time) at the end of
-    each of its steps: the relaxation thread runs behind the clock, so a step that ends after the
-    stroke in wall time may still simulate the tissue before it."""
+    perf_counter at session time 0), the wall seconds until a relaxation step begun after that
+    moment (so made with the load the blade's leaving left) ends within ``within`` of the force
+    scale (the rest tolerance) and within 1e-3 (``wall_s_within_1e-3``), and the residual then;
+    ``wall_s_tissue_time``: until a step that also simulates the tissue past the stroke's end does
+    (the relaxation runs behind the clock while the blade cuts; its steps are then made with the
+    newest load, so they bring the picture to rest before its clock has caught up).  None without
+    a stroke end.  ``steps_of_tissues`` holds, for each tissue stepped, (perf_counter, tissue time)
+    at the end of each of its steps."""
     rel = relax.get("relative_residual") or []
     # the session's tissue: the one with as many steps (the session also steps a small warm-up tissue)
     steps = next((w for w in steps_of_tissues if len(w) == len(rel)), None)
@@ -286,13 +288,19 @@ def rest_to_balance(relax: dict, steps_of_tissues: list, stroke_end: float | Non
     within = relax.get("rest_rtol") or 1e-3
     end_wall = perf_at_zero + stroke_end
 
-    def first_within(bound):
-        return next((k for k, (wall, t) in enumerate(steps) if t > stroke_end and rel[k] <= bound), None)
+    def first(bound, tissue_time=False):
+        for k in range(1, len(steps)):
+            begun_after = steps[k - 1][0] > end_wall and (not tissue_time or steps[k][1] > stroke_end)
+            if begun_after and rel[k] <= bound:
+                return k
+        return None
 
-    done, loose = first_within(within), first_within(1e-3)
-    return {"within": within, "stroke_end_s": stroke_end,
-            "wall_s": None if done is None else steps[done][0] - end_wall,
-            "wall_s_within_1e-3": None if loose is None else steps[loose][0] - end_wall,
+    def wall(k):
+        return None if k is None else steps[k][0] - end_wall
+
+    done = first(within)
+    return {"within": within, "stroke_end_s": stroke_end, "wall_s": wall(done),
+            "wall_s_within_1e-3": wall(first(1e-3)), "wall_s_tissue_time": wall(first(within, True)),
             "residual_then": None if done is None else rel[done], "final_residual": rel[-1]}
 
 
