@@ -88,7 +88,12 @@ def _deformation(x, el, t, B, F):
 def _positive_definite(A):
     """Whether the symmetric (9, 9) A has a Cholesky factor (it then needs no projection; a
     test costs about a tenth of the eigen-decomposition it saves)."""
-    L = np.empty((9, 9))
+    return _positive_definite_in(A, np.empty((9, 9)))
+
+
+@njit(cache=True, nogil=True)
+def _positive_definite_in(A, L):
+    """:func:`_positive_definite` with the factor's scratch L (9, 9)."""
     for j in range(9):
         d = A[j, j]
         for k in range(j):
@@ -102,6 +107,20 @@ def _positive_definite(A):
                 v -= L[i, k] * L[j, k]
             L[i, j] = v / L[j, j]
     return True
+
+
+#: Scratch of one element's gradient and Hessian (:func:`hessian_scratch`), kept by a parallel
+#: block across its elements: a (4, 3) gradient operator B, F, P and cof F (3, 3), HF (9, 9),
+#: the Cholesky test's L (9, 9) and the product M (9, 12).  Allocating them per element cost
+#: about a fifth of an assembly.
+HessianScratch = namedtuple("HessianScratch", "B F P C HF L M")
+
+
+@njit(cache=True, nogil=True)
+def hessian_scratch():
+    """A fresh :data:`HessianScratch`."""
+    return HessianScratch(np.empty((4, 3)), np.empty((3, 3)), np.empty((3, 3)), np.empty((3, 3)),
+                          np.empty((9, 9)), np.empty((9, 9)), np.empty((9, 12)))
 
 
 #: ``project`` codes of the kernels: the exact d2psi/dF2; its negative eigenvalues clamped to
@@ -139,7 +158,12 @@ def stress_hessian(F, mu, lam, project, P, HF):
     is not decomposed at all (on the knee most elements: the test costs a fifth of the
     analytic eigensystem).
     """
-    C = np.empty((3, 3))
+    return stress_hessian_in(F, mu, lam, project, P, HF, np.empty((3, 3)), np.empty((9, 9)))
+
+
+@njit(cache=True, nogil=True)
+def stress_hessian_in(F, mu, lam, project, P, HF, C, L):
+    """:func:`stress_hessian` with the scratch cof F ``C`` (3, 3) and the Cholesky test's ``L`` (9, 9)."""
     J = _cofactor(F, C)
     k = lam + mu
     _, db, ddb = barrier(J, k)
@@ -153,7 +177,7 @@ def stress_hessian(F, mu, lam, project, P, HF):
             HF[p, q] = w * C[p // 3, p % 3] * C[q // 3, q % 3]
         HF[p, p] += mu
     add_det_hessian(F, s, HF)
-    project_hf(F, mu, w, s, project, HF)
+    project_hf_in(F, mu, w, s, project, HF, L)
     return J
 
 
@@ -161,7 +185,13 @@ def stress_hessian(F, mu, lam, project, P, HF):
 def project_hf(F, mu, w, s, project, HF):
     """Project HF = mu I + w vec(cof F) vec(cof F)^T + s d2J/dF2 (9, 9) in place as ``project`` says
     (:data:`EXACT` ... :data:`ABSOLUTE_EIGH`); one with a Cholesky factor is left as it is."""
-    if (project == CLAMP or project == ABSOLUTE) and not _positive_definite(HF):
+    project_hf_in(F, mu, w, s, project, HF, np.empty((9, 9)))
+
+
+@njit(cache=True, nogil=True)
+def project_hf_in(F, mu, w, s, project, HF, L):
+    """:func:`project_hf` with the Cholesky test's scratch ``L`` (9, 9)."""
+    if (project == CLAMP or project == ABSOLUTE) and not _positive_definite_in(HF, L):
         project_stress_hessian(F, mu, w, s, float(project), HF)
     elif project == CLAMP_EIGH or project == ABSOLUTE_EIGH:
         _project_eigh(HF, project - 2)
@@ -173,21 +203,23 @@ def element_gradient_hessian(x, el, t, project, g, H):
 
     ``dW/dx_j,s = V sum_c P_sc b_j,c`` and ``d2W/dx_j,s dx_k,t = V sum_cq HF[3s+c, 3t+q] b_j,c b_k,q``.
     """
-    B = np.empty((4, 3))
-    F = np.empty((3, 3))
-    P = np.empty((3, 3))
-    HF = np.empty((9, 9))
+    element_gradient_hessian_in(x, el, t, project, g, H, hessian_scratch())
+
+
+@njit(cache=True, nogil=True)
+def element_gradient_hessian_in(x, el, t, project, g, H, sc):
+    """:func:`element_gradient_hessian` in the scratch ``sc`` (:data:`HessianScratch`)."""
+    B, F, P, HF, M = sc.B, sc.F, sc.P, sc.HF, sc.M
     _deformation(x, el, t, B, F)
     V = el.volume[t]
-    stress_hessian(F, el.mu[t], el.lam[t], project, P, HF)
+    stress_hessian_in(F, el.mu[t], el.lam[t], project, P, HF, sc.C, sc.L)
     for j in range(4):
         for s_ in range(3):
             acc = 0.0
             for c in range(3):
                 acc += P[s_, c] * B[j, c]
             g[3 * j + s_] = V * acc
-    M = np.empty((9, 12))  # M[3s + c, 3k + t] = sum_q HF[3s+c, 3t+q] b_k,q
-    for p in range(9):
+    for p in range(9):  # M[3s + c, 3k + t] = sum_q HF[3s+c, 3t+q] b_k,q
         for kk in range(4):
             for t_ in range(3):
                 acc = 0.0
@@ -224,9 +256,10 @@ def element_hessians(x, el, first, project, H):
     k = H.shape[0]
     for b in prange(ASSEMBLY_BLOCKS):
         g = np.empty(12)
+        sc = hessian_scratch()
         for q in range(k * b // ASSEMBLY_BLOCKS, k * (b + 1) // ASSEMBLY_BLOCKS):
             if el.volume[first + q] > 0.0:
-                element_gradient_hessian(x, el, first + q, project, g, H[q])
+                element_gradient_hessian_in(x, el, first + q, project, g, H[q], sc)
 
 
 @njit(cache=True, nogil=True)
