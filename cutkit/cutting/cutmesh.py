@@ -242,6 +242,11 @@ class CutMesh:
         return self._tet_orig[:self.n_tets_total][self._alive[:self.n_tets_total]]
 
     @property
+    def tet_capacity(self) -> int:
+        """Tet ids the arrays have room for before they grow (:data:`TET_ROOM_FRACTION`)."""
+        return int(self._tets.shape[0])
+
+    @property
     def tet_corners(self):
         """(n_tets_total, 4) int64 corners of every tet id, dead ones included (a view)."""
         return self._tets[:self.n_tets_total]

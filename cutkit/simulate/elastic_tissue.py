@@ -226,8 +226,8 @@ class ElasticTissue(TissueBase):
         mat = material_of_tets(model, cm.labels, poisson_ratio=poisson_ratio)
         self.mu, self.lam, self.density = mat["mu"], mat["lam"], mat["density"]
         self.prestrain, self.fibre = prestress_of_tets(model, cm.labels)
-        self.em = em = ElementModel.empty(n, cm._tets.shape[0])
-        em.add_elements(cm._X[:n], cm.orig_tets, self.mu, self.lam, self.density, self.prestrain, self.fibre,
+        self.em = em = ElementModel.empty(n, cm.tet_capacity)
+        em.add_elements(cm.rest_points[:n], cm.orig_tets, self.mu, self.lam, self.density, self.prestrain, self.fibre,
                         ids=np.arange(m))
         em.damping[:] = node_damping(n, cm.orig_tets, mat["damping"])
         self.bc_fixed = fixed_nodes_mask(model)
@@ -292,7 +292,7 @@ class ElasticTissue(TissueBase):
 
     @property
     def rest_positions(self) -> np.ndarray:
-        return self.cm._X[: self.em.n_nodes]
+        return self.cm.rest_points[: self.em.n_nodes]
 
     @property
     def velocities(self) -> np.ndarray:
@@ -610,17 +610,17 @@ class ElasticTissue(TissueBase):
         em.remove_elements(np.concatenate([removed, again]))
         redo = np.concatenate([added, again])
         if redo.size:
-            orig = cm._tet_orig[redo]
-            em.add_elements(cm._X, cm._tets[redo], self.mu[orig], self.lam[orig], self.density[orig],
+            orig = cm.tet_origins[redo]
+            em.add_elements(cm.rest_points, cm.tet_corners[redo], self.mu[orig], self.lam[orig], self.density[orig],
                             self.prestrain[orig], self.fibre[orig], ids=redo)
             placed = np.concatenate([old_moved, np.arange(n_old, n_new)])
             self._unfold(redo, placed, np.concatenate([x_before, self.state.positions[n_old:n_new]]))
-        self._hold_orphans(np.unique(np.concatenate([cm._tets[np.concatenate([removed, redo])].ravel(),
+        self._hold_orphans(np.unique(np.concatenate([cm.tet_corners[np.concatenate([removed, redo])].ravel(),
                                                      np.arange(n_old, n_new)])))
         self._recolour(added, n_old)
         if self.r2.shape[0] < em.n_nodes:
             self.r2 = append_rows(self.r2, np.zeros(em.n_nodes - self.r2.shape[0]))
-        self.kept_forces.changed(cm._tets[np.concatenate([removed, redo])])  # their corners' sums changed
+        self.kept_forces.changed(cm.tet_corners[np.concatenate([removed, redo])])  # their corners' sums changed
         touched = [np.arange(n_old, em.n_nodes), moved]
         if redo.size:
             touched.append(em.tets[redo].ravel())
@@ -670,11 +670,11 @@ class ElasticTissue(TissueBase):
             Their positions before the step (new nodes: as placed).
         """
         x, em = self.state.positions, self.em
-        q = self.cm._tets[tets]
+        q = self.cm.tet_corners[tets]
         folded = signed_volumes_serial(x, q) <= 0.0
         if not folded.any():
             return
-        X = self.cm._X[: em.n_nodes]
+        X = self.cm.rest_points[: em.n_nodes]
         interp = self.interpolate_positions(placed)
         for k in np.flatnonzero(np.isin(placed, q[folded])):
             i = placed[k]
@@ -754,7 +754,7 @@ class ElasticTissue(TissueBase):
             with no rest volume are left out.
         """
         order = np.argsort(moved)
-        return old_shape_corners(self.cm._tets[tets], self.cm._X, self.state.positions, self.state.positions.shape[0],
+        return old_shape_corners(self.cm.tet_corners[tets], self.cm.rest_points, self.state.positions, self.state.positions.shape[0],
                                  np.ascontiguousarray(moved[order]), np.ascontiguousarray(moved_from[order]))
 
     def _through_old_shape(self, old_shape, nodes: np.ndarray) -> np.ndarray:
@@ -775,7 +775,7 @@ class ElasticTissue(TissueBase):
         x = self.interpolate_positions(nodes)
         X, xc, Tinv = old_shape
         if X.shape[0] and nodes.size:
-            place_through_old_shape(np.ascontiguousarray(self.cm._X[nodes]), X, xc, Tinv, PLACE_REACH, x)
+            place_through_old_shape(np.ascontiguousarray(self.cm.rest_points[nodes]), X, xc, Tinv, PLACE_REACH, x)
         return x
 
     def _hold_orphans(self, nodes: np.ndarray) -> None:
@@ -827,14 +827,14 @@ class ElasticTissue(TissueBase):
         m = int(np.asarray(old_of_new).shape[0])
         self.n_orig_tets = m
         n = old.n_nodes
-        em = ElementModel.empty(n, cm._tets.shape[0])
+        em = ElementModel.empty(n, cm.tet_capacity)
         em.damping[:] = old.damping
         em.fixed[:] = old.fixed
         em.colour[:] = old.colour  # the same tets on the same nodes: the colouring stays valid
         em.element, em.deviatoric_smoothing = old.element, old.deviatoric_smoothing
         self.kept_forces.forget()
         em.reserve_rows(cm.orig_tets)  # the rows in sweep order before they are filled: no copy after
-        em.add_elements(cm._X[:n], cm.orig_tets, self.mu, self.lam, self.density, self.prestrain, self.fibre,
+        em.add_elements(cm.rest_points[:n], cm.orig_tets, self.mu, self.lam, self.density, self.prestrain, self.fibre,
                         ids=np.arange(m))
         self.em = em
         self._newton = self._newton_solver()

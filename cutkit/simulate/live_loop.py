@@ -65,7 +65,7 @@ class OuterBoundary:
         cut = np.fromiter(cm.subtets.keys(), np.int64, len(cm.subtets))
         keep = ~np.isin(self.face_tet, cut)
         m0, total = cm.orig_tets.shape[0], cm.n_tets_total
-        sub = cm._tets[m0:total][cm._alive[m0:total]]
+        sub = cm.tet_corners[m0:total][cm.tet_alive[m0:total]]
         parts = [self.faces[keep]]
         if sub.shape[0]:
             f, _ = boundary_faces(sub)

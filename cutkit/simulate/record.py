@@ -48,7 +48,7 @@ class FrameRecorder:
             pd = {"displacement": tis.displacement.copy(), "velocity": tis.velocities.copy(),
                   "fixed": tis.fixed.astype(np.uint8), **tis.point_data()}
             positions = tis.positions.copy()
-            labels = cm.labels[cm._tet_orig[ids]].astype(np.int32)
+            labels = cm.labels[cm.tet_origins[ids]].astype(np.int32)
             surf_faces = cut_surface_faces(cm)
             made = made_by_cut(cm, ids)  # in any stroke
         if rgb is not None:
@@ -182,7 +182,7 @@ def summary(session, *, model_path, loop_wall: float, t_traj_end, opening_at_tra
         "model": model_path,
         "tets_initial": int(cm.n_model_tets),
         "nodes_initial": int(cm.n_model_points),
-        "tets_final": int(cm._alive[:cm.n_tets_total].sum()),
+        "tets_final": int(cm.tet_alive.sum()),
         "nodes_final": tis.n_nodes,
         "material_model": session.material_model,
         "settle": session.settle_info,

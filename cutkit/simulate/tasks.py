@@ -210,7 +210,7 @@ class CutTask:
         cm = self.tis.cm
         corners = np.ascontiguousarray(cm.orig_tets[cm.active_tets])
         length = cm.blade_length
-        return (segment_meets_any_tet(blade_tip - length * axis, blade_tip, cm._x, corners),
+        return (segment_meets_any_tet(blade_tip - length * axis, blade_tip, cm.points, corners),
                 segment_meets_any_tet(proxy - length * axis, proxy, self.tis.positions, corners))
 
     def _apply(self, result) -> None:

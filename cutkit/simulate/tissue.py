@@ -108,7 +108,7 @@ class Tissue(TissueBase):
 
         # per-tet records (indexed by CutMesh tet id), per-spring sums
         tets = cm.orig_tets
-        cap = cm._tets.shape[0]
+        cap = cm.tet_capacity
         self.rec_V = np.zeros(cap)
         self.rec_sv = np.zeros((cap, 6))
         V, sv = self._contributions(np.arange(self.n_orig_tets))
@@ -135,10 +135,10 @@ class Tissue(TissueBase):
     def _contributions(self, tet_ids: np.ndarray):
         """Rest volume (t,) and prestress terms V p cos^2 per edge (t, 6) of CutMesh tets."""
         cm = self.cm
-        q = cm._tets[tet_ids]
-        X = cm._X
+        q = cm.tet_corners[tet_ids]
+        X = cm.rest_points
         V = tet_volumes(X, q)
-        orig = cm._tet_orig[tet_ids]
+        orig = cm.tet_origins[tet_ids]
         d = X[q[:, TET_EDGES[:, 1]]] - X[q[:, TET_EDGES[:, 0]]]  # (t, 6, 3)
         length = np.linalg.norm(d, axis=2)
         cos = np.einsum("tkc,tc->tk", d, self.fibre[orig]) / np.where(length > 0, length, 1.0)
@@ -166,8 +166,8 @@ class Tissue(TissueBase):
         moved = [int(k) for k in delta.moved_nodes]
         if not added and not removed and not moved and n_new == n_old:
             return {"nodes_added": 0, "springs_added": 0, "springs_removed": 0}
-        if self.rec_V.shape[0] < cm._tets.shape[0]:
-            grow = cm._tets.shape[0] - self.rec_V.shape[0]
+        if self.rec_V.shape[0] < cm.tet_capacity:
+            grow = cm.tet_capacity - self.rec_V.shape[0]
             self.rec_V = np.concatenate([self.rec_V, np.zeros(grow)])
             self.rec_sv = np.concatenate([self.rec_sv, np.zeros((grow, 6))])
 
@@ -215,8 +215,8 @@ class Tissue(TissueBase):
                 self.rec_sv[ids] = sv
             else:
                 V, sv = self.rec_V[ids], self.rec_sv[ids]
-            orig = cm._tet_orig[ids]
-            q = cm._tets[ids]
+            orig = cm.tet_origins[ids]
+            q = cm.tet_corners[ids]
             np.add.at(masses, q.ravel(), np.repeat(sign * self.rho[orig] * V / 4.0, 4))
             np.add.at(self.node_tet_count, q.ravel(), int(sign))
             ea, eb = q[:, TET_EDGES[:, 0]], q[:, TET_EDGES[:, 1]]  # (t, 6)
@@ -324,18 +324,18 @@ class Tissue(TissueBase):
         from cutkit.relax.volume import VolumeTerm
 
         cm = self.cm
-        ids = np.flatnonzero(cm._alive[:cm.n_tets_total])
+        ids = np.flatnonzero(cm.tet_alive)
         # Flat sub-tets of a cut are left out: their volume stiffness
         # (bulk |dV/dx|^2 / V0) dwarfs their springs' and the semi-implicit
         # step, which treats it per node, overshoots on them.
         sub = ids[made_by_cut(cm, ids)]  # in any stroke
-        small = self.rec_V[sub] < VOLUME_TERM_MIN_FRACTION * self.model_V[cm._tet_orig[sub]]
+        small = self.rec_V[sub] < VOLUME_TERM_MIN_FRACTION * self.model_V[cm.tet_origins[sub]]
         flat = sub[small | (self.rec_V[sub] <= 0.0)
-                   | (_shape_quality(cm._X, cm._tets[sub], self.rec_V[sub]) < VOLUME_TERM_MIN_QUALITY)]
+                   | (_shape_quality(cm.rest_points, cm.tet_corners[sub], self.rec_V[sub]) < VOLUME_TERM_MIN_QUALITY)]
         ids = np.setdiff1d(ids, flat, assume_unique=True)
         V0 = self.rec_V[ids]
-        self.springs.volume = VolumeTerm.build(self.springs.rest_positions, cm._tets[ids], V0,
-                                               self.volume_stiffness * self.E[cm._tet_orig[ids]])
+        self.springs.volume = VolumeTerm.build(self.springs.rest_positions, cm.tet_corners[ids], V0,
+                                               self.volume_stiffness * self.E[cm.tet_origins[ids]])
 
     def _append_nodes(self, new: np.ndarray, delta) -> None:
         """Append the delta's new nodes ``new`` (p,) int64: rest from the delta, the rest interpolated."""
@@ -477,7 +477,7 @@ class Tissue(TissueBase):
         """
         old_of_new = np.asarray(old_of_new, np.int64)
         old_orig = np.asarray(old_orig, np.int64)
-        m, cap = old_of_new.shape[0], max(self.cm._tets.shape[0], old_of_new.shape[0])
+        m, cap = old_of_new.shape[0], max(self.cm.tet_capacity, old_of_new.shape[0])
         rec_V, rec_sv = np.zeros(cap), np.zeros((cap, 6))
         rec_V[:m], rec_sv[:m] = self.rec_V[old_of_new], self.rec_sv[old_of_new]
         self.rec_V, self.rec_sv = rec_V, rec_sv

@@ -47,16 +47,16 @@ class TissueBase:
         over its defining original nodes carry over to the deformed ones.
         """
         cm = self.cm
-        par = cm._def_nodes[nodes]
-        w = np.where(par >= 0, cm._def_w[nodes], 0.0)
+        par = cm.defining_nodes[nodes]
+        w = np.where(par >= 0, cm.defining_weights[nodes], 0.0)
         return np.einsum("pq,pqc->pc", w, self.positions[np.where(par >= 0, par, 0)])
 
     def _interpolation_weights(self, nodes: np.ndarray):
         """Defining nodes (p, q) and their normalised weights (p, q) of cut nodes (invalid slots weigh 0)."""
         cm = self.cm
-        par = cm._def_nodes[nodes]
+        par = cm.defining_nodes[nodes]
         valid = par >= 0
-        wz = np.where(valid, cm._def_w[nodes], 0.0)
+        wz = np.where(valid, cm.defining_weights[nodes], 0.0)
         wsum = wz.sum(axis=1, keepdims=True)
         return np.where(valid, par, 0), wz / np.where(wsum > 0, wsum, 1.0), valid
 
@@ -140,8 +140,8 @@ class TissueBase:
     def alive_tets(self) -> tuple[np.ndarray, np.ndarray]:
         """(k, 4) int64 current tets and (k,) int64 their CutMesh ids."""
         cm = self.cm
-        ids = np.flatnonzero(cm._alive[:cm.n_tets_total])
-        return cm._tets[ids], ids
+        ids = np.flatnonzero(cm.tet_alive)
+        return cm.tet_corners[ids], ids
 
     @property
     def displacement(self) -> np.ndarray:
