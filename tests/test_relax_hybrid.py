@@ -285,3 +285,32 @@ def test_what_is_written_does_not_change_a_hybrid_run_with_resting_steps(tmp_pat
             assert a == b
         else:
             np.testing.assert_array_equal(a, b)  # to the bit
+
+
+def test_the_kept_volume_ratios_report_what_the_whole_pass_reports_at_every_step_of_a_cut(monkeypatch, tmp_path):
+    """The per-step smallest J comes from ratios kept between steps and computed again only where a
+    node moved or a cut removed or added an element: through a cut, its hold and the tissue's
+    unfolding of new tets, at every step it equals the whole pass over every element, bit for bit."""
+    from test_settle_cache import prestressed_block
+
+    from cutkit.cutting.trajectory import straight_incision
+    from cutkit.relax.vbd import volume_ratio_extremes
+    from cutkit.simulate import simulate
+    from cutkit.simulate.elastic_tissue import KeptVolumeRatios
+
+    kept = KeptVolumeRatios.extremes
+    seen = []
+
+    def both(self, em, x, below, stop=None):
+        out = kept(self, em, x, below, stop)
+        seen.append((out, volume_ratio_extremes(em, x, below), int(self.mark.sum())))
+        return out
+
+    monkeypatch.setattr(KeptVolumeRatios, "extremes", both)
+    traj = straight_incision([3.0, 0.0, 4.3], [13.0, 0.0, 4.3], inward=[0, 1, 0], depth=3.0, approach=2.0,
+                             press_time=0.2, cut_time=0.3, rate=100)
+    s = simulate(prestressed_block(), traj, tmp_path / "o", SimulateOptions(frames=False, hold_s=0.2, solver="hybrid"))
+    assert s["cut_tets"] > 0 and len(seen) == s["relax_steps"]["count"] > 20
+    for out, whole, left in seen:
+        assert out == whole and left == 0
+    assert min(j for (j, _), _, _ in seen) < 1.0  # the cut deforms the tissue: the report is not trivial

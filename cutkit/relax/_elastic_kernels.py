@@ -485,6 +485,52 @@ def volume_ratio_extremes(x, el, below, stop):
 
 
 @njit(cache=True, nogil=True)
+def refresh_volume_ratios(x, el, adj, at, stale, mark, J, stop):
+    """Compute again the kept volume ratios ``J`` (m,) that a change can reach: the elements
+    around a node whose position in ``x`` (n, 3) differs from ``at`` (n, 3, where they were
+    computed; NaN: never) and the ``stale`` (k,) int64 elements; ``at`` is brought up to ``x``.
+    ``mark`` (m,) bool holds the elements still to compute (True on entry for any the caller
+    adds; all False on a complete exit).  Each J is :func:`volume_ratio_extremes`'s, bit for bit.
+    ``stop`` ((1,) int64) is read every :data:`STOP_EVERY` elements computed: non-zero ends the
+    pass with the rest still marked, and the result is False (True: complete)."""
+    n = at.shape[0]
+    for i in range(n):
+        if x[i, 0] != at[i, 0] or x[i, 1] != at[i, 1] or x[i, 2] != at[i, 2]:
+            for r in range(adj.start[i], adj.start[i] + adj.degree[i]):
+                mark[adj.tets[r]] = True
+            at[i, 0], at[i, 1], at[i, 2] = x[i, 0], x[i, 1], x[i, 2]
+    for q in range(stale.shape[0]):
+        mark[stale[q]] = True
+    done = 0
+    for t in range(el.tets.shape[0]):
+        if not mark[t]:
+            continue
+        if done % STOP_EVERY == 0 and flag_up(stop):
+            return False
+        done += 1
+        mark[t] = False
+        if el.volume[t] > 0.0:
+            F00, F01, F02, F10, F11, F12, F20, F21, F22 = _deformation(x, el, t)
+            J[t] = F00 * (F11 * F22 - F12 * F21) - F01 * (F10 * F22 - F12 * F20) + F02 * (F10 * F21 - F11 * F20)
+    return True
+
+
+@njit(cache=True, nogil=True)
+def kept_ratio_extremes(J, volume, below):
+    """The smallest of the kept volume ratios ``J`` (m,) over the elements with ``volume`` > 0 (1.0
+    if none) and how many are below ``below``: :func:`volume_ratio_extremes` of kept values."""
+    lowest = np.inf
+    count = 0
+    for t in range(J.shape[0]):
+        if volume[t] > 0.0:
+            if J[t] < lowest:
+                lowest = J[t]
+            if J[t] < below:
+                count += 1
+    return (lowest if lowest < np.inf else 1.0), count
+
+
+@njit(cache=True, nogil=True)
 def refresh_forces(x, adj, at, stale, most, mark, forces):
     """Sum again the kept elastic forces ``forces`` (n, 3) that a change can reach: the nodes whose
     position in ``x`` (n, 3) differs from ``at`` (n, 3, where the forces were summed; NaN: never),

@@ -231,6 +231,40 @@ def elastic_forces_at(em: ElementModel, positions, nodes) -> np.ndarray:
     return out
 
 
+def kept_volume_ratios(em: ElementModel, positions, at: np.ndarray, stale, mark: np.ndarray, J: np.ndarray,
+                       below: float, stop=None) -> tuple[float, int]:
+    """:func:`volume_ratio_extremes` from volume ratios kept between calls, computed again only
+    where a change can reach (the kernel's docstring: ``_elastic_kernels.refresh_volume_ratios``).
+
+    Parameters
+    ----------
+    em : ElementModel
+    positions : (n, 3) float64
+    at : (n, 3) float64
+        Where ``J`` was computed (NaN: never); brought up to ``positions``.
+    stale : (k,) int
+        Elements to compute again whatever their corners did (added or removed).
+    mark : (m,) bool
+        Elements still to compute (m: the model's element rows); False where computed.
+    J : (m,) float64
+        The kept ratios, updated in place.
+    below : float
+    stop : (1,) int64, optional
+        As :func:`volume_ratio_extremes`'s: raised, the result is (NaN, 0) and the rest stays marked.
+
+    Returns
+    -------
+    (lowest, count) as :func:`volume_ratio_extremes` gives them, bit for bit.
+    """
+    x = np.ascontiguousarray(positions, np.float64)
+    whole = K.refresh_volume_ratios(x, em.elements, em.adjacency, at, np.ascontiguousarray(stale, np.int64), mark,
+                                    J, NEVER_STOP if stop is None else stop)
+    if not whole:
+        return float("nan"), 0
+    lowest, count = K.kept_ratio_extremes(J, em.volume, float(below))
+    return float(lowest), int(count)
+
+
 def refresh_forces(em: ElementModel, positions, at: np.ndarray, stale, most: int, mark: np.ndarray,
                    forces: np.ndarray) -> int:
     """Sum again the kept elastic forces a change can reach (the kernel's docstring:
