@@ -658,3 +658,22 @@ def test_the_surface_rate_cap_keeps_frames_with_jitter_and_caps_faster_ones():
         t[0] = start + k / 120.0
         view.show(frame)
     assert 299 <= view.frames_sent - sent <= 301
+
+
+def test_a_transform_body_is_the_protocols_layout_and_pyigtls_bytes():
+    """TRANSFORM bodies are packed and parsed here (not through pyigtl's private methods): 12
+    big-endian float32, the rotation column by column then the translation (the OpenIGTLink spec),
+    the same bytes as pyigtl's own pack() after its 58-byte header, and parsed back exactly."""
+    import struct
+
+    import pyigtl
+
+    from cutkit.live.igtl_protocol import parse_transform, transform_content
+
+    m = np.eye(4)
+    m[:3, :3] = [[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]
+    m[:3, 3] = [1.5, -2.25, 3.0]
+    body = transform_content(m)
+    assert struct.unpack(">12f", body) == (0.0, 1.0, 0.0, -1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 1.5, -2.25, 3.0)
+    assert body == pyigtl.TransformMessage(m, device_name="T").pack()[58:]
+    np.testing.assert_array_equal(parse_transform(body), m)

@@ -304,7 +304,7 @@ class IGTLPolyDataView(_Owner):
         self.frames_sent = 0
         self._slot = -np.inf  # the rate cap's time slot of the last frame sent
         # compile (or load) the normals kernel now, not on a client thread while the session runs
-        _SurfaceMessage("warm-up", np.eye(3), np.array([[0, 1, 2]]), None, None, np.eye(4))._pack_content()
+        _SurfaceMessage("warm-up", np.eye(3), np.array([[0, 1, 2]]), None, None, np.eye(4)).content()
         self._attach(port, endpoint, local_only, driver)
 
     def show(self, frame: LiveFrame) -> None:
@@ -351,11 +351,11 @@ class _SurfaceMessage(PolyDataMessage):
         super().__init__(device_name=name)
         self._parts = (points, faces, rgb, colour, np.asarray(to_client, np.float64))
 
-    def _pack_content(self):
+    def content(self) -> bytes:
         if self._parts is not None:
             self._build(*self._parts)
             self._parts = None
-        return super()._pack_content()
+        return super().content()
 
     def _build(self, points, faces, rgb, colour, to_client) -> None:
         from cutkit.live._kernels import vertex_normals

@@ -35,7 +35,7 @@ from cutkit.errors import InputError
 
 __all__ = ["Header", "ProtocolError", "PolyDataMessage", "decode_polydata", "polydata_attributes", "crc64",
            "parse_header", "pack_message", "split_body", "status_content", "parse_status",
-           "capability_content", "parse_capability", "HEADER_SIZE", "STATUS_OK", "STATUS_NOT_FOUND",
+           "capability_content", "parse_capability", "transform_content", "parse_transform", "HEADER_SIZE", "STATUS_OK", "STATUS_NOT_FOUND",
            "STATUS_ACCESS_DENIED", "STATUS_BUSY", "STATUS_TIME_OUT", "STATUS_OVERFLOW", "STATUS_CHECKSUM_ERROR",
            "STATUS_UNKNOWN_INSTRUCTION", "STATUS_UNKNOWN_VERSION", "STATUS_CONFIGURATION_ERROR",
            "POINT_SCALAR", "POINT_NORMAL", "POINT_RGBA"]
@@ -76,6 +76,8 @@ POINT_SCALAR, POINT_VECTOR, POINT_NORMAL, POINT_TENSOR, POINT_RGBA = 0x00, 0x01,
 _KIND_COMPONENTS = {POINT_VECTOR: 3, POINT_NORMAL: 3, POINT_TENSOR: 9, POINT_RGBA: 4}
 #: POLYDATA's fixed header: npoints, then count and byte size of vertices, lines, polygons, strips, nattributes.
 _POLY_HEAD = struct.Struct(">10I")
+#: A TRANSFORM body: the rotation's columns, then the translation, big-endian float32.
+_TRANSFORM = struct.Struct(">12f")
 #: One attribute header: type uint8, components uint8, count uint32.
 _ATTR_HEAD = struct.Struct(">BBI")
 
@@ -259,6 +261,22 @@ def parse_capability(content: bytes) -> list[str]:
 
 
 # ---------------------------------------------------------------------------- POLYDATA
+def transform_content(matrix) -> bytes:
+    """The 48-byte TRANSFORM body of a (4, 4) homogeneous ``matrix`` (its top three rows):
+    R11 R21 R31 R12 R22 R32 R13 R23 R33 TX TY TZ, big-endian float32 (the protocol's layout)."""
+    m = np.asarray(matrix, np.float64)
+    return _TRANSFORM.pack(*m[:3, :3].T.ravel(), *m[:3, 3])
+
+
+def parse_transform(content: bytes) -> np.ndarray:
+    """(4, 4) float64 homogeneous matrix of a 48-byte TRANSFORM body (:func:`transform_content`)."""
+    v = np.asarray(_TRANSFORM.unpack(content), np.float64)
+    m = np.eye(4)
+    m[:3, :3] = v[:9].reshape(3, 3).T
+    m[:3, 3] = v[9:]
+    return m
+
+
 @dataclass
 class PolyDataAttribute:
     """One POLYDATA attribute.
@@ -284,7 +302,11 @@ class PolyDataMessage(pyigtl.PolyDataMessage):
     = PolyDataMessage`` for a pyigtl client to receive POLYDATA.
     """
 
-    def _pack_content(self):
+    def _pack_content(self):  # pyigtl's hook (its pack())
+        return self.content()
+
+    def content(self) -> bytes:
+        """The POLYDATA body: the points, the four cell lists and the attributes."""
         parts = [np.asarray(x if x is not None else (), np.int64).ravel()
                  for x in (self.vertices, self.lines, self.polygons, self.triangle_strips)]
         pts = np.zeros((0, 3)) if self.points is None else np.asarray(self.points).reshape(-1, 3)

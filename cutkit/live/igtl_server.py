@@ -39,6 +39,7 @@ import socketserver
 import threading
 import time
 
+import numpy as np
 import pyigtl
 
 from cutkit.errors import InputError
@@ -108,8 +109,18 @@ class _Outgoing:
 
     @classmethod
     def of(cls, message) -> "_Outgoing":
-        """A pyigtl message, packed when a client first needs it."""
-        return cls(message.message_type, message.device_name, message._pack_content, message.timestamp)
+        """A TRANSFORM (pyigtl's) or POLYDATA (:class:`~cutkit.live.igtl_protocol.PolyDataMessage`)
+        message, its body packed when a client first needs it."""
+        if isinstance(message, wire.PolyDataMessage):
+            content = message.content
+        elif isinstance(message, pyigtl.TransformMessage):
+            matrix = np.array(message.matrix, np.float64)
+
+            def content():
+                return wire.transform_content(matrix)
+        else:
+            raise TypeError(f"cannot send a {message.message_type} message (TRANSFORM and POLYDATA only)")
+        return cls(message.message_type, message.device_name, content, message.timestamp)
 
     def content(self) -> bytes:
         with self._lock:
@@ -438,8 +449,8 @@ class IGTLEndpoint:
             self._drop(client, "malformed", head, f"a TRANSFORM body is {_TRANSFORM_SIZE} bytes, not {len(content)}",
                        wire.STATUS_UNKNOWN_ERROR, "Malformed", message_id)
             return
-        msg = pyigtl.TransformMessage(device_name=head.device_name, timestamp=head.timestamp)
-        msg._unpack_content(content)
+        msg = pyigtl.TransformMessage(wire.parse_transform(content), device_name=head.device_name,
+                                      timestamp=head.timestamp)
         msg.header_version, msg.message_id, msg.metadata = head.version, message_id, metadata
         name = head.device_name
         with self._lock:
