@@ -677,3 +677,15 @@ def test_a_transform_body_is_the_protocols_layout_and_pyigtls_bytes():
     assert struct.unpack(">12f", body) == (0.0, 1.0, 0.0, -1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 1.5, -2.25, 3.0)
     assert body == pyigtl.TransformMessage(m, device_name="T").pack()[58:]
     np.testing.assert_array_equal(parse_transform(body), m)
+
+
+def test_any_other_pyigtl_message_is_sent_with_the_body_pyigtl_packs():
+    """The server packs POLYDATA and TRANSFORM bodies itself; any other pyigtl message type a caller
+    sends goes out with the body of pyigtl's public pack() (its 58-byte v1 header cut off)."""
+    import pyigtl
+
+    from cutkit.live.igtl_server import _Outgoing
+
+    m = pyigtl.StringMessage("cutkit", device_name="S")
+    out = _Outgoing.of(m)
+    assert out.kind == "STRING" and out.content() == m.pack()[58:]

@@ -109,8 +109,9 @@ class _Outgoing:
 
     @classmethod
     def of(cls, message) -> "_Outgoing":
-        """A TRANSFORM (pyigtl's) or POLYDATA (:class:`~cutkit.live.igtl_protocol.PolyDataMessage`)
-        message, its body packed when a client first needs it."""
+        """A pyigtl message, its body packed when a client first needs it: POLYDATA
+        (:class:`~cutkit.live.igtl_protocol.PolyDataMessage`) and TRANSFORM here, any other type
+        by pyigtl's own ``pack()`` (which also sums a CRC the server makes again)."""
         if isinstance(message, wire.PolyDataMessage):
             content = message.content
         elif isinstance(message, pyigtl.TransformMessage):
@@ -119,7 +120,10 @@ class _Outgoing:
             def content():
                 return wire.transform_content(matrix)
         else:
-            raise TypeError(f"cannot send a {message.message_type} message (TRANSFORM and POLYDATA only)")
+            def content():
+                packed = message.pack()
+                head = wire.parse_header(packed[:wire.HEADER_SIZE])
+                return wire.split_body(head.version, packed[wire.HEADER_SIZE:])[0]
         return cls(message.message_type, message.device_name, content, message.timestamp)
 
     def content(self) -> bytes:
