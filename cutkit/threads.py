@@ -169,9 +169,14 @@ WORKER_NICE = 10
 
 def yield_cpu_in_this_thread() -> bool:
     """Lower this thread's scheduling priority to :data:`WORKER_NICE` (Linux: per thread); returns
-    whether it was set (other systems, or a priority already lower: left as it is)."""
+    whether it was set (other systems, or a priority already lower: left as it is).  Only on
+    Linux, where a thread's id is in the process ids' space: elsewhere the same call would name
+    another process, or none."""
+    import sys
     import threading
 
+    if not sys.platform.startswith("linux"):
+        return False
     try:
         tid = threading.get_native_id()
         if os.getpriority(os.PRIO_PROCESS, tid) < WORKER_NICE:

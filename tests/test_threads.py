@@ -1,6 +1,7 @@
 """numba threads: --threads, CUTKIT_THREADS, the default, and identical results with 1 and 2 threads."""
 
 import os
+import sys
 
 import numba
 import numpy as np
@@ -212,7 +213,7 @@ def test_one_blas_thread_limits_every_blas_and_restores_it_each_time():
             assert [lib["num_threads"] for lib in threadpool_info() if lib["user_api"] == "blas"] == outside
 
 
-@pytest.mark.skipif(not hasattr(os, "setpriority"), reason="per-thread priorities are a Linux feature here")
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="per-thread priorities are set on Linux only")
 def test_a_live_worker_yields_the_cpu_in_its_own_thread_only():
     """The relaxation and rebase threads run at WORKER_NICE; the thread that called it alone."""
     import threading
@@ -231,3 +232,13 @@ def test_a_live_worker_yields_the_cpu_in_its_own_thread_only():
     t.join()
     assert seen["nice"] == max(WORKER_NICE, main_before) and seen["set"] == (main_before < WORKER_NICE)
     assert os.getpriority(os.PRIO_PROCESS, threading.get_native_id()) == main_before
+
+
+def test_a_live_worker_leaves_its_priority_alone_off_linux(monkeypatch):
+    """Off Linux a native thread id is not a process id: nothing is set (another process could be named)."""
+    from cutkit.threads import yield_cpu_in_this_thread
+
+    calls = []
+    monkeypatch.setattr("sys.platform", "darwin")
+    monkeypatch.setattr("os.setpriority", lambda *a: calls.append(a), raising=False)
+    assert yield_cpu_in_this_thread() is False and calls == []
