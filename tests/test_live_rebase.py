@@ -53,13 +53,18 @@ def model():
     return slab()
 
 
-def _session(model, traj, out, block_first_rebase: bool = False, stepped: bool = False):
+def _session(model, traj, out, block_first_rebase: bool = False, stepped: bool = False,
+             rest_once_finished: bool = False):
     """Run ``traj`` live; with ``block_first_rebase`` the first rebase waits until the source has handed
-    out its last pose; ``stepped``: on a stepped clock.  Returns the summary and what the session saw."""
+    out its last pose; ``stepped``: on a stepped clock; ``rest_once_finished``: the tissue counts as at
+    rest only once the source has handed out its last pose.  Returns the summary and what the session
+    saw."""
     clock = SteppedClock() if stepped else None
     source = (TrajectoryPoseSource(traj, clock=clock) if stepped else TrajectoryPoseSource(traj, speed=SPEED))
     loop = LiveLoop(model, source, [], out, None, clock=clock)
     s = loop.session
+    if rest_once_finished:
+        s.tis.at_rest = lambda: source.finished
     seen = {"frames_while_pending": 0, "tets_before": None, "held": 0, "most_held": 0}
     release = threading.Event()
     rebase = s.rebase
@@ -101,13 +106,13 @@ def two_strokes(model, tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def joined_strokes(model, tmp_path_factory):
-    """The same strokes on the wall clock, the first one's rebase waiting (the tissue never at rest, a
-    wait of 1 s, 25 times the gap between the strokes): the second stroke comes before it starts."""
+    """The same strokes on the wall clock, the first one's rebase waiting however long the machine
+    takes (no time limit; the tissue counts as at rest only once the source is finished): the second
+    stroke comes before it starts."""
     traj = _then(_stroke(4.3), _stroke(11.7))
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr("cutkit.simulate.live_loop.REBASE_WAIT_MAX_S", 1.0)
-        mp.setattr("cutkit.simulate.elastic_tissue.ElasticTissue.at_rest", lambda self: False)
-        return _session(model, traj, tmp_path_factory.mktemp("joined"))
+        mp.setattr("cutkit.simulate.live_loop.REBASE_WAIT_MAX_S", float("inf"))
+        return _session(model, traj, tmp_path_factory.mktemp("joined"), rest_once_finished=True)
 
 
 @pytest.fixture(scope="module")
