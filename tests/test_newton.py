@@ -483,15 +483,17 @@ def test_every_kernel_that_takes_the_stop_flag_reads_it_atomically():
     from cutkit.relax import _block_cg_kernels as KB
     from cutkit.relax import _elastic_kernels as KE
     from cutkit.relax.newton import rest_step
-    from cutkit.relax.vbd import volume_ratio_extremes
+    from cutkit.relax.vbd import kept_volume_ratios
 
     p, em, f, tip = cantilever()
     solver = NewtonSolver(em, linear="cg", preconditioner="block_jacobi")
     st = ElementState(p.copy(), np.zeros_like(p))
     rest_step(em, st, 0.02, f, atol=1e-9, sweeps=1, max_iterations=1, solver=solver, stop=np.zeros(1, np.int64))
-    volume_ratio_extremes(em, st.positions, 0.5, np.zeros(1, np.int64))
+    m = em.tets.shape[0]
+    kept_volume_ratios(em, st.positions, np.full((em.n_nodes, 3), np.nan), np.empty(0, np.int64), np.ones(m, bool),
+                       np.ones(m), 0.5, np.zeros(1, np.int64))
     kernels = {"node_neighbours": KN.node_neighbours, "element_blocks": KN.element_blocks,
-               "vbd_sweep": KE.vbd_sweep, "volume_ratio_extremes": KE.volume_ratio_extremes,
+               "vbd_sweep": KE.vbd_sweep, "refresh_volume_ratios": KE.refresh_volume_ratios,
                "block_pcg": KB.block_pcg}
     for name, kernel in kernels.items():
         assert kernel.signatures, name

@@ -51,8 +51,8 @@ INCIDENCE_TERMS = 6
 #: A sweep splits each colour class into this many blocks (at most), each with its own scratch
 #: row: a fixed count, so the result does not depend on the number of threads.
 SWEEP_BLOCKS = 64
-#: A report pass (:func:`volume_ratio_extremes`) reads its stop flag every this many elements
-#: (about 20 us of work on one core).
+#: Passes that a live cut may stop (:func:`refresh_volume_ratios`, the Newton pattern's build)
+#: read the stop flag every this many elements (about 20 us of work on one core).
 STOP_EVERY = 1024
 
 
@@ -456,32 +456,34 @@ def element_energy(x, el):
     return total
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _volume_ratio(x, el, t):
+    """J = det F of element t at x."""
+    F00, F01, F02, F10, F11, F12, F20, F21, F22 = _deformation(x, el, t)
+    return F00 * (F11 * F22 - F12 * F21) - F01 * (F10 * F22 - F12 * F20) + F02 * (F10 * F21 - F11 * F20)
+
+
 @njit(cache=True, nogil=True, parallel=True)
-def volume_ratio_extremes(x, el, below, stop):
-    """The smallest volume ratio J = det F over the elements with V > 0 (1.0 if none), how many
-    have J < ``below``, and whether every element was seen: the report of how near a step's state
-    came to crushing a tet.  A minimum and a count do not depend on the order they are taken in,
-    so the blocks run in parallel.  ``stop`` ((1,) int64) is read every :data:`STOP_EVERY`
-    elements: non-zero ends the pass unfinished (a waiting cut does not wait for a report)."""
+def volume_ratio_extremes(x, el, below):
+    """The smallest volume ratio J = det F over the elements with V > 0 (1.0 if none), and how many
+    have J < ``below``: the report of how near a state came to crushing a tet, in one pass over
+    every element (the tissue keeps its ratios between steps instead: :func:`refresh_volume_ratios`).
+    A minimum and a count do not depend on the order they are taken in, so the blocks run in
+    parallel."""
     m = el.tets.shape[0]
     lowest = np.full(SWEEP_BLOCKS, np.inf)
     counts = np.zeros(SWEEP_BLOCKS, np.int64)
-    seen = np.ones(SWEEP_BLOCKS, np.bool_)
     for b in prange(SWEEP_BLOCKS):
         for t in range(m * b // SWEEP_BLOCKS, m * (b + 1) // SWEEP_BLOCKS):
-            if t % STOP_EVERY == 0 and flag_up(stop):
-                seen[b] = False
-                break
             if el.volume[t] <= 0.0:
                 continue
-            F00, F01, F02, F10, F11, F12, F20, F21, F22 = _deformation(x, el, t)
-            J = F00 * (F11 * F22 - F12 * F21) - F01 * (F10 * F22 - F12 * F20) + F02 * (F10 * F21 - F11 * F20)
+            J = _volume_ratio(x, el, t)
             if J < lowest[b]:
                 lowest[b] = J
             if J < below:
                 counts[b] += 1
     least = lowest.min()
-    return (least if least < np.inf else 1.0), counts.sum(), seen.all()
+    return (least if least < np.inf else 1.0), counts.sum()
 
 
 @njit(cache=True, nogil=True)
@@ -510,8 +512,7 @@ def refresh_volume_ratios(x, el, adj, at, stale, mark, J, stop):
         done += 1
         mark[t] = False
         if el.volume[t] > 0.0:
-            F00, F01, F02, F10, F11, F12, F20, F21, F22 = _deformation(x, el, t)
-            J[t] = F00 * (F11 * F22 - F12 * F21) - F01 * (F10 * F22 - F12 * F20) + F02 * (F10 * F21 - F11 * F20)
+            J[t] = _volume_ratio(x, el, t)
     return True
 
 

@@ -298,13 +298,9 @@ def elastic_energy(em: ElementModel, positions) -> float:
     return float(K.element_energy(np.ascontiguousarray(positions, np.float64), em.elements))
 
 
-def volume_ratio_extremes(em: ElementModel, positions, below: float, stop=None) -> tuple[float, int]:
+def volume_ratio_extremes(em: ElementModel, positions, below: float) -> tuple[float, int]:
     """The smallest volume ratio ``J = det F`` (of each element's natural shape) at ``positions``
-    (n, 3) float64 over the live elements (1.0 without any), and how many have ``J < below``.
-
-    ``stop`` ((1,) int64, optional) is read every ``STOP_EVERY`` elements:
-    non-zero ends the pass, and the result is (NaN, 0): not measured.
-    """
-    lowest, count, seen = K.volume_ratio_extremes(np.ascontiguousarray(positions, np.float64), em.elements,
-                                                  float(below), NEVER_STOP if stop is None else stop)
-    return (float(lowest), int(count)) if seen else (float("nan"), 0)
+    (n, 3) float64 over the live elements (1.0 without any), and how many have ``J < below``: one
+    pass over every element (:func:`kept_volume_ratios` keeps them between calls)."""
+    lowest, count = K.volume_ratio_extremes(np.ascontiguousarray(positions, np.float64), em.elements, float(below))
+    return float(lowest), int(count)
