@@ -196,6 +196,15 @@ def use_threads_in_this_thread(n: int) -> int:
     return threads
 
 
+def become_live_worker() -> int:
+    """Make this thread one of a live session's workers (the relaxation, a rebase): its kernels on
+    :func:`worker_threads` threads (numba's count is per thread) and its priority lowered
+    (:func:`yield_cpu_in_this_thread`).  Returns the thread count."""
+    threads = use_threads_in_this_thread(worker_threads())
+    yield_cpu_in_this_thread()
+    return threads
+
+
 @contextlib.contextmanager
 def threads_in_this_thread(n: int):
     """Run this thread's numba kernels on ``n`` threads for the block (:func:`use_threads_in_this_thread`),
@@ -235,11 +244,8 @@ def configure_threads(n: int | None = None) -> int:
         asked = parse_threads(os.environ.get(ENV_VAR))
     if asked is None:
         asked = default_threads()
-    import numba
-
     global _configured
-    threads = max(1, min(int(asked), int(numba.config.NUMBA_NUM_THREADS)))
-    numba.set_num_threads(threads)
+    threads = use_threads_in_this_thread(asked)
     _configured = threads
     return threads
 

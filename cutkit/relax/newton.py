@@ -263,7 +263,7 @@ class NewtonSolver:
             return None
         n = self.em.n_nodes
         d = np.empty((n, 3))
-        flag = halt if halt is not None else np.zeros(1, np.int64)
+        flag = halt if halt is not None else NEVER_STOP
         status, its = KB.block_pcg(blocks, inv, np.ascontiguousarray(r.reshape(n, 3)), rtol,
                                    CG_MAX_ITERATIONS, flag, d)
         self.counts["cg_iterations"] += its

@@ -152,10 +152,9 @@ class RelaxThread(threading.Thread):
         self.error: BaseException | None = None
 
     def run(self) -> None:
-        from cutkit.threads import use_threads_in_this_thread, worker_threads, yield_cpu_in_this_thread
+        from cutkit.threads import become_live_worker
 
-        use_threads_in_this_thread(worker_threads())  # numba's thread count is per thread
-        yield_cpu_in_this_thread()  # drawing, sending and feeling first where the cores are busy
+        become_live_worker()  # its own thread count, and drawing, sending and feeling first
         s = self.session
         try:
             while not self.stop.is_set():
