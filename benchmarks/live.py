@@ -18,8 +18,8 @@
   the blade lifted out, at once a parallel one 15 mm lower, then a pause)
   through the service into a live session (:func:`cutkit.simulate.live.run_live`)
   on MODEL, drawn by an off-screen window (default camera) and sent as
-  OpenIGTLink POLYDATA at ``--igtl-rate`` to a client in this process that
-  stamps every message's arrival: the haptic loop's rate and p99 period
+  OpenIGTLink POLYDATA at ``--igtl-rate`` to a client in its own process (as
+  a Slicer peer is) that stamps every message's arrival: the haptic loop's rate and p99 period
   (server ticks), frames per second, relaxation passes per second, the
   latency from a pose arriving to the drawn frame showing its cut, the
   longest gaps between frames and between OpenIGTLink messages (over the
@@ -144,46 +144,58 @@ def strokes(which: str = "two", gap_s: float = 0.05, pause_s: float = 1.0):
     return _then(traj, rest, pause_s)
 
 
-class MessageClock:
-    """An OpenIGTLink client that reads every message (header, then body) and stamps its arrival."""
+#: The OpenIGTLink peer of :class:`MessageClock`, run in its own process: it reads every message
+#: (protocol v1/v2 header of 58 bytes, then the body), stamps its arrival with ``perf_counter``
+#: (CLOCK_MONOTONIC on Linux, the same clock in every process) and, when SIGTERM comes or the
+#: session closes the connection, prints the stamps as JSON [[seconds, type], ...].
+_PEER = r"""
+import json, signal, socket, struct, sys, time
+stamps = []
+def done(*_):
+    print(json.dumps(stamps), flush=True)
+    sys.exit(0)
+signal.signal(signal.SIGTERM, done)
+sock = socket.create_connection(("127.0.0.1", int(sys.argv[1])), timeout=None)
+print("connected", flush=True)
+def exactly(n):
+    buf = bytearray()
+    while len(buf) < n:
+        chunk = sock.recv(n - len(buf))
+        if not chunk:
+            raise ConnectionError
+        buf += chunk
+    return bytes(buf)
+try:
+    while True:
+        head = exactly(58)
+        exactly(struct.unpack(">Q", head[42:50])[0])
+        stamps.append((time.perf_counter(), head[2:14].rstrip(b"\0").decode("ascii", "replace")))
+except (OSError, ConnectionError):
+    pass
+done()
+"""
 
-    HEADER = 58  # version, type, device name, time stamp, body size, CRC (protocol v1/v2 header)
+
+class MessageClock:
+    """An OpenIGTLink client in its own process, as a Slicer peer is (a reader thread in the
+    session's process would wait for the interpreter lock while the session draws, and stamp
+    late); :attr:`arrivals` (perf_counter s, message type) once :meth:`close` has run."""
 
     def __init__(self, port: int):
-        import socket
-        import threading
+        import subprocess
+        import sys
 
-        self.sock = socket.create_connection(("127.0.0.1", port), timeout=30.0)
+        self.proc = subprocess.Popen([sys.executable, "-c", _PEER, str(port)], stdout=subprocess.PIPE,
+                                     stderr=subprocess.DEVNULL, text=True)
+        if self.proc.stdout.readline().strip() != "connected":
+            raise RuntimeError("the OpenIGTLink clock could not connect")
         self.arrivals: list[tuple[float, str]] = []
-        self.stop = threading.Event()
-        self.thread = threading.Thread(target=self._read, daemon=True)
-        self.thread.start()
-
-    def _exactly(self, n: int) -> bytes:
-        buf = bytearray()
-        while len(buf) < n:
-            chunk = self.sock.recv(n - len(buf))
-            if not chunk:
-                raise ConnectionError("closed")
-            buf += chunk
-        return bytes(buf)
-
-    def _read(self) -> None:
-        import struct
-
-        try:
-            while not self.stop.is_set():
-                head = self._exactly(self.HEADER)
-                kind = head[2:14].rstrip(b"\0").decode("ascii", "replace")
-                size = struct.unpack(">Q", head[42:50])[0]
-                self._exactly(size)
-                self.arrivals.append((time.perf_counter(), kind))
-        except (OSError, ConnectionError):
-            pass
 
     def close(self) -> None:
-        self.stop.set()
-        self.sock.close()
+        if self.proc.poll() is None:
+            self.proc.terminate()
+        out, _ = self.proc.communicate(timeout=30)
+        self.arrivals = [tuple(a) for a in json.loads(out or "[]")]
 
 
 def _gaps_ms(times, lo=-np.inf, hi=np.inf):

@@ -49,6 +49,7 @@ from cutkit.relax import anp
 from cutkit.relax.elastic import ElementModel, ElementState
 from cutkit.threads import one_blas_thread
 from cutkit.relax.settle import rigid_modes
+from cutkit.relax.hessian_pattern import HessianPattern
 from cutkit.relax.vbd import (DEFAULT_ATOL_N, NEVER_STOP, SolveInfo, _node_terms, elastic_energy, elastic_forces,
                               iterate)
 
@@ -135,11 +136,13 @@ class NewtonSolver:
         solves on :func:`newton_region` grown by k rings (doubled after an
         iteration that gains little), the rest held; the solve still stops on
         the whole model's residual.
+    pattern : HessianPattern, optional
+        The model's matrix pattern, shared with other solvers of ``em`` (default: its own).
     """
 
     def __init__(self, em: ElementModel, *, linear: str = "auto", hessian: str = "auto",
                  preconditioner: str = "block_jacobi", region_rings: int | None = None,
-                 cg_rtol: float = CG_RTOL):
+                 cg_rtol: float = CG_RTOL, pattern: HessianPattern | None = None):
         if linear not in LINEAR_SOLVERS:
             raise InputError(f"linear solver must be one of {', '.join(LINEAR_SOLVERS)}, not {linear!r}")
         if hessian not in HESSIANS:
@@ -162,14 +165,17 @@ class NewtonSolver:
                        "amg_setups": 0,
                        "local_iterations": 0, "global_iterations": 0}
         self._amg = None  # (hierarchy, dofs it was built on)
+        self._patterns = HessianPattern(em) if pattern is None else pattern
+        self._pattern = None
         self.reset()
 
     def reset(self) -> None:
-        """Forget the pattern (after a topology change).  The multigrid hierarchy stays: a cut only
-        appends nodes, so it still preconditions the dofs it was built on (:meth:`_preconditioner`)."""
-        self._pattern = None
+        """Look at the pattern again at its next use (after a topology change: it is updated where
+        the change was, :class:`~cutkit.relax.hessian_pattern.HessianPattern`).  The multigrid
+        hierarchy stays: a cut only appends nodes, so it still preconditions the dofs it was built
+        on (:meth:`_preconditioner`)."""
+        self._patterns.changed()
         self._key = None
-        self._upper = None  # the pattern's blocks above the diagonal (_block_cg_kernels.upper_blocks)
 
     # ------------------------------------------------------------ the linear system
     def _elements(self) -> KE.Elements:
@@ -178,28 +184,22 @@ class NewtonSolver:
         return KE.Elements(em.tets[:m], em.Dminv[:m], em.volume[:m], em.mu[:m], em.lam[:m])
 
     def pattern(self, halt=None) -> KN.Pattern | None:
-        """The sparsity pattern of the model's Hessian (built on first use after :meth:`reset`);
-        None where ``halt`` ((1,) int64, optional: a waiting cut) stopped the build (nothing kept)."""
+        """The sparsity pattern of the model's Hessian (kept, and updated after :meth:`reset`);
+        None where ``halt`` ((1,) int64, optional: a waiting cut) stopped its build."""
         em = self.em
-        key = (em.n_nodes, em.n_elements, em.element)  # the element sets the stencil
-        if self._pattern is None or key != self._key:
-            el = self._elements()
-            flag = NEVER_STOP if halt is None else halt
-            if em.element == "anp":  # the nodal volume terms couple each node's patch
-                pattern = anp.anp_pattern(em, el)
-            else:
-                ptr, idx, whole = KN.node_neighbours(el.tets, el.volume, em.n_nodes, flag)
-                if not whole:
-                    return None
-                blocks, whole = KN.element_blocks(el.tets, el.volume, ptr, idx, flag)
-                if not whole:
-                    return None
-                indptr, indices, diagonal = KN.scalar_pattern(ptr, idx)
-                pattern = KN.Pattern(ptr, idx, blocks, indptr, indices, diagonal)
-            self._pattern, self._key = pattern, key
-            self._upper = None
+        if em.element == "anp":  # the nodal volume terms couple each node's patch
+            key = (em.n_nodes, em.n_elements)
+            pattern = self._pattern if key == self._key else anp.anp_pattern(em, self._elements())
+            self._key = key
+        else:
+            pattern = self._patterns.get(halt)
+            if pattern is None:
+                return None
+        if pattern is not self._pattern:
+            self._pattern = pattern
+            self._upper = None  # the pattern's blocks above the diagonal (_block_cg_kernels.upper_blocks)
             self.counts["pattern_builds"] += 1
-        return self._pattern
+        return pattern
 
     def matrix(self, x: np.ndarray, free: np.ndarray, diagonal_add: np.ndarray, project: int = 1, halt=None):
         """The Hessian of G at x: (3n, 3n) scipy CSR, identity rows at held dofs; None where ``halt``
