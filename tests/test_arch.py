@@ -84,6 +84,34 @@ def synthetic(tmp_path):
         "pkg/run/c2.py": "from pkg.run import c1\n",
         "pkg/run/long.py": "def long_one():\n" + LONG_BODY + "    return 0\n",
         "pkg/build/long.py": "def long_but_build_side():\n" + LONG_BODY + "    return 0\n",
+        "pkg/build/kern.py": """
+            from numba import njit
+            import numba
+
+
+            @njit(cache=True)
+            def wide(a, b, c, d, e, f, g, h, i, j):
+                return a
+
+
+            @numba.jit(nopython=True)
+            def also_wide(a, b, c, d, e, f, g, h, i, j, k):
+                return a
+
+
+            @njit(cache=True)
+            def nine(a, b, c, d, e, f, g, h, i):
+                return a
+
+
+            @njit(cache=True, inline="always")
+            def inlined_arithmetic(a, b, c, d, e, f, g, h, i, j):
+                return a
+
+
+            def plain_python(a, b, c, d, e, f, g, h, i, j):
+                return a
+        """,
     })
     return tmp_path
 
@@ -100,12 +128,14 @@ def test_each_kind_of_violation_is_reported(synthetic):
         "cycle pkg.run.c1 | pkg.run.c2",
         "run-imports-build pkg/run/user.py -> pkg.build.thing",
         "long-function pkg/run/long.py::long_one",
+        "kernel-arguments pkg/build/kern.py::wide",
+        "kernel-arguments pkg/build/kern.py::also_wide",
     }
     by_entry = {v.entry: v for v in found}
     assert by_entry["private-import pkg/run/user.py -> pkg.a._priv.x"].line == 3  # file:line of the import
     assert by_entry["long-function pkg/run/long.py::long_one"].line == 1
     assert arch.counts(found) == {"private-import": 2, "private-read": 1, "private-write": 2, "cycle": 1,
-                                  "run-imports-build": 1, "long-function": 1}
+                                  "run-imports-build": 1, "long-function": 1, "kernel-arguments": 2}
 
 
 def test_a_new_violation_or_a_fixed_baseline_line_fails(synthetic):

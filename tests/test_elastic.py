@@ -326,7 +326,7 @@ def test_local_step_bookkeeping_matches_the_twins(deformed):
     seeds = np.array([11, 11, 0], np.int64)
     movable_t, r2_t, wake_t = T.step_seeds(em.masses, em.fixed, degree, v, r2, h, tau2, seeds)
     movable, mark, r2_k = np.empty(n, bool), np.zeros(n, bool), r2.copy()
-    wake = KA.step_seeds(em.masses, em.fixed, degree, v, r2_k, h, tau2, seeds, movable, mark)
+    wake = KA.step_seeds(KA.NodeKinds(em.masses, em.fixed, degree), v, r2_k, h, tau2, seeds, (movable, mark))
     np.testing.assert_array_equal(movable, movable_t)
     np.testing.assert_array_equal(r2_k, r2_t)
     np.testing.assert_array_equal(wake, wake_t)

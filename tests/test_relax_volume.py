@@ -6,7 +6,7 @@ import pytest
 from _twins_relax import kuhn_grid, volume_forces_twin
 from cutkit.errors import InputError
 from cutkit.relax import Control, build_spring_model, initial_state, step
-from cutkit.relax._volume_kernels import add_volume_forces
+from cutkit.relax._volume_kernels import NodeSums, VolumeTets, add_volume_forces
 from cutkit.relax.volume import VolumeTerm
 from test_relax import block
 
@@ -31,7 +31,8 @@ def test_kernel_matches_twin():
     f_in, k_in = rng.normal(size=x.shape), rng.uniform(size=len(x))
     f, k = np.full_like(x, np.nan), np.full(len(x), np.nan)
     nodes = np.arange(len(x))[::2]  # only these rows are written
-    add_volume_forces(nodes, x, vt.tets, vt.tet_offsets, vt.node_tets, V0, bulk, f_in, k_in, f, k)
+    add_volume_forces(nodes, x, VolumeTets(vt.tets, vt.tet_offsets, vt.node_tets, V0, bulk), NodeSums(f_in, k_in),
+                      NodeSums(f, k))
     tf, tk = volume_forces_twin(x, tets, V0, bulk)
     np.testing.assert_allclose(f[nodes], f_in[nodes] + tf[nodes], rtol=1e-12, atol=1e-14)
     np.testing.assert_allclose(k[nodes], k_in[nodes] + tk[nodes], rtol=1e-12)
@@ -48,8 +49,8 @@ def test_forces_are_minus_the_energy_gradient():
         return float(np.sum(bulk * (_volumes(y, tets) - V0) ** 2 / (2 * V0)))
 
     f = np.zeros_like(x)
-    add_volume_forces(np.arange(len(x)), x, vt.tets, vt.tet_offsets, vt.node_tets, V0, bulk,
-                      np.zeros_like(x), np.zeros(len(x)), f, np.zeros(len(x)))
+    add_volume_forces(np.arange(len(x)), x, VolumeTets(vt.tets, vt.tet_offsets, vt.node_tets, V0, bulk),
+                      NodeSums(np.zeros_like(x), np.zeros(len(x))), NodeSums(f, np.zeros(len(x))))
     h = 1e-6
     for node in (0, 7, 20):
         for c in range(3):

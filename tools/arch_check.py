@@ -24,6 +24,11 @@ Kinds of violation (each reported with file:line and a stable key):
 ``long-function``
     A function or method of the run side over :data:`MAX_FUNCTION_LINES`
     lines (``def`` line to last line, decorators not counted).
+``kernel-arguments``
+    A numba kernel (``@njit`` / ``@jit``, either side) with more than
+    :data:`MAX_KERNEL_ARGUMENTS` parameters: pass structs (namedtuples of
+    arrays) instead.  Helpers compiled into their caller
+    (``inline="always"``: scalar arithmetic) are not kernels.
 
 Known violations are listed in ``tools/arch_baseline.txt`` (one ``kind key``
 per line); the check fails on a violation not listed there and on a listed
@@ -54,8 +59,11 @@ RUN_SIDE = frozenset({"collision", "cutting", "relax", "scalpel", "haptics", "si
 BUILD_SIDE = frozenset({"isovolume", "decimate", "segment", "texture", "assign", "volumes", "build", "recipe"})
 #: Longest function allowed on the run side, in lines.
 MAX_FUNCTION_LINES = 80
+#: Most parameters a numba kernel may take.
+MAX_KERNEL_ARGUMENTS = 9
 BASELINE = ROOT / "tools" / "arch_baseline.txt"
-KINDS = ("private-import", "private-read", "private-write", "cycle", "run-imports-build", "long-function")
+KINDS = ("private-import", "private-read", "private-write", "cycle", "run-imports-build", "long-function",
+         "kernel-arguments")
 
 
 @dataclass(frozen=True)
@@ -185,6 +193,25 @@ def _functions(tree: ast.AST):
             else:
                 yield from walk(child, prefix)
     yield from walk(tree, "")
+
+
+def _is_kernel(fn) -> bool:
+    """Whether ``fn`` is compiled by numba as a kernel of its own (not inlined into its caller)."""
+    for d in fn.decorator_list:
+        call = d if isinstance(d, ast.Call) else None
+        if ast.unparse(call.func if call else d).split(".")[-1] not in ("njit", "jit"):
+            continue
+        return not (call and any(k.arg == "inline" and ast.unparse(k.value) == "'always'" for k in call.keywords))
+    return False
+
+
+def _kernel_arguments(mod, add) -> None:
+    """``kernel-arguments`` violations of one module."""
+    for qual, fn in _functions(mod.tree):
+        n = len(fn.args.posonlyargs) + len(fn.args.args) + len(fn.args.kwonlyargs)
+        if n > MAX_KERNEL_ARGUMENTS and _is_kernel(fn):
+            add("kernel-arguments", f"{mod.rel}::{qual}", mod, fn.lineno,
+                f"kernel {qual} takes {n} arguments (> {MAX_KERNEL_ARGUMENTS}): pass structs")
 
 
 def _enclosing(tree: ast.AST) -> dict[int, str]:
@@ -350,6 +377,7 @@ def check(root: Path = ROOT, packages: dict[str, str] | None = None, run_side=RU
                 if n > max_lines:
                     add("long-function", f"{mod.rel}::{qual}", mod, fn.lineno,
                         f"{qual} has {n} lines (> {max_lines})")
+        _kernel_arguments(mod, add)
     for comp in _cycles(graph):
         path = _cycle_path(comp, graph)
         mod = modules[comp[0]]

@@ -9,10 +9,27 @@ int64 (-1 for a leaf), ``parent`` (k,) int64 (-1 for the root),
 
 from __future__ import annotations
 
+from collections import namedtuple
+
 import numpy as np
 from numba import njit
 
 from cutkit.mesh.geometry import segment_box, segment_triangle_hit
+
+#: The hierarchy as its kernels read it (the module docstring's arrays) and its ``root`` node
+#: (int, -1 when empty).
+Tree = namedtuple("Tree", ["box_min", "box_max", "child", "parent", "leaf_face", "root"])
+#: The boundary surface: ``faces`` (f, 3) int64, ``face_alive`` (f,) bool, and each face's leaf
+#: node ``face_leaf`` (f,) int64.
+Surface = namedtuple("Surface", ["faces", "face_alive", "face_leaf"])
+#: The nodes' tolerance boxes (4.1): half size ``s_tol`` (float), ``tol_min`` / ``tol_max``
+#: (n, 3) float64, and the faces around each node (CSR ``node_face_off`` (n_indexed_points + 1,)
+#: int64, ``node_face_idx`` int64) among the first ``n_indexed_faces`` (int) faces.
+Tolerances = namedtuple("Tolerances", ["s_tol", "tol_min", "tol_max", "node_face_off", "node_face_idx",
+                                       "n_indexed_faces"])
+#: Room for a segment's hits: ``face`` (cap,) int64, ``kind`` (cap,) int64 (see
+#: :mod:`cutkit.mesh.geometry`), ``param`` (cap, 4) float64 (t, x, y, z).
+SegmentHits = namedtuple("SegmentHits", ["face", "kind", "param"])
 
 
 @njit(cache=True, nogil=True)
@@ -99,17 +116,19 @@ def pair_level(box_min, box_max, nodes, adj_off, adj_idx):
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _refit_leaf(f, faces, face_leaf, tol_min, tol_max, box_min, box_max, child, parent, counters):
+def _refit_leaf(f, surface, tol, tree, counters):
     """Leaf box of face f from its corners' tolerance boxes, then its ancestors."""
+    faces, tol_min, tol_max = surface.faces, tol.tol_min, tol.tol_max
+    box_min, box_max, child = tree.box_min, tree.box_max, tree.child
     a = faces[f, 0]
     b = faces[f, 1]
     c = faces[f, 2]
-    leaf = face_leaf[f]
+    leaf = surface.face_leaf[f]
     for ax in range(3):
         box_min[leaf, ax] = min(tol_min[a, ax], tol_min[b, ax], tol_min[c, ax])
         box_max[leaf, ax] = max(tol_max[a, ax], tol_max[b, ax], tol_max[c, ax])
     counters[1] += 1
-    node = parent[leaf]
+    node = tree.parent[leaf]
     while node >= 0:
         l = child[node, 0]
         r = child[node, 1]
@@ -124,12 +143,11 @@ def _refit_leaf(f, faces, face_leaf, tol_min, tol_max, box_min, box_max, child, 
         counters[2] += 1
         if not changed:
             break
-        node = parent[node]
+        node = tree.parent[node]
 
 
 @njit(cache=True, nogil=True)
-def refit(points, faces, face_alive, face_leaf, node_face_off, node_face_idx, n_indexed_faces,
-          s_tol, tol_min, tol_max, box_min, box_max, child, parent, counters):
+def refit(points, surface, tol, tree, counters):
     """Tolerance-box test of every node and local bottom-up refit (4.1).
 
     A node that left its tolerance box gets a new one centred on its
@@ -142,25 +160,19 @@ def refit(points, faces, face_alive, face_leaf, node_face_off, node_face_idx, n_
     Parameters
     ----------
     points : (n, 3) float64
-    faces : (f, 3) int64
-    face_alive : (f,) bool
-    face_leaf : (f,) int64
-    node_face_off : (n_indexed_points + 1,) int64, node_face_idx : int64
-        Faces around each node (CSR) among the first ``n_indexed_faces``
-        faces; nodes beyond ``n_indexed_points`` have none there.  Faces
-        from ``n_indexed_faces`` on (added by cuts since the index was
-        made) are scanned one by one.
-    s_tol : float
-    tol_min, tol_max : (n, 3) float64
-        Tolerance boxes, updated in place.
-    box_min, box_max : (k, 3) float64
-        Node boxes, updated in place.
-    child : (k, 2) int64
-    parent : (k,) int64
+    surface : Surface
+        The faces in use (faces from ``tol.n_indexed_faces`` on, added by
+        cuts since the index was made, are scanned one by one).
+    tol : Tolerances
+        Its boxes updated in place; nodes beyond the index have no faces
+        there.
+    tree : Tree
+        Node boxes updated in place.
     counters : (3,) int64
         Incremented in place: nodes that left their tolerance box, leaf
         refits, inner-node refits.
     """
+    faces, face_alive, tol_min, tol_max = surface.faces, surface.face_alive, tol.tol_min, tol.tol_max
     n = points.shape[0]
     moved = np.zeros(n, dtype=np.bool_)
     moved_ids = np.empty(n, dtype=np.int64)
@@ -176,18 +188,18 @@ def refit(points, faces, face_alive, face_leaf, node_face_off, node_face_idx, n_
             moved_ids[n_moved] = i
             n_moved += 1
             for ax in range(3):
-                tol_min[i, ax] = points[i, ax] - s_tol
-                tol_max[i, ax] = points[i, ax] + s_tol
+                tol_min[i, ax] = points[i, ax] - tol.s_tol
+                tol_max[i, ax] = points[i, ax] + tol.s_tol
     counters[0] += n_moved
     if n_moved == 0:
         return
-    n_indexed_points = node_face_off.shape[0] - 1
+    n_indexed_points = tol.node_face_off.shape[0] - 1
     for q in range(n_moved):
         i = moved_ids[q]
         if i >= n_indexed_points:
             continue
-        for k in range(node_face_off[i], node_face_off[i + 1]):
-            f = node_face_idx[k]
+        for k in range(tol.node_face_off[i], tol.node_face_off[i + 1]):
+            f = tol.node_face_idx[k]
             if not face_alive[f]:
                 continue
             # refit a face once: from its lowest-numbered moved corner
@@ -197,32 +209,24 @@ def refit(points, faces, face_alive, face_leaf, node_face_off, node_face_idx, n_
                 if v < i and moved[v]:
                     first = False
             if first:
-                _refit_leaf(f, faces, face_leaf, tol_min, tol_max, box_min, box_max, child, parent, counters)
-    for f in range(n_indexed_faces, faces.shape[0]):
+                _refit_leaf(f, surface, tol, tree, counters)
+    for f in range(tol.n_indexed_faces, faces.shape[0]):
         if face_alive[f] and (moved[faces[f, 0]] or moved[faces[f, 1]] or moved[faces[f, 2]]):
-            _refit_leaf(f, faces, face_leaf, tol_min, tol_max, box_min, box_max, child, parent, counters)
+            _refit_leaf(f, surface, tol, tree, counters)
 
 
 @njit(cache=True, nogil=True)
-def query_segment(points, faces, face_alive, box_min, box_max, child, leaf_face,
-                  root, p0, p1, hit_face, hit_kind, hit_param):
+def query_segment(points, surface, tree, p0, p1, hits):
     """Top-down traversal: every live face the segment p0-p1 meets.
 
     Parameters
     ----------
     points : (n, 3) float64
-    faces : (f, 3) int64
-    face_alive : (f,) bool
-    box_min, box_max : (k, 3) float64
-    child : (k, 2) int64
-    leaf_face : (k,) int64
-    root : int
+    surface : Surface
+    tree : Tree
     p0, p1 : (3,) float64
-    hit_face : (cap,) int64
-    hit_kind : (cap,) int64
-    hit_param : (cap, 4) float64
-        Filled with the first ``min(count, cap)`` hits: face, kind
-        (see :mod:`cutkit.mesh.geometry`), and (t, x, y, z).
+    hits : SegmentHits
+        Filled with the first ``min(count, cap)`` hits.
 
     Returns
     -------
@@ -231,18 +235,18 @@ def query_segment(points, faces, face_alive, box_min, box_max, child, leaf_face,
     n_box_tests : int
         Boxes tested, for statistics.
     """
-    cap = hit_face.shape[0]
+    faces, face_alive, box_min, box_max = surface.faces, surface.face_alive, tree.box_min, tree.box_max
+    cap = hits.face.shape[0]
     count = 0
     n_box = 0
-    if root < 0:
+    if tree.root < 0:
         return 0, 0
     dx = p1[0] - p0[0]
     dy = p1[1] - p0[1]
     dz = p1[2] - p0[2]
     stack = np.empty(128, dtype=np.int64)
     out = np.empty(4, dtype=np.float64)
-    top = 0
-    stack[0] = root
+    stack[0] = tree.root
     top = 1
     while top > 0:
         top -= 1
@@ -250,7 +254,7 @@ def query_segment(points, faces, face_alive, box_min, box_max, child, leaf_face,
         n_box += 1
         if not segment_box(p0[0], p0[1], p0[2], dx, dy, dz, box_min[node], box_max[node]):
             continue
-        f = leaf_face[node]
+        f = tree.leaf_face[node]
         if f >= 0:
             if not face_alive[f]:
                 continue
@@ -258,30 +262,31 @@ def query_segment(points, faces, face_alive, box_min, box_max, child, leaf_face,
                                     points[faces[f, 2]], out)
             if kind >= 0:
                 if count < cap:
-                    hit_face[count] = f
-                    hit_kind[count] = kind
+                    hits.face[count] = f
+                    hits.kind[count] = kind
                     for q in range(4):
-                        hit_param[count, q] = out[q]
+                        hits.param[count, q] = out[q]
                 count += 1
             continue
         if top + 2 > stack.shape[0]:
             grown = np.empty(2 * stack.shape[0], dtype=np.int64)
             grown[:top] = stack[:top]
             stack = grown
-        stack[top] = child[node, 1]
-        stack[top + 1] = child[node, 0]
+        stack[top] = tree.child[node, 1]
+        stack[top + 1] = tree.child[node, 0]
         top += 2
     return count, n_box
 
 
 @njit(cache=True, nogil=True)
-def brute_segment(points, faces, face_alive, p0, p1, hit_face, hit_kind, hit_param):
+def brute_segment(points, surface, p0, p1, hits):
     """Every live face the segment meets, testing all faces (no hierarchy).
 
     Same outputs as :func:`query_segment`; the reference the hierarchy is
     benchmarked against.
     """
-    cap = hit_face.shape[0]
+    faces, face_alive = surface.faces, surface.face_alive
+    cap = hits.face.shape[0]
     count = 0
     out = np.empty(4, dtype=np.float64)
     for f in range(faces.shape[0]):
@@ -291,10 +296,10 @@ def brute_segment(points, faces, face_alive, p0, p1, hit_face, hit_kind, hit_par
                                 points[faces[f, 2]], out)
         if kind >= 0:
             if count < cap:
-                hit_face[count] = f
-                hit_kind[count] = kind
+                hits.face[count] = f
+                hits.kind[count] = kind
                 for q in range(4):
-                    hit_param[count, q] = out[q]
+                    hits.param[count, q] = out[q]
             count += 1
     return count
 

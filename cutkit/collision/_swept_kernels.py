@@ -39,15 +39,13 @@ def _box_overlap(lo, hi, bmin, bmax):
 
 
 @njit(cache=True, nogil=True)
-def query_triangle(points, faces, face_alive, box_min, box_max, child, leaf_face, root, tri,
-                   hit_face, hit_point):
+def query_triangle(points, surface, tree, tri, hit_face, hit_point):
     """Every live face the triangle ``tri`` (3, 3) meets, by top-down traversal.
 
     Parameters
     ----------
     points : (n, 3) float64
-    faces : (f, 3) int64;  face_alive : (f,) bool
-    box_min, box_max : (k, 3) float64;  child : (k, 2) int64;  leaf_face : (k,) int64;  root : int
+    surface : _kernels.Surface;  tree : _kernels.Tree
     tri : (3, 3) float64
     hit_face : (cap,) int64;  hit_point : (cap, 3) float64  filled with the first min(count, cap) hits
 
@@ -55,9 +53,10 @@ def query_triangle(points, faces, face_alive, box_min, box_max, child, leaf_face
     -------
     int  number of hits (may exceed cap: call again with more room)
     """
+    faces, face_alive, box_min, box_max = surface.faces, surface.face_alive, tree.box_min, tree.box_max
     cap = hit_face.shape[0]
     count = 0
-    if root < 0:
+    if tree.root < 0:
         return 0
     lo = np.empty(3)
     hi = np.empty(3)
@@ -66,14 +65,14 @@ def query_triangle(points, faces, face_alive, box_min, box_max, child, leaf_face
         hi[d] = max(tri[0, d], tri[1, d], tri[2, d])
     out = np.empty(4)
     stack = np.empty(128, np.int64)
-    stack[0] = root
+    stack[0] = tree.root
     top = 1
     while top > 0:
         top -= 1
         node = stack[top]
         if not _box_overlap(lo, hi, box_min[node], box_max[node]):
             continue
-        f = leaf_face[node]
+        f = tree.leaf_face[node]
         if f >= 0:
             if face_alive[f] and tri_tri(points[faces[f, 0]], points[faces[f, 1]], points[faces[f, 2]],
                                          tri[0], tri[1], tri[2], out):
@@ -87,7 +86,7 @@ def query_triangle(points, faces, face_alive, box_min, box_max, child, leaf_face
             grown = np.empty(2 * stack.shape[0], np.int64)
             grown[:top] = stack[:top]
             stack = grown
-        stack[top] = child[node, 1]
-        stack[top + 1] = child[node, 0]
+        stack[top] = tree.child[node, 1]
+        stack[top + 1] = tree.child[node, 0]
         top += 2
     return count

@@ -139,6 +139,14 @@ class SurfaceBVH:
     face_alive = property(lambda self: self._face_alive[: self._n_faces])
     face_leaf = property(lambda self: self._face_leaf[: self._n_faces])
 
+    def kernel_tree(self) -> K.Tree:
+        """The hierarchy as its kernels read it (the arrays' whole room; the root reaches the nodes in use)."""
+        return K.Tree(self._box_min, self._box_max, self._child, self._parent, self._leaf_face, self.root)
+
+    def kernel_surface(self) -> K.Surface:
+        """The faces as the queries read them (the arrays' whole room; the leaves name the faces in use)."""
+        return K.Surface(self._faces, self._face_alive, self._face_leaf)
+
     @property
     def refit_counts(self) -> dict[str, int]:
         """Counters since construction or :meth:`reset_counters`.
@@ -343,10 +351,10 @@ class SurfaceBVH:
         points = _points(points)
         self._grow_points(points)
         before = int(self.counters[0])
-        K.refit(points, self.faces, self.face_alive, self.face_leaf, self._node_face_off,
-                self._node_face_idx, self._n_indexed, self.s_tol,
-                self.tol_min, self.tol_max, self._box_min, self._box_max,
-                self._child, self._parent, self.counters)
+        tol = K.Tolerances(self.s_tol, self.tol_min, self.tol_max, self._node_face_off, self._node_face_idx,
+                           self._n_indexed)
+        K.refit(points, K.Surface(self.faces, self.face_alive, self.face_leaf), tol, self.kernel_tree(),
+                self.counters)
         return int(self.counters[0]) - before
 
     def _grow_up(self, node: int) -> None:
@@ -473,12 +481,11 @@ class SurfaceBVH:
         while True:
             face, kind, par = self._hit_buffers
             cap = face.shape[0]
+            hits = K.SegmentHits(face, kind, par)
             if brute_force:
-                count = K.brute_segment(points, self.faces, self.face_alive, p0, p1, face, kind, par)
+                count = K.brute_segment(points, K.Surface(self.faces, self.face_alive, self.face_leaf), p0, p1, hits)
             else:
-                count, _ = K.query_segment(points, self._faces, self._face_alive, self._box_min,
-                                           self._box_max, self._child, self._leaf_face, self.root,
-                                           p0, p1, face, kind, par)
+                count, _ = K.query_segment(points, self.kernel_surface(), self.kernel_tree(), p0, p1, hits)
             if count <= cap:
                 break
             self._hit_buffers = _hit_buffers(count)

@@ -44,8 +44,7 @@ def query_triangle(bvh: SurfaceBVH, points, tri):
     cap = _HIT_ROOM
     while True:
         face, pt = np.empty(cap, np.int64), np.empty((cap, 3))
-        n = K.query_triangle(points, bvh.faces, bvh.face_alive, bvh.box_min, bvh.box_max, bvh.child,
-                             bvh.leaf_face, bvh.root, tri, face, pt)
+        n = K.query_triangle(points, bvh.kernel_surface(), bvh.kernel_tree(), tri, face, pt)
         if n <= cap:
             return face[:n], pt[:n]
         cap = n

@@ -568,7 +568,7 @@ def segment_triangle_hit(p0, p1, v0, v1, v2, out):
         dist = abs(sx * nx + sy * ny + sz * nz) / nlen
         if dist > EPS_COPLANAR * size:
             return -1
-        return _coplanar(p0, dx, dy, dz, v0, v1, v2, nx, ny, nz, nlen, out)
+        return _coplanar(p0, p1, v0, v1, v2, out)
     # Cramer's rule on p0 + t d = v0 + u e1 + v e2 (Möller–Trumbore form)
     px = dy * e2z - dz * e2y
     py = dz * e2x - dx * e2z
@@ -614,8 +614,22 @@ def _hit_kind(u, v, w):
 
 
 @njit(cache=True, nogil=True)
-def _coplanar(p0, dx, dy, dz, v0, v1, v2, nx, ny, nz, nlen, out):
-    """Clip a segment lying in the triangle's plane to the triangle (Cyrus–Beck)."""
+def _coplanar(p0, p1, v0, v1, v2, out):
+    """Clip a segment lying in the triangle's plane to the triangle (Cyrus–Beck); its direction and
+    the plane's normal computed as :func:`segment_triangle_hit` computes them (the same numbers)."""
+    dx = p1[0] - p0[0]
+    dy = p1[1] - p0[1]
+    dz = p1[2] - p0[2]
+    e1x = v1[0] - v0[0]
+    e1y = v1[1] - v0[1]
+    e1z = v1[2] - v0[2]
+    e2x = v2[0] - v0[0]
+    e2y = v2[1] - v0[1]
+    e2z = v2[2] - v0[2]
+    nx = e1y * e2z - e1z * e2y
+    ny = e1z * e2x - e1x * e2z
+    nz = e1x * e2y - e1y * e2x
+    nlen = math.sqrt(nx * nx + ny * ny + nz * nz)
     t0 = 0.0
     t1 = 1.0
     for k in range(3):

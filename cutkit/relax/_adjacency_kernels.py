@@ -10,10 +10,16 @@ kernels check nothing (:mod:`cutkit.relax.elastic` does).
 
 from __future__ import annotations
 
+from collections import namedtuple
+
 import numpy as np
 from numba import njit, prange
 
 from cutkit.relax._elastic_kernels import EDGE_COLUMN, OPPOSITE
+
+#: What :func:`step_seeds` reads of each node (n,): ``masses`` float64, ``fixed`` (n, 3) bool
+#: (held directions) and ``degree`` int64 (its tets).
+NodeKinds = namedtuple("NodeKinds", ["masses", "fixed", "degree"])
 
 
 @njit(cache=True, nogil=True)
@@ -308,15 +314,18 @@ def awake_after_sweep(adj, movable, r2, tau2, nodes, mark):
 
 
 @njit(cache=True, nogil=True)
-def step_seeds(masses, fixed, degree, velocities, r2, h, tau2, seeds, movable, mark):
+def step_seeds(kinds, velocities, r2, h, tau2, seeds, work):
     """The start of a local step (:func:`cutkit.relax.vbd.local_step`) in one pass over the nodes.
 
-    Fills ``movable`` (n,) bool (not held in all three directions, in some
-    tet), zeroes ``r2`` of the others, and returns in ascending order the
-    nodes to wake first: ``seeds``, and the movable nodes that move (inertial
-    force ``m |v| / h`` above ``sqrt(tau2)``) or are out of balance
-    (``r2 > tau2``).  ``mark`` (n,) bool is all False on entry and on return.
+    ``work`` is (``movable``, ``mark``), both (n,) bool.  Fills ``movable``
+    (not held in all three directions, in some tet; ``kinds`` a
+    :class:`NodeKinds`), zeroes ``r2`` of the others, and returns in
+    ascending order the nodes to wake first: ``seeds``, and the movable nodes
+    that move (inertial force ``m |v| / h`` above ``sqrt(tau2)``) or are out
+    of balance (``r2 > tau2``).  ``mark`` is all False on entry and on return.
     """
+    masses, fixed, degree = kinds.masses, kinds.fixed, kinds.degree
+    movable, mark = work
     tau = np.sqrt(tau2)
     for i in range(movable.shape[0]):
         mov = degree[i] > 0 and not (fixed[i, 0] and fixed[i, 1] and fixed[i, 2])

@@ -11,6 +11,8 @@ count.
 
 from __future__ import annotations
 
+from collections import namedtuple
+
 import numpy as np
 from numba import njit, prange
 
@@ -23,6 +25,21 @@ MODE_EXPLICIT = 2  # symplectic Euler (no prediction, no implicit stiffness)
 #: "no-NaN" assumptions): lets LLVM vectorise the spring loop; still the
 #: same result for every thread count.
 FASTMATH = {"reassoc", "contract", "arcp"}
+
+#: Each node's springs as :func:`relax_nodes` reads them (CSR over nodes): ``adj_offsets`` (n + 1,)
+#: int64, the other ends ``adj_nodes``, the springs ``adj_springs``, their rest lengths
+#: ``adj_rest`` (mm) and stiffnesses ``adj_stiffness`` (N/mm), and ``coefficients`` (s,) float64,
+#: :func:`spring_coefficients` of the predicted positions, or empty (each node computes its own).
+NodeSprings = namedtuple("NodeSprings", ["adj_offsets", "adj_nodes", "adj_springs", "adj_rest", "adj_stiffness",
+                                         "coefficients"])
+#: What else acts on each node (n,): ``node_stiffness`` (N/mm, the sum of its springs' k),
+#: ``mass``, ``damping`` (1/s), the loads ``f_ext`` (n, 3) N and ``gravity`` (3,) mm/s^2.
+NodeTerms = namedtuple("NodeTerms", ["node_stiffness", "mass", "damping", "f_ext", "gravity"])
+#: Nodes' positions ``x`` (n, 3), velocities ``v`` (n, 3) and time stamps ``stamp`` (n,).
+NodeStates = namedtuple("NodeStates", ["x", "v", "stamp"])
+#: Where :func:`relax_nodes` writes: the :class:`NodeStates` fields, and each node's recent
+#: accelerations ``accel_window`` (n, w) and update count ``n_updates`` (n,), updated in place.
+NodeUpdates = namedtuple("NodeUpdates", ["x", "v", "stamp", "accel_window", "n_updates"])
 
 
 @njit(cache=True, parallel=True, nogil=True)
@@ -58,7 +75,7 @@ def spring_coefficients(spring_a, spring_b, p, rest_length, stiffness, c_out):
 
 
 @njit(cache=True, nogil=True, fastmath=FASTMATH, inline="always")
-def _spring_forces_precomputed(k, p, adj_offsets, adj_nodes, adj_springs, c_spring, secant):
+def _spring_forces_precomputed(k, p, springs, secant):
     """Spring force on node k (eq. 6) from the coefficients ``c_spring`` of :func:`spring_coefficients`,
     summed in CSR order, and with ``secant`` the implicit stiffness sum of max(c, 0).
 
@@ -73,9 +90,9 @@ def _spring_forces_precomputed(k, p, adj_offsets, adj_nodes, adj_springs, c_spri
     f1 = 0.0
     f2 = 0.0
     kimp = 0.0
-    for a in range(adj_offsets[k], adj_offsets[k + 1]):
-        j = adj_nodes[a]
-        c = c_spring[adj_springs[a]]
+    for a in range(springs.adj_offsets[k], springs.adj_offsets[k + 1]):
+        j = springs.adj_nodes[a]
+        c = springs.coefficients[springs.adj_springs[a]]
         f0 += c * (p[j, 0] - pk0)
         f1 += c * (p[j, 1] - pk1)
         f2 += c * (p[j, 2] - pk2)
@@ -85,7 +102,7 @@ def _spring_forces_precomputed(k, p, adj_offsets, adj_nodes, adj_springs, c_spri
 
 
 @njit(cache=True, nogil=True, fastmath=FASTMATH, inline="always")
-def _spring_forces(k, p, adj_offsets, adj_nodes, adj_rest, adj_stiffness, secant):
+def _spring_forces(k, p, springs, secant):
     """Spring force on node k (eq. 6) at the predicted positions ``p``, each spring's coefficient
     computed here, summed in CSR order; with ``secant`` also the sum of max(c, 0).
 
@@ -100,15 +117,15 @@ def _spring_forces(k, p, adj_offsets, adj_nodes, adj_rest, adj_stiffness, secant
     f1 = 0.0
     f2 = 0.0
     kimp = 0.0
-    for a in range(adj_offsets[k], adj_offsets[k + 1]):
-        j = adj_nodes[a]
+    for a in range(springs.adj_offsets[k], springs.adj_offsets[k + 1]):
+        j = springs.adj_nodes[a]
         d0 = p[j, 0] - pk0
         d1 = p[j, 1] - pk1
         d2 = p[j, 2] - pk2
         l2 = d0 * d0 + d1 * d1 + d2 * d2
-        ks = adj_stiffness[a]
+        ks = springs.adj_stiffness[a]
         # physical force coefficient, minus the paper's E (eq. 6); 0 for coincident ends
-        c = ks - ks * adj_rest[a] / np.sqrt(l2) if l2 > 0.0 else 0.0
+        c = ks - ks * springs.adj_rest[a] / np.sqrt(l2) if l2 > 0.0 else 0.0
         f0 += c * d0
         f1 += c * d1
         f2 += c * d2
@@ -129,23 +146,38 @@ def _store_node(x_out, v_out, k, x0, x1, x2, v0, v1, v2):
 
 
 @njit(cache=True, parallel=True, nogil=True, fastmath=FASTMATH)
-def relax_nodes(nodes, target_time, x, v, stamp, p, x_out, v_out, stamp_out, in_place, c_spring, accel_window,
-                n_updates, adj_offsets, adj_nodes, adj_springs, adj_rest, adj_stiffness, node_stiffness, mass,
-                damping, f_ext, gravity, mode):
+def relax_nodes(nodes, target_time, before, after, p, springs, terms, mode, in_place):
     """Advance every node of ``nodes`` from its own time stamp to ``target_time``.
 
-    The step of node k is ``target_time - stamp[k]`` (section 5.2, last
-    paragraph).  ``p`` holds every node's position predicted to
+    The step of node k is ``target_time - before.stamp[k]`` (section 5.2,
+    last paragraph).  ``p`` holds every node's position predicted to
     ``target_time`` by eq. (7) (:func:`predict_positions`), at least for
-    ``nodes`` and their neighbours.  With ``in_place`` (Gauss-Seidel over a
-    colour class: outputs alias inputs, no two listed nodes share a spring)
-    ``p[k]`` is set to the new position, so later classes use it as is.
-    ``c_spring`` (s,) holds :func:`spring_coefficients` of ``p`` (Jacobi
-    sweeps) or is empty (then each node computes its springs' coefficients).
-    ``node_stiffness[k]`` is the sum of k_jk over the node's springs.
+    ``nodes`` and their neighbours.  Where ``after`` is ``before`` (the same
+    arrays: Gauss-Seidel over a colour class, no two listed nodes share a
+    spring, ``in_place`` True) ``p[k]`` is set to the new position, so later classes use it as
+    is (``in_place``).  ``springs.coefficients`` holds :func:`spring_coefficients` of ``p``
+    (Jacobi sweeps) or is empty (then each node computes its springs').
+
+    Parameters
+    ----------
+    nodes : (k,) int64
+    target_time : float
+    before : NodeStates
+    after : NodeUpdates
+        Written (its states may be ``before``'s arrays).
+    p : (n, 3) float64
+    springs : NodeSprings
+    terms : NodeTerms
+    mode : int
+        :data:`MODE_AXIAL`, :data:`MODE_SECANT` or :data:`MODE_EXPLICIT`.
+    in_place : bool
     """
+    x, v, stamp = before.x, before.v, before.stamp
+    x_out, v_out, stamp_out = after.x, after.v, after.stamp
+    accel_window, n_updates = after.accel_window, after.n_updates
+    mass, damping, f_ext, gravity = terms.mass, terms.damping, terms.f_ext, terms.gravity
     window = accel_window.shape[1]
-    precomputed = c_spring.shape[0] > 0
+    precomputed = springs.coefficients.shape[0] > 0
     secant = mode == MODE_SECANT
     for ii in prange(nodes.shape[0]):
         k = nodes[ii]
@@ -162,11 +194,11 @@ def relax_nodes(nodes, target_time, x, v, stamp, p, x_out, v_out, stamp_out, in_
             continue
         m = mass[k]
         if precomputed:
-            f0, f1, f2, kimp = _spring_forces_precomputed(k, p, adj_offsets, adj_nodes, adj_springs, c_spring, secant)
+            f0, f1, f2, kimp = _spring_forces_precomputed(k, p, springs, secant)
         else:
-            f0, f1, f2, kimp = _spring_forces(k, p, adj_offsets, adj_nodes, adj_rest, adj_stiffness, secant)
+            f0, f1, f2, kimp = _spring_forces(k, p, springs, secant)
         if mode == MODE_AXIAL:
-            kimp = node_stiffness[k]
+            kimp = terms.node_stiffness[k]
         # m (v' - v) = h (f - D v' + F* - K (x' - p)),  x' - p = h (v' - v)
         fx0 = f_ext[k, 0] + m * gravity[0] + f0
         fx1 = f_ext[k, 1] + m * gravity[1] + f1

@@ -8,8 +8,17 @@ same result for every thread count.
 
 from __future__ import annotations
 
+from collections import namedtuple
+
 import numpy as np
 from numba import njit, prange
+
+#: The volume term's tets as the kernel reads them: ``tets`` (m, 4) int64, the node -> tet CSR
+#: ``tet_offsets`` (n + 1,) int64 and ``node_tets`` (4 m,) int64
+#: (:func:`cutkit.mesh.topology.node_to_tets`), ``rest_volume`` (m,) mm^3, ``bulk`` (m,) N/mm^2.
+VolumeTets = namedtuple("VolumeTets", ["tets", "tet_offsets", "node_tets", "rest_volume", "bulk"])
+#: Per-node sums: ``force`` (n, 3) float64 N and ``stiffness`` (n,) float64 N/mm.
+NodeSums = namedtuple("NodeSums", ["force", "stiffness"])
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -44,20 +53,21 @@ def _grad_volume(p, a, b, c, d, corner):
 
 
 @njit(cache=True, parallel=True, nogil=True)
-def add_volume_forces(nodes, p, tets, tet_offsets, node_tets, rest_volume, bulk, f_in, k_in, f_out, k_out):
+def add_volume_forces(nodes, p, volume, given, out):
     """Volume forces and stiffnesses of each node of ``nodes`` at positions ``p``, added to given ones.
 
-    ``f_out[k] = f_in[k] + sum over k's tets of -bulk (V - V0) / V0 dV/dx_k``
-    (N) and ``k_out[k] = k_in[k] + sum of bulk |dV/dx_k|^2 / V0`` (N/mm),
+    ``out.force[k] = given.force[k] + sum over k's tets of -bulk (V - V0) / V0 dV/dx_k``
+    (N) and ``out.stiffness[k] = given.stiffness[k] + sum of bulk |dV/dx_k|^2 / V0`` (N/mm),
     for the listed nodes only (other rows are left alone): the force and the
     diagonal stiffness along the gradient at the current shape, which the
     semi-implicit step of eq. (6) adds to the node's spring stiffness sum.
 
-    p : (n, 3) float64 positions (the eq. (7) predictions); tets : (m, 4)
-    int64; tet_offsets : (n + 1,) int64, node_tets : (4 m,) int64 (the
-    node -> tet CSR of :func:`cutkit.mesh.topology.node_to_tets`); rest_volume : (m,) mm^3;
-    bulk : (m,) N/mm^2; f_in, f_out : (n, 3) float64; k_in, k_out : (n,) float64.
+    nodes : (k,) int64; p : (n, 3) float64 positions (the eq. (7) predictions); volume :
+    VolumeTets; given, out : NodeSums (``out`` written at ``nodes``).
     """
+    tets, tet_offsets, node_tets = volume.tets, volume.tet_offsets, volume.node_tets
+    rest_volume, bulk = volume.rest_volume, volume.bulk
+    f_in, k_in, f_out, k_out = given.force, given.stiffness, out.force, out.stiffness
     for ii in prange(nodes.shape[0]):
         k = nodes[ii]
         f0 = 0.0

@@ -25,7 +25,7 @@ import numpy as np
 
 from cutkit.errors import InputError
 from cutkit.relax import _kernels as K
-from cutkit.relax._volume_kernels import add_volume_forces
+from cutkit.relax._volume_kernels import NodeSums, add_volume_forces
 from cutkit.relax.model import Control, SpringModel, SpringState
 from cutkit.relax.momentum import free_momentum_start, keep_free_momentum
 
@@ -109,20 +109,24 @@ def advance_nodes(
     if vt is not None:
         # the advanced nodes' rows of these get the volume terms added (scratch kept by the term)
         f_node, k_node = vt.scratch(n)
-    args = (state.accel_window, state.n_updates, model.adj_offsets, model.adj_nodes, model.adj_springs,
-            model.adj_rest, model.adj_stiffness, k_node, model.masses, model.damping, f_node,
-            gravity, mode)
+        volume, given, summed = vt.kernel_tets(), NodeSums(f_ext, model.node_stiffness), NodeSums(f_node, k_node)
+    terms = K.NodeTerms(k_node, model.masses, model.damping, f_node, gravity)
+    before = K.NodeStates(x, v, ts)
+
+    def springs(coefficients):
+        return K.NodeSprings(model.adj_offsets, model.adj_nodes, model.adj_springs, model.adj_rest,
+                             model.adj_stiffness, coefficients)
+
     if classes is not None:
+        after = K.NodeUpdates(x, v, ts, state.accel_window, state.n_updates)
         for cls in classes:
             if vt is not None:
                 # Gauss-Seidel: this class sees the new positions of the classes before it
-                add_volume_forces(cls, p, vt.tets, vt.tet_offsets, vt.node_tets, vt.rest_volume,
-                                  vt.bulk, f_ext, model.node_stiffness, f_node, k_node)
-            K.relax_nodes(cls, target_time, x, v, ts, p, x, v, ts, True, _NO_COEFFICIENTS, *args)
+                add_volume_forces(cls, p, volume, given, summed)
+            K.relax_nodes(cls, target_time, before, after, p, springs(_NO_COEFFICIENTS), terms, mode, True)
         return
     if vt is not None:
-        add_volume_forces(nodes, p, vt.tets, vt.tet_offsets, vt.node_tets, vt.rest_volume,
-                          vt.bulk, f_ext, model.node_stiffness, f_node, k_node)
+        add_volume_forces(nodes, p, volume, given, summed)
     if 4 * len(nodes) >= n:
         # a large share of the nodes: one square root per spring, not per spring end
         c = np.empty(model.n_springs)
@@ -130,7 +134,8 @@ def advance_nodes(
     else:
         c = _NO_COEFFICIENTS
     x_new, v_new, ts_new = x.copy(), v.copy(), ts.copy()
-    K.relax_nodes(nodes, target_time, x, v, ts, p, x_new, v_new, ts_new, False, c, *args)
+    after = K.NodeUpdates(x_new, v_new, ts_new, state.accel_window, state.n_updates)
+    K.relax_nodes(nodes, target_time, before, after, p, springs(c), terms, mode, False)
     state.positions, state.velocities, state.time_stamps = x_new, v_new, ts_new
 
 

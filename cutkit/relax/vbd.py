@@ -162,8 +162,8 @@ def local_step(em: ElementModel, state: ElementState, h: float, f_ext, r2, seeds
     mark = np.zeros(n, bool)
     # a node held or left without tets (a cut's orphan) gets no residual (step_seeds): its last
     # one would otherwise stay in the sum and keep every later step from converging
-    seeds = KA.step_seeds(em.masses, em.fixed, em.adj_degree, v, r2, float(h), float(tau2),
-                          np.asarray(seeds, np.int64), movable, mark)
+    seeds = KA.step_seeds(KA.NodeKinds(em.masses, em.fixed, em.adj_degree), v, r2, float(h), float(tau2),
+                          np.asarray(seeds, np.int64), (movable, mark))
     awake = KA.awake_after_sweep(em.adjacency, movable, r2, -1.0, seeds, mark)
     x0 = x.copy()
     y = x0.copy()

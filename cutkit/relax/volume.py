@@ -48,6 +48,12 @@ class VolumeTerm:
     _f_scratch: np.ndarray | None = None
     _k_scratch: np.ndarray | None = None
 
+    def kernel_tets(self):
+        """The term's arrays as ``_volume_kernels.add_volume_forces`` reads them (``VolumeTets``)."""
+        from cutkit.relax._volume_kernels import VolumeTets
+
+        return VolumeTets(self.tets, self.tet_offsets, self.node_tets, self.rest_volume, self.bulk)
+
     def scratch(self, n: int) -> tuple[np.ndarray, np.ndarray]:
         """Force (n, 3) and stiffness (n,) work arrays of the integrator, reused between passes."""
         if self._f_scratch is None or self._f_scratch.shape[0] != n:

@@ -85,26 +85,25 @@ def crack_advance(t_a, crack, depth, params):
 
 
 @njit(cache=True)
-def fracture_step(params, proxy, velocity, code, crack, entry, normal, control, f_sim, out):
+def fracture_step(params, blade, control, f_sim, out):
     """Advance the fracture scalpel by one time step.
 
     Parameters
     ----------
     params : (N_PARAMS,) float64
-    proxy, velocity : (3,) float64, in/out
-        The blade edge P_s (mm, in the blade plane) and its velocity (mm/s).
-    code : (1,) int64, in/out
-        FREE, STATIC (loading), CUTTING (the crack advanced) or WITHDRAWING.
-    crack : (1,) float64, in/out
-        Crack length c from the entry point along a, mm.
-    entry, normal : (3,) float64
-        Entry point P_e and unit blade plane normal b.
+    blade : _kernels.BladeState
+        In/out: the blade edge P_s (mm, in the blade plane), its velocity
+        (mm/s), the code (FREE, STATIC (loading), CUTTING (the crack
+        advanced) or WITHDRAWING) and the crack length c from the entry point
+        along a (mm); the entry point P_e and unit blade plane normal b.
     control : tuple of three (3,) float64
         Device tip, a and n (``Control``).
     f_sim : (3,) float64
         External force from the tissue simulation, N.
     out : (N_OUT,) float64, out
     """
+    proxy, velocity, code, crack = blade.proxy, blade.velocity, blade.code, blade.crack
+    entry, normal = blade.entry, blade.normal
     tip, a_in, n_in = control
     if free_blade(code, proxy, velocity, tip, a_in, n_in, out):
         return

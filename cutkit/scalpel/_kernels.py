@@ -12,6 +12,7 @@ stiffness eta in Pa.  An acceleration F/m in N/kg = m/s^2 is multiplied by
 from __future__ import annotations
 
 import math
+from collections import namedtuple
 
 from numba import njit
 
@@ -61,6 +62,12 @@ O_A = 11  # (3) blade direction a used this step (in the blade plane)
 O_N = 14  # (3) in-plane direction n used this step
 O_CRACK = 17  # fracture model: crack length from the entry point along a, mm (0 in the paper's)
 N_OUT = 18
+
+#: What of the scalpel changes every step, as the step kernels read it (``ScalpelState``): the
+#: proxy P_s and its velocity (3,) float64 (mm, mm/s), the state ``code`` (1,) int64, the crack
+#: length ``crack`` (1,) float64 (mm, the fracture model), the entry point P_e and the blade
+#: plane's unit normal b (3,) float64.
+BladeState = namedtuple("BladeState", ["proxy", "velocity", "code", "crack", "entry", "normal"])
 
 #: Below this length a projected blade axis is treated as degenerate.
 AXIS_EPS = 1e-9
@@ -150,31 +157,26 @@ def blade_frame(normal, a_in, n_in):
 
 
 @njit(cache=True)
-def scalpel_step(params, proxy, velocity, code, entry, normal, tip, a_in, n_in, f_sim, out):
+def scalpel_step(params, blade, control, f_sim, out):
     """Advance the scalpel proxy by one time step.
 
     Parameters
     ----------
     params : (N_PARAMS,) float64
-    proxy : (3,) float64, in/out
-        The scalpel's actual position P_s, mm; kept in the blade plane.
-    velocity : (3,) float64, in/out
-        Proxy velocity, mm/s.
-    code : (1,) int64, in/out
-        FREE, STATIC, CUTTING or WITHDRAWING.
-    entry : (3,) float64
-        Entry point P_e, mm; a point of the blade plane.
-    normal : (3,) float64
-        Unit normal b of the blade plane.
-    tip : (3,) float64
-        Device tip, mm.
-    a_in, n_in : (3,) float64
-        Device blade direction a (the way the sharp edge faces) and the
-        in-plane direction n along the blade, need not be exactly unit.
+    blade : BladeState
+        In/out: the proxy (kept in the blade plane), its velocity and the
+        code (FREE, STATIC, CUTTING or WITHDRAWING); the entry point is a
+        point of the blade plane.
+    control : tuple of three (3,) float64
+        The device tip (mm), blade direction a (the way the sharp edge
+        faces) and in-plane direction n along the blade, a and n need not be
+        exactly unit.
     f_sim : (3,) float64
         External force from the tissue simulation, N.
     out : (N_OUT,) float64, out
     """
+    proxy, velocity, code, entry, normal = blade.proxy, blade.velocity, blade.code, blade.entry, blade.normal
+    tip, a_in, n_in = control
     if free_blade(code, proxy, velocity, tip, a_in, n_in, out):
         return
     # a: the device's a projected into the blade plane, n = b x a (6.1)

@@ -279,9 +279,9 @@ def step(params: np.ndarray, state: ScalpelState, control: Control, f_sim: np.nd
         ``cutkit.scalpel._kernels``.  ``params[P_MODEL]`` picks the paper's
         model or the fracture model.
     """
+    blade = K.BladeState(state.proxy, state.velocity, state.code, state.crack, state.entry, state.normal)
+    pose = (control.tip, control.a, control.n)
     if params[K.P_MODEL] == K.FRACTURE:
-        FK.fracture_step(params, state.proxy, state.velocity, state.code, state.crack, state.entry,
-                         state.normal, (control.tip, control.a, control.n), f_sim, out)
+        FK.fracture_step(params, blade, pose, f_sim, out)
         return
-    K.scalpel_step(params, state.proxy, state.velocity, state.code, state.entry, state.normal,
-                   control.tip, control.a, control.n, f_sim, out)
+    K.scalpel_step(params, blade, pose, f_sim, out)

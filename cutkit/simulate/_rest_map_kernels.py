@@ -3,13 +3,21 @@
 
 from __future__ import annotations
 
+from collections import namedtuple
+
 from numba import njit
 
 from cutkit.mesh.geometry import segment_dist2
 
+#: The flood fill's visit marks and work space, kept between calls: ``tet_stamp`` (m,) int64 and
+#: ``node_stamp`` (n,) int64 (never reset: visited when equal to ``mark``, an int no entry has
+#: yet), ``stack`` (m,) int64, and the results ``out`` (n,) int64 (the nodes) and ``out_d2`` (n,)
+#: float64 (their squared distances to the blade), ``[:count]``.
+FloodFill = namedtuple("FloodFill", ["tet_stamp", "node_stamp", "mark", "stack", "out", "out_d2"])
+
 
 @njit(cache=True, nogil=True)
-def nodes_near_blade(x, tets, neighbors, seeds, blade, radius, tet_stamp, node_stamp, mark, stack, out, out_d2):
+def nodes_near_blade(x, tets, neighbors, seeds, blade, radius, fill):
     """The corners of tets within ``radius`` of the blade segment, found by a flood fill from ``seeds``.
 
     Tets are visited over face neighbours while one of their corners lies
@@ -25,17 +33,14 @@ def nodes_near_blade(x, tets, neighbors, seeds, blade, radius, tet_stamp, node_s
     seeds : (k,) int64  tets to start from (always visited)
     blade : (2, 3) float64  its back end and its tip
     radius : float
-    tet_stamp : (m,) int64, node_stamp : (n,) int64
-        Visit marks, never reset: visited when equal to ``mark``.
-    mark : int  a value no entry of the stamps has
-    stack : (m,) int64  work space
-    out : (n,) int64  written: the nodes within ``radius``, ``[:count]``
-    out_d2 : (n,) float64  written: their squared distances to the blade, ``[:count]``
+    fill : FloodFill  its marks and results written
 
     Returns
     -------
     count : int
     """
+    tet_stamp, node_stamp, mark, stack = fill.tet_stamp, fill.node_stamp, fill.mark, fill.stack
+    out, out_d2 = fill.out, fill.out_d2
     back, tip = blade[0], blade[1]
     r2 = radius * radius
     n = 0

@@ -85,13 +85,13 @@ class BladeNeighbourhood:
         tip : (3,) float64  the blade's tip, mm
         axis : (3,) float64  unit vector along the blade, handle to tip
         """
-        from cutkit.simulate._rest_map_kernels import nodes_near_blade
+        from cutkit.simulate._rest_map_kernels import FloodFill, nodes_near_blade
 
         self.mark += 1
         blade = np.array([tip - cm.blade_length * axis, tip], np.float64)
+        fill = FloodFill(self.tet_stamp, self.node_stamp, self.mark, self.stack, self.out, self.out_d2)
         n = nodes_near_blade(positions, cm.orig_tets, cm.neighbors, np.ascontiguousarray(seeds, np.int64), blade,
-                             self.radius, self.tet_stamp, self.node_stamp, self.mark, self.stack, self.out,
-                             self.out_d2)
+                             self.radius, fill)
         return self.out[:n], self.out_d2[:n]
 
 
