@@ -20,6 +20,7 @@ from cutkit.decimate import _candidates as C
 from cutkit.decimate import _kernels as K
 from cutkit.decimate import _legality as L
 from cutkit.decimate import _pool as P
+from cutkit.decimate import _state as S
 from cutkit.mesh.geometry import point_triangle_dist2, tet_max_cos, tet_volume6
 from cutkit.decimate.decimate import _adjacency
 
@@ -119,7 +120,7 @@ def test_surface_faces_match_twin():
     for x in range(points.shape[0]):
         m = 3 * length[x]
         fa, fb, f0, f1 = (np.empty(m, np.int64) for _ in range(4))
-        k = L.surface_faces(x, tets, labels, start, length, pool, fa, fb, f0, f1)
+        k = L.surface_faces(x, S.Stars(tets, start, length, pool), labels, (fa, fb, f0, f1))
         got = {(frozenset((x, int(fa[i]), int(fb[i]))), (int(f0[i]), int(f1[i]))) for i in range(k)}
         assert len(got) == k
         assert got == surface_faces_twin(tets, labels, x)
@@ -157,8 +158,10 @@ def test_legality_of_single_collapses_matches_twin():
     picks = [edges[i] for i in rng.choice(len(edges), 250, replace=False)]
     n_legal = 0
     for u, v in picks:
-        got, _ = L.can_collapse(u, v, points, tets, labels, tet_lab, maxcos, start, length, pool, vclass, points,
-                                own_next, mark, mark2, np.zeros(1), np.array([np.inf]), counters, params, new_maxcos)
+        state = S.Decimation(S.Mesh(points, labels, tet_lab, None, maxcos, None, vclass, None),
+                             S.Stars(tets, start, length, pool), None, None, S.Owners(points, None, own_next),
+                             (mark, mark2), S.Budget(np.zeros(1), np.array([np.inf])), None, None)
+        got, _ = L.can_collapse(u, v, state, counters, params, new_maxcos)
         want = legal_collapse_twin(points, tets, labels, u, v, params[L.P_COS_MIN], 1e9, -1.0)
         assert got == want, (u, v)
         if got:  # the dihedral cosines handed to the collapse are those of the new tets
@@ -185,7 +188,8 @@ def test_cheapest_neighbours_match_twin():
         cand = np.empty(k, np.int64)
         key2 = np.empty(k)
         for u in range(n):
-            nc = C.cheapest_neighbours(u, points, tets, start, length, pool, vclass, mark, counters, params, cand, key2)
+            nc = C.cheapest_neighbours(u, points, S.Stars(tets, start, length, pool), vclass, mark, counters,
+                                       params, (cand, key2))
             star = pool[start[u] : start[u] + length[u]]
             want, want_keys = cheapest_neighbours_twin(points, tets, vclass, star, u, 3.0, 0.5, k)
             assert cand[:nc].tolist() == want, u
@@ -213,7 +217,7 @@ def test_volume_precheck_matches_twin():
         got = np.einsum("ij,ij->i", grad[: star.size], x - points[base[: star.size]])
         np.testing.assert_allclose(got, want, atol=1e-9)
         for v in set(tets[star].ravel().tolist()) - {u}:
-            ok = C.volume_precheck(u, v, points, tets, start, length, pool, grad, base, eps)
+            ok = C.volume_precheck(u, v, points, S.Stars(tets, start, length, pool), (grad, base), eps)
             assert ok == bool(np.all(moved_tets_volume6(points, tets, star, u, v) > eps)), (u, v)
             n_pass += ok
             n_fail += not ok

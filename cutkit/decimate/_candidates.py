@@ -50,12 +50,15 @@ def half_edge_key2(w, x, points, vclass, params):
 
 
 @njit(cache=True)
-def cheapest_neighbours(u, points, tets, adj_start, adj_len, pool, vclass, mark, counters, params, cand, cand_key2):
+def cheapest_neighbours(u, points, stars, vclass, mark, counters, params, out):
     """The ``len(cand)`` cheapest allowed half-edges ``u -> v``, cheapest first.
 
     Parameters
     ----------
     u : int
+    stars : _state.Stars
+    out : tuple
+        ``(cand, cand_key2)``:
     cand : (k,) int64
         Output: the neighbours ``v``; ties keep the order in which the star
         of ``u`` lists them (a stable sort).
@@ -69,14 +72,15 @@ def cheapest_neighbours(u, points, tets, adj_start, adj_len, pool, vclass, mark,
     int
         How many entries of ``cand`` are filled (0: no allowed collapse).
     """
+    cand, cand_key2 = out
     kmax = cand.shape[0]
     st = _new_stamp(counters)
-    s0 = adj_start[u]
+    s0 = stars.adj_start[u]
     nc = 0
-    for i in range(adj_len[u]):
-        t = pool[s0 + i]
+    for i in range(stars.adj_len[u]):
+        t = stars.pool[s0 + i]
         for k in range(4):
-            w = tets[t, k]
+            w = stars.tets[t, k]
             if w == u or mark[w] == st:
                 continue
             mark[w] = st
@@ -142,13 +146,15 @@ def volume_gradients(u, points, tets, adj_start, adj_len, pool, grad, base):
 
 
 @njit(cache=True)
-def volume_precheck(u, v, points, tets, adj_start, adj_len, pool, grad, base, vol_eps):
+def volume_precheck(u, v, points, stars, gradients, vol_eps):
     """Whether every tet of ``u`` without ``v`` keeps ``6 V > vol_eps`` after ``u -> v``.
 
-    ``grad``, ``base`` come from :func:`volume_gradients` for ``u``.  Rounding
-    differs from :func:`cutkit.mesh.geometry.tet_volume6`, so this only
+    ``gradients`` = (``grad``, ``base``) come from :func:`volume_gradients` for ``u``.
+    Rounding differs from :func:`cutkit.mesh.geometry.tet_volume6`, so this only
     skips candidates; the exact test decides.
     """
+    tets, adj_start, adj_len, pool = stars.tets, stars.adj_start, stars.adj_len, stars.pool
+    grad, base = gradients
     s0 = adj_start[u]
     px = points[v, 0]
     py = points[v, 1]

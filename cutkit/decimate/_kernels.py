@@ -7,6 +7,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
+from cutkit.decimate._state import Stars
 from cutkit.decimate._candidates import cheapest_neighbours, half_edge_key2, volume_gradients, volume_precheck
 from cutkit.decimate._legality import (
     P_H,
@@ -113,7 +114,7 @@ def classify_vertices(tets, labels, adj_start, adj_len, pool):
         fb = np.empty(m, np.int64)
         f0 = np.empty(m, np.int64)
         f1 = np.empty(m, np.int64)
-        if surface_faces(x, tets, labels, adj_start, adj_len, pool, fa, fb, f0, f1) > 0:
+        if surface_faces(x, Stars(tets, adj_start, adj_len, pool), labels, (fa, fb, f0, f1)) > 0:
             out[x] = 1
     return out
 
@@ -137,7 +138,7 @@ def surface_face_points(points, tets, labels, adj_start, adj_len, pool, vclass):
         fb = np.empty(m, np.int64)
         f0 = np.empty(m, np.int64)
         f1 = np.empty(m, np.int64)
-        nf = surface_faces(x, tets, labels, adj_start, adj_len, pool, fa, fb, f0, f1)
+        nf = surface_faces(x, Stars(tets, adj_start, adj_len, pool), labels, (fa, fb, f0, f1))
         c = 0
         for i in range(nf):
             if x < fa[i] and x < fb[i]:
@@ -154,7 +155,7 @@ def surface_face_points(points, tets, labels, adj_start, adj_len, pool, vclass):
         fb = np.empty(m, np.int64)
         f0 = np.empty(m, np.int64)
         f1 = np.empty(m, np.int64)
-        nf = surface_faces(x, tets, labels, adj_start, adj_len, pool, fa, fb, f0, f1)
+        nf = surface_faces(x, Stars(tets, adj_start, adj_len, pool), labels, (fa, fb, f0, f1))
         j = offsets[x]
         for i in range(nf):
             if x < fa[i] and x < fb[i]:
@@ -207,24 +208,26 @@ def best_cost(w, points, tets, adj_start, adj_len, pool, vclass, params):
 
 
 @njit(cache=True, parallel=True)
-def _all_best_costs(points, tets, adj_start, adj_len, pool, vclass, locked, vert_alive, params):
-    n = adj_start.shape[0]
+def _all_best_costs(mesh, stars, params):
+    n = stars.adj_start.shape[0]
     out = np.full(n, np.inf)
     for w in prange(n):
-        if vert_alive[w] and not locked[w]:
-            out[w] = best_cost(w, points, tets, adj_start, adj_len, pool, vclass, params)
+        if mesh.vert_alive[w] and not mesh.locked[w]:
+            out[w] = best_cost(w, mesh.points, stars.tets, stars.adj_start, stars.adj_len, stars.pool, mesh.vclass,
+                               params)
     return out
 
 
 @njit(cache=True)
-def push_all(points, tets, adj_start, adj_len, pool, vclass, locked, vert_alive, ver, qkey, qlow, heap_key, heap_u, heap_stamp, counters, params):
-    """Rebuild the heap with every movable vertex at its current cost.
+def push_all(state, counters, params):
+    """Rebuild the heap with every movable vertex at its current cost (``state`` a ``_state.Decimation``).
 
     ``qkey[w]`` is the key of w's live heap entry (inf: w is not queued), a
     lower bound of its cost; ``qlow[w]`` a lower bound of the cost of a vertex
     that is not queued.
     """
-    costs = _all_best_costs(points, tets, adj_start, adj_len, pool, vclass, locked, vert_alive, params)
+    ver, qkey, qlow, heap_key, heap_u, heap_stamp = state.queue
+    costs = _all_best_costs(state.mesh, state.stars, params)
     size = 0
     for w in range(costs.shape[0]):
         ver[w] += 1
@@ -240,13 +243,18 @@ def push_all(points, tets, adj_start, adj_len, pool, vclass, locked, vert_alive,
 
 
 @njit(cache=True)
-def collapse(u, v, points, tets, tet_alive, tet_maxcos, adj_start, adj_len, adj_cap, pool, vert_alive, vclass, own_tail, own_next, counters, new_maxcos):
-    """Apply the (legal) half-edge collapse ``u -> v``: local updates only.
+def collapse(u, v, state, counters, new_maxcos):
+    """Apply the (legal) half-edge collapse ``u -> v``: local updates only (``state`` a ``_state.Decimation``).
 
     ``new_maxcos`` (>= adj_len[u],) float64: the largest dihedral cosine of
     each tet of ``u``'s list after the collapse, as computed by
     :func:`cutkit.decimate._legality.can_collapse` (in the same list order).
     """
+    tets, adj_start, adj_len, pool = state.stars
+    adj_cap = state.room
+    tet_alive, tet_maxcos, vert_alive, vclass = (state.mesh.tet_alive, state.mesh.tet_maxcos, state.mesh.vert_alive,
+                                                 state.mesh.vclass)
+    own_tail, own_next = state.owners.own_tail, state.owners.own_next
     s0 = adj_start[u]
     n = adj_len[u]
     # Copy u's list first: appending to v's list may move lists inside the pool.
@@ -278,13 +286,19 @@ def collapse(u, v, points, tets, tet_alive, tet_maxcos, adj_start, adj_len, adj_
 
 
 @njit(cache=True)
-def _try_vertex(u, nc, cand, grad, gbase, newcos, points, tets, labels, tet_lab, vol_drift, vol_budget, tet_alive, tet_maxcos, adj_start, adj_len, adj_cap, pool, vert_alive, vclass, locked, ver, qkey, qlow, own_pts, own_tail, own_next, mark, mark2, heap_key, heap_u, heap_stamp, collapse_u, collapse_v, tet_counts, counters, params, bnd_keys, bnd_nodes, grid):
+def _try_vertex(u, nc, cand, scratch, state, counters, params):
     """Collapse ``u`` onto the first legal of its ``nc`` cheapest neighbours ``cand``; False if none is legal.
 
-    ``grad`` (k, 3) float64, ``gbase`` (k,) int64 and ``newcos`` (k,) float64
-    are scratch space for :func:`volume_gradients` and the new dihedral
-    cosines (replaced locally when the star is larger than k).
+    ``scratch`` = (``grad`` (k, 3) float64, ``gbase`` (k,) int64, ``newcos``
+    (k,) float64): space for :func:`volume_gradients` and the new dihedral
+    cosines (replaced locally when the star is larger than k).  ``state`` a
+    ``_state.Decimation``.
     """
+    grad, gbase, newcos = scratch
+    points, tets, vclass = state.mesh.points, state.stars.tets, state.mesh.vclass
+    adj_start, adj_len, pool = state.stars.adj_start, state.stars.adj_len, state.stars.pool
+    mark = state.marks[0]
+    vol_drift = state.budget.vol_drift
     s0 = adj_start[u]
     n = adj_len[u]
     if grad.shape[0] < n:
@@ -294,19 +308,18 @@ def _try_vertex(u, nc, cand, grad, gbase, newcos, points, tets, labels, tet_lab,
     volume_gradients(u, points, tets, adj_start, adj_len, pool, grad, gbase)
     for idx in range(nc):
         v = cand[idx]
-        if not volume_precheck(u, v, points, tets, adj_start, adj_len, pool, grad, gbase, params[P_VOL_EPS]):
+        if not volume_precheck(u, v, points, state.stars, (grad, gbase), params[P_VOL_EPS]):
             counters[C_PRECHECK_REJECTS] += 1
             continue
         counters[C_CHECKS] += 1
-        ok, _err = can_collapse(u, v, points, tets, labels, tet_lab, tet_maxcos, adj_start, adj_len, pool, vclass, own_pts, own_next, mark, mark2, vol_drift, vol_budget, counters, params, newcos)
+        ok, _err = can_collapse(u, v, state, counters, params, newcos)
         if not ok:
             continue
-        if vclass[u] != 0 and bnd_keys.shape[0] and not conforming_after(
-                u, v, points, tets, labels, adj_start, adj_len, pool, vert_alive, bnd_keys, bnd_nodes, grid):
+        if vclass[u] != 0 and state.boundary.bnd_keys.shape[0] and not conforming_after(u, v, state):
             continue
         if vclass[u] != 0:
             dvol = np.empty(vol_drift.shape[0])
-            label_volume_change(u, v, points, tets, tet_lab, adj_start, adj_len, pool, dvol)
+            label_volume_change(u, v, points, tets, state.mesh.tet_lab, adj_start, adj_len, pool, dvol)
             vol_drift += dvol
         # The vertices whose star changes are those of u's tets; v's other
         # neighbours keep their stars (their collapses onto v are re-tested
@@ -322,19 +335,19 @@ def _try_vertex(u, nc, cand, grad, gbase, newcos, points, tets, labels, tet_lab,
                     mark[w] = st
                     touched[nt] = w
                     nt += 1
-        collapse(u, v, points, tets, tet_alive, tet_maxcos, adj_start, adj_len, adj_cap, pool, vert_alive, vclass, own_tail, own_next, counters, newcos)
+        collapse(u, v, state, counters, newcos)
         c = counters[C_COLLAPSES]
-        collapse_u[c] = u
-        collapse_v[c] = v
-        tet_counts[c + 1] = counters[C_ALIVE_TETS]
+        state.log.collapse_u[c] = u
+        state.log.collapse_v[c] = v
+        state.log.tet_counts[c + 1] = counters[C_ALIVE_TETS]
         counters[C_COLLAPSES] = c + 1
-        _requeue_touched(v, touched, nt, points, vclass, locked, ver, qkey, qlow, heap_key, heap_u, heap_stamp, counters, params)
+        _requeue_touched(v, touched, nt, state, counters, params)
         return True
     return False
 
 
 @njit(cache=True)
-def _requeue_touched(v, touched, nt, points, vclass, locked, ver, qkey, qlow, heap_key, heap_u, heap_stamp, counters, params):
+def _requeue_touched(v, touched, nt, state, counters, params):
     """Queue the touched vertices of a collapse ``u -> v`` whose cost may have gone down.
 
     Keys are lower bounds of the true costs (a popped vertex whose true cost
@@ -348,6 +361,8 @@ def _requeue_touched(v, touched, nt, points, vclass, locked, ver, qkey, qlow, he
     was last popped at cost ``qlow[w]``, and the new neighbourhood may allow
     one) is pushed at ``min(qlow[w], new edges)``.
     """
+    points, vclass, locked = state.mesh.points, state.mesh.vclass, state.mesh.locked
+    ver, qkey, qlow, heap_key, heap_u, heap_stamp = state.queue
     inv_h = 1.0 / params[P_H]
     for i in range(nt):
         w = touched[i]
@@ -371,11 +386,15 @@ def _requeue_touched(v, touched, nt, points, vclass, locked, ver, qkey, qlow, he
 
 
 @njit(cache=True)
-def run_collapses(points, tets, labels, tet_lab, vol_drift, vol_budget, tet_alive, tet_maxcos, adj_start, adj_len, adj_cap, pool, vert_alive, vclass, locked, ver, qkey, qlow, own_pts, own_tail, own_next, mark, mark2, heap_key, heap_u, heap_stamp, collapse_u, collapse_v, tet_counts, counters, params, max_pops, bnd_keys, bnd_nodes, grid):
-    """Pop the heap until the target tet count, an empty heap, or ``max_pops`` pops.
+def run_collapses(state, counters, params, max_pops):
+    """Pop the heap until the target tet count, an empty heap, or ``max_pops`` pops (``state`` a
+    ``_state.Decimation``).
 
     Returns one of ``STATUS_TARGET``, ``STATUS_EMPTY``, ``STATUS_BUDGET``.
     """
+    points, vclass, vert_alive = state.mesh.points, state.mesh.vclass, state.mesh.vert_alive
+    ver, qkey, qlow, heap_key, heap_u, heap_stamp = state.queue
+    mark = state.marks[0]
     cand = np.empty(MAX_CANDIDATES, np.int64)
     cand_key2 = np.empty(MAX_CANDIDATES)
     grad = np.empty((STAR_SCRATCH, 3))
@@ -393,7 +412,7 @@ def run_collapses(points, tets, labels, tet_lab, vol_drift, vol_budget, tet_aliv
         if vert_alive[u] == 0 or stamp != ver[u]:
             continue  # stale entry: u was pushed again since
         qkey[u] = np.inf
-        nc = cheapest_neighbours(u, points, tets, adj_start, adj_len, pool, vclass, mark, counters, params, cand, cand_key2)
+        nc = cheapest_neighbours(u, points, state.stars, vclass, mark, counters, params, (cand, cand_key2))
         cost = math.sqrt(cand_key2[0]) / params[P_H] if nc > 0 else np.inf
         if cost > key * (1.0 + 1e-12):
             # The neighbourhood changed since u was queued: requeue at its true cost.
@@ -403,6 +422,6 @@ def run_collapses(points, tets, labels, tet_lab, vol_drift, vol_budget, tet_aliv
                 qkey[u] = cost
                 heap_push(cost, u, ver[u], heap_key, heap_u, heap_stamp, ver, counters)
             continue
-        if not _try_vertex(u, nc, cand, grad, gbase, newcos, points, tets, labels, tet_lab, vol_drift, vol_budget, tet_alive, tet_maxcos, adj_start, adj_len, adj_cap, pool, vert_alive, vclass, locked, ver, qkey, qlow, own_pts, own_tail, own_next, mark, mark2, heap_key, heap_u, heap_stamp, collapse_u, collapse_v, tet_counts, counters, params, bnd_keys, bnd_nodes, grid):
+        if not _try_vertex(u, nc, cand, (grad, gbase, newcos), state, counters, params):
             qlow[u] = cost  # no legal collapse now; a lower bound once its star changes
     return STATUS_TARGET

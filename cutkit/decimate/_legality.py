@@ -54,8 +54,9 @@ def _swap(x, u, v):
 
 
 @njit(cache=True)
-def surface_faces(x, tets, labels, adj_start, adj_len, pool, fa, fb, fs0, fs1):
-    """S-faces (boundary or tissue interface) around vertex ``x``.
+def surface_faces(x, stars, labels, faces):
+    """S-faces (boundary or tissue interface) around vertex ``x`` (``stars`` a ``_state.Stars``;
+    ``faces`` the outputs ``(fa, fb, fs0, fs1)``).
 
     Each S-face ``(x, fa[i], fb[i])`` is written once, with its sheet
     ``(fs0[i], fs1[i])``: the two labels on its sides, sorted, ``-1`` for the
@@ -64,6 +65,8 @@ def surface_faces(x, tets, labels, adj_start, adj_len, pool, fa, fb, fs0, fs1):
     in the tet the face came from, so that ``cross(fa - x, fb - x)`` keeps its
     sense when ``x`` is replaced by another point.
     """
+    tets, adj_start, adj_len, pool = stars.tets, stars.adj_start, stars.adj_len, stars.pool
+    fa, fb, fs0, fs1 = faces
     s0 = adj_start[x]
     n = adj_len[x]
     # Every tet of x has three faces through x, named by their other two
@@ -158,13 +161,14 @@ def label_volume_change(u, v, points, tets, tet_lab, adj_start, adj_len, pool, d
 
 
 @njit(cache=True)
-def shape_rule(u, v, points, tets, tet_maxcos, adj_start, adj_len, pool, params, new_maxcos):
+def shape_rule(u, v, points, stars, tet_maxcos, params, new_maxcos):
     """Rule 1: the surviving tets of ``u`` keep ``6 V > vol_eps`` and no worse a dihedral angle.
 
     Also refuses a collapse that kills no tet (``u v`` is not an edge).
     Writes the new largest dihedral cosine of each surviving tet of ``u``'s
     list to ``new_maxcos``.
     """
+    tets, adj_start, adj_len, pool = stars.tets, stars.adj_start, stars.adj_len, stars.pool
     su0 = adj_start[u]
     nsu = adj_len[u]
     old_worst = -1.0
@@ -388,10 +392,11 @@ def normal_rule(u, v, points, nu, fa, fb, params):
 
 
 @njit(cache=True)
-def volume_balance_rule(u, v, points, tets, tet_lab, adj_start, adj_len, pool, vol_drift, vol_budget):
+def volume_balance_rule(u, v, points, stars, tet_lab, budget):
     """Rule 3d: no label's volume drift goes beyond its budget, unless the collapse brings it back towards zero."""
+    vol_drift, vol_budget = budget.vol_drift, budget.vol_budget
     dvol = np.empty(vol_drift.shape[0])
-    label_volume_change(u, v, points, tets, tet_lab, adj_start, adj_len, pool, dvol)
+    label_volume_change(u, v, points, stars.tets, tet_lab, stars.adj_start, stars.adj_len, stars.pool, dvol)
     for lab in range(dvol.shape[0]):
         after = vol_drift[lab] + dvol[lab]
         if abs(after) > vol_budget[lab] and abs(after) > abs(vol_drift[lab]):
@@ -400,13 +405,17 @@ def volume_balance_rule(u, v, points, tets, tet_lab, adj_start, adj_len, pool, v
 
 
 @njit(cache=True)
-def own_points_distance_rule(u, v, points, own_pts, own_next, nu, fa, fb, nv, ga, gb, tol2, worst):
+def own_points_distance_rule(u, v, points, owners, faces_u, faces_v, tol2, worst):
     """Rule 3e, the points ``u`` and ``v`` represent: within the tolerance of the S-faces after the collapse.
 
     The points of u go to the new S-faces; those of v to the new S-faces and
-    v's S-faces that stay.  Returns ``(ok, worst)``, ``worst`` the largest
-    squared distance so far (in: from the rules before).
+    v's S-faces that stay (``faces_u`` = (nu, fa, fb), ``faces_v`` = (nv, ga, gb):
+    :func:`surface_faces` of u and of v).  Returns ``(ok, worst)``, ``worst`` the
+    largest squared distance so far (in: from the rules before).
     """
+    own_pts, own_next = owners.own_pts, owners.own_next
+    nu, fa, fb = faces_u
+    nv, ga, gb = faces_v
     pv = points[v]
     r = u
     while r >= 0:
@@ -440,14 +449,17 @@ def own_points_distance_rule(u, v, points, own_pts, own_next, nu, fa, fb, nv, ga
 
 
 @njit(cache=True)
-def neighbour_points_distance_rule(u, v, points, tets, labels, adj_start, adj_len, pool, own_pts, own_next,
-                                   nu, fa, fb, mark, counters, tol2, worst):
+def neighbour_points_distance_rule(u, v, state, faces_u, counters, tol2, worst):
     """Rule 3e, the points the other S-neighbours w of ``u`` represent.
 
     Each goes to the S-faces around w after the collapse (u replaced by v,
-    faces holding both gone).  Returns ``(ok, worst)`` as
+    faces holding both gone).  ``state`` a ``_state.Decimation``, ``faces_u``
+    as for :func:`own_points_distance_rule`.  Returns ``(ok, worst)`` as
     :func:`own_points_distance_rule`.
     """
+    points, labels, stars = state.mesh.points, state.mesh.labels, state.stars
+    own_pts, own_next, mark = state.owners.own_pts, state.owners.own_next, state.marks[0]
+    nu, fa, fb = faces_u
     pv = points[v]
     st4 = _new_stamp(counters)
     for i in range(nu):
@@ -457,12 +469,12 @@ def neighbour_points_distance_rule(u, v, points, tets, labels, adj_start, adj_le
             mark[w] = st4
             if own_next[w] < 0:
                 continue
-            nw = 3 * adj_len[w]
+            nw = 3 * stars.adj_len[w]
             ha = np.empty(nw, np.int64)
             hb = np.empty(nw, np.int64)
             hs0 = np.empty(nw, np.int64)
             hs1 = np.empty(nw, np.int64)
-            nfw = surface_faces(w, tets, labels, adj_start, adj_len, pool, ha, hb, hs0, hs1)
+            nfw = surface_faces(w, stars, labels, (ha, hb, hs0, hs1))
             r = own_next[w]
             while r >= 0:
                 pr = own_pts[r]
@@ -516,7 +528,7 @@ def sample_distance_rule(u, v, points, nu, fa, fb, tol2, worst):
 
 
 @njit(cache=True)
-def can_collapse(u, v, points, tets, labels, tet_lab, tet_maxcos, adj_start, adj_len, pool, vclass, own_pts, own_next, mark, mark2, vol_drift, vol_budget, counters, params, new_maxcos):
+def can_collapse(u, v, state, counters, params, new_maxcos):
     """Whether the half-edge collapse ``u -> v`` is legal; returns ``(ok, surface_error_mm)``.
 
     The rules of the module docstring, in order (the ``*_rule`` functions
@@ -527,16 +539,18 @@ def can_collapse(u, v, points, tets, labels, tet_lab, tet_maxcos, adj_start, adj
     collapse (entries of the tets that die are left alone), for
     :func:`cutkit.decimate._kernels.collapse`.
 
-    ``own_pts`` (n + k, 3) holds the original surface points: the n nodes,
-    then the centroids of the original S-faces; ``own_next`` links the ones
-    each vertex represents (a list that starts at the vertex itself and ends
-    with -1).
-    ``tet_lab`` (m,) is each tet's label as an index 0..L-1; ``vol_drift``
-    (L,) the volume each label has gained so far, ``vol_budget`` (L,) the
-    drift allowed.
+    ``state`` is the ``_state.Decimation``: its owners' ``own_pts`` (n + k, 3)
+    hold the original surface points (the n nodes, then the centroids of the
+    original S-faces), ``own_next`` links the ones each vertex represents (a
+    list that starts at the vertex itself and ends with -1); its budget the
+    volume each label has gained so far and the drift allowed.
     """
+    mesh, stars = state.mesh, state.stars
+    points, labels, vclass = mesh.points, mesh.labels, mesh.vclass
+    tets, adj_start, adj_len, pool = stars.tets, stars.adj_start, stars.adj_len, stars.pool
+    mark, mark2 = state.marks
     # 1. shape; 2. link conditions of the tet complex
-    if not shape_rule(u, v, points, tets, tet_maxcos, adj_start, adj_len, pool, params, new_maxcos):
+    if not shape_rule(u, v, points, stars, mesh.tet_maxcos, params, new_maxcos):
         return False, 0.0
     ok, ring = vertex_link_rule(u, v, tets, adj_start, adj_len, pool, mark, mark2, counters)
     if not ok:
@@ -555,34 +569,33 @@ def can_collapse(u, v, points, tets, labels, tet_lab, tet_maxcos, adj_start, adj
     fb = np.empty(3 * nsu, np.int64)
     fs0 = np.empty(3 * nsu, np.int64)
     fs1 = np.empty(3 * nsu, np.int64)
-    nu = surface_faces(u, tets, labels, adj_start, adj_len, pool, fa, fb, fs0, fs1)
+    nu = surface_faces(u, stars, labels, (fa, fb, fs0, fs1))
     if not sheet_rule(v, nu, fa, fb, fs0, fs1):
         return False, 0.0
     ga = np.empty(3 * nsv, np.int64)
     gb = np.empty(3 * nsv, np.int64)
     gs0 = np.empty(3 * nsv, np.int64)
     gs1 = np.empty(3 * nsv, np.int64)
-    nv = surface_faces(v, tets, labels, adj_start, adj_len, pool, ga, gb, gs0, gs1)
+    nv = surface_faces(v, stars, labels, (ga, gb, gs0, gs1))
     if not surface_link_rule(v, nu, fa, fb, nv, ga, gb, mark, counters):
         return False, 0.0
     if not normal_rule(u, v, points, nu, fa, fb, params):
         return False, 0.0
-    if not volume_balance_rule(u, v, points, tets, tet_lab, adj_start, adj_len, pool, vol_drift, vol_budget):
+    if not volume_balance_rule(u, v, points, stars, mesh.tet_lab, state.budget):
         return False, 0.0
     # 3e. distance, both ways: original points -> new S-faces, samples of the new S-faces -> S now
     tol = params[P_TOL] * params[P_SURF_SAFETY]
     tol2 = tol * tol
-    ok, worst = own_points_distance_rule(u, v, points, own_pts, own_next, nu, fa, fb, nv, ga, gb, tol2, 0.0)
+    ok, worst = own_points_distance_rule(u, v, points, state.owners, (nu, fa, fb), (nv, ga, gb), tol2, 0.0)
     if ok:
-        ok, worst = neighbour_points_distance_rule(u, v, points, tets, labels, adj_start, adj_len, pool, own_pts,
-                                                   own_next, nu, fa, fb, mark, counters, tol2, worst)
+        ok, worst = neighbour_points_distance_rule(u, v, state, (nu, fa, fb), counters, tol2, worst)
     if ok:
         ok, worst = sample_distance_rule(u, v, points, nu, fa, fb, tol2, worst)
     return ok, math.sqrt(worst)
 
 
 @njit(cache=True)
-def conforming_after(u, v, points, tets, labels, adj_start, adj_len, pool, vert_alive, bnd_keys, bnd_nodes, grid):
+def conforming_after(u, v, state):
     """Rule 4: no boundary node lies on an outer boundary face the collapse ``u -> v`` makes.
 
     Such a node hangs (``cutkit check`` refuses the mesh): thin structures
@@ -590,15 +603,17 @@ def conforming_after(u, v, points, tets, labels, adj_start, adj_len, pool, vert_
     faces.  Nodes never move in a half-edge collapse, so the boundary nodes
     are binned once: ``bnd_keys`` their sorted linear cell keys,
     ``bnd_nodes`` the node of each, ``grid`` = (lo x, y, z, cell size,
-    cells along x, y, z, relative tolerance).  Run after :func:`can_collapse` found the collapse
-    legal (``u`` on the surface).
+    cells along x, y, z, relative tolerance): ``state.boundary``.  Run after :func:`can_collapse`
+    found the collapse legal (``u`` on the surface).
     """
-    nsu = adj_len[u]
+    points, labels, vert_alive, stars = state.mesh.points, state.mesh.labels, state.mesh.vert_alive, state.stars
+    bnd_keys, bnd_nodes, grid = state.boundary
+    nsu = stars.adj_len[u]
     fa = np.empty(3 * nsu, np.int64)
     fb = np.empty(3 * nsu, np.int64)
     fs0 = np.empty(3 * nsu, np.int64)
     fs1 = np.empty(3 * nsu, np.int64)
-    nu = surface_faces(u, tets, labels, adj_start, adj_len, pool, fa, fb, fs0, fs1)
+    nu = surface_faces(u, stars, labels, (fa, fb, fs0, fs1))
     h = grid[3]
     rel_tol = grid[7]
     dims = np.empty(3, np.int64)

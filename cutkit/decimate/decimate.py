@@ -184,6 +184,7 @@ def decimate(
     from cutkit.decimate import _kernels as K
     from cutkit.decimate import _legality as L
     from cutkit.decimate import _pool as P
+    from cutkit.decimate import _state as S
 
     points, tets0, labels, vol6 = _check_model(model)
     n, m = points.shape[0], tets0.shape[0]
@@ -251,6 +252,11 @@ def decimate(
     tet_counts[0] = m
 
     bnd_keys, bnd_nodes, grid = _boundary_grid(points, tets0, h)
+    state = S.Decimation(
+        S.Mesh(points, labels, tet_lab, tet_alive, tet_maxcos, vert_alive, vclass, locked),
+        S.Stars(tets, adj_start, adj_len, pool), adj_cap, S.Queue(ver, qkey, qlow, heap_key, heap_u, heap_stamp),
+        S.Owners(own_pts, own_tail, own_next), (mark, mark2), S.Budget(vol_drift, vol_budget),
+        S.Log(collapse_u, collapse_v, tet_counts), S.Boundary(bnd_keys, bnd_nodes, grid))
 
     to_remove = max(m - target, 0)
     rounds = 0
@@ -262,12 +268,8 @@ def decimate(
                 break  # a full round without a collapse: nothing legal is left
             done_at_round = int(counters[P.C_COLLAPSES])
             rounds += 1
-            K.push_all(points, tets, adj_start, adj_len, pool, vclass, locked, vert_alive, ver, qkey, qlow, heap_key, heap_u, heap_stamp, counters, params)
-        status = K.run_collapses(
-            points, tets, labels, tet_lab, vol_drift, vol_budget, tet_alive, tet_maxcos, adj_start, adj_len, adj_cap, pool, vert_alive, vclass,
-            locked, ver, qkey, qlow, own_pts, own_tail, own_next, mark, mark2, heap_key, heap_u, heap_stamp, collapse_u, collapse_v,
-            tet_counts, counters, params, POPS_PER_CALL, bnd_keys, bnd_nodes, grid,
-        )
+            K.push_all(state, counters, params)
+        status = K.run_collapses(state, counters, params, POPS_PER_CALL)
         if progress is not None:
             progress(int(min(m - counters[P.C_ALIVE_TETS], to_remove)), to_remove)
 
