@@ -40,8 +40,11 @@ def _grid_id(g0, c, ny, nz):
 
 
 @njit(cache=True, nogil=True)
-def _index_position(x, g0, i, j, k, ny, nz, mask, eoff, n_v, cross_s, out):
-    """Index-space position of cube ref ``x`` (a corner, < 8, or a crossing, < REF_CENTRE)."""
+def _index_position(x, cube, crossings, out):
+    """Index-space position of cube ref ``x`` (a corner, < 8, or a crossing, < REF_CENTRE) of ``cube``
+    (``_structs.Cube``; ``crossings`` a ``_structs.Crossings``)."""
+    g0, i, j, k, ny, nz = cube
+    mask, eoff, n_v, cross_s = crossings
     if x < 8:
         c = x
         s = 0.0
@@ -62,11 +65,13 @@ def _to_world(affine, p, out):
 
 
 @njit(cache=True, nogil=True)
-def _background_crossing_mean(lab, g0, t, i, j, k, ny, nz, mask, eoff, n_v, cross_s, out):
+def _background_crossing_mean(lab, cube, t, crossings, out):
     """Index-space mean of Kuhn tet ``t``'s crossings with the background.
 
     There is one on an edge of every corner, so the mean is strictly inside the tet.
     """
+    g0, i, j, k, ny, nz = cube
+    mask, eoff, n_v, cross_s = crossings
     p = np.empty(3)
     out[:] = 0.0
     nw = 0
@@ -113,26 +118,27 @@ def _cone_min_angle(rows, m, centre_ref, centre, world, p):
 
 
 @njit(cache=True, nogil=True)
-def place_centre(rows, m, t, lab, g0, i, j, k, ny, nz, mask, eoff, n_v, cross_s, affine, world, known, work, out):
-    """World position of the centre node of Kuhn tet ``t`` of cube (i, j, k).
+def place_centre(rows, m, t, lab, cube, crossings, affine, scratch, out):
+    """World position of the centre node of Kuhn tet ``t`` of ``cube`` (``_structs.Cube``).
 
     Parameters
     ----------
     rows : (>= m, 4) int64
         The cube's pieces as cube refs; those holding ``REF_CENTRE + t`` are
         the cone of this centre.
-    mask, eoff, n_v, cross_s
-        The crossing table (:mod:`cutkit.isovolume._crossings`): ``cross_s``
-        (n_e,) float64 is the parameter of crossing node ``n_v + e``.
+    crossings : Crossings
+        The crossing table (:mod:`cutkit.isovolume._crossings`).
     affine : (3, 4) float64
         Index space to world (mm).
-    world : (REF_CENTRE, 3) float64, known : (REF_CENTRE,) bool
-        Scratch: world positions of cube refs, and which are filled in.
-    work : (8, 3) float64
-        Scratch.
+    scratch : tuple
+        (``world`` (REF_CENTRE, 3) float64, ``known`` (REF_CENTRE,) bool,
+        ``work`` (8, 3) float64): world positions of cube refs, which are
+        filled in, and work space.
     out : (3,) float64
         Receives the position.
     """
+    world, known, work = scratch
+    g0, ny, nz = cube.g0, cube.ny, cube.nz
     has_bg = False
     for w in range(4):
         if lab[_grid_id(g0, KUHN_PATHS[t, w], ny, nz)] == 0:
@@ -142,7 +148,7 @@ def place_centre(rows, m, t, lab, g0, i, j, k, ny, nz, mask, eoff, n_v, cross_s,
         # A centre on the outer surface stays at the mean of the background
         # crossings: moving it would move the boundary away from the
         # segmentation (docs/isovolume.md, the half-voxel bound).
-        _background_crossing_mean(lab, g0, t, i, j, k, ny, nz, mask, eoff, n_v, cross_s, c0)
+        _background_crossing_mean(lab, cube, t, crossings, c0)
         _to_world(affine, c0, out)
         return
     centre_ref = REF_CENTRE + t
@@ -160,7 +166,7 @@ def place_centre(rows, m, t, lab, g0, i, j, k, ny, nz, mask, eoff, n_v, cross_s,
             x = rows[r, v]
             if x < REF_CENTRE and not known[x]:
                 known[x] = True
-                _index_position(x, g0, i, j, k, ny, nz, mask, eoff, n_v, cross_s, work[1])
+                _index_position(x, cube, crossings, work[1])
                 _to_world(affine, work[1], world[x])
     # The crossing mean and the centroid, in world space (the map is affine).
     centroid = work[1]

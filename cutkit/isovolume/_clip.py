@@ -9,6 +9,8 @@ index-space positions (for the orientation of each emitted tet).  See
 
 from __future__ import annotations
 
+from collections import namedtuple
+
 from itertools import permutations
 
 import numpy as np
@@ -129,10 +131,17 @@ def label_crossing(lab, g, code, ny, nz):
 
 # ------------------------------------------------------- tet clipping ---
 
+#: One Kuhn tet being clipped: its local nodes' cube refs ``ref`` (11,) int64, global keys ``key``
+#: (11,) int64 and index-space positions ``pos`` (11, 3) float64 (local 0-3 the corners, 4 + e the
+#: crossing of edge e, 10 the centre), the orientation ``sgn`` (+1 / -1), and where its pieces go:
+#: ``out`` (k, 4) int64 (cube refs) and ``out_lab`` (k,) int32.
+Cell = namedtuple("Cell", ["ref", "key", "pos", "sgn", "out", "out_lab"])
+
 
 @njit(cache=True, nogil=True)
-def _emit(a, b, c, d, label, ref, pos, sgn, out, out_lab, n):
+def _emit(a, b, c, d, label, cell, n):
     """Append tet (a, b, c, d) (local node numbers) oriented so sgn * det > 0."""
+    ref, pos, sgn, out, out_lab = cell.ref, cell.pos, cell.sgn, cell.out, cell.out_lab
     ax = pos[b, 0] - pos[a, 0]
     ay = pos[b, 1] - pos[a, 1]
     az = pos[b, 2] - pos[a, 2]
@@ -173,24 +182,25 @@ def _quad(q0, q1, q2, q3, key):
 
 
 @njit(cache=True, nogil=True)
-def _pyramid(apex, q0, q1, q2, q3, label, ref, key, pos, sgn, out, out_lab, n):
-    if _quad(q0, q1, q2, q3, key):
-        n = _emit(apex, q0, q1, q2, label, ref, pos, sgn, out, out_lab, n)
-        n = _emit(apex, q0, q2, q3, label, ref, pos, sgn, out, out_lab, n)
+def _pyramid(apex, q0, q1, q2, q3, label, cell, n):
+    if _quad(q0, q1, q2, q3, cell.key):
+        n = _emit(apex, q0, q1, q2, label, cell, n)
+        n = _emit(apex, q0, q2, q3, label, cell, n)
     else:
-        n = _emit(apex, q1, q2, q3, label, ref, pos, sgn, out, out_lab, n)
-        n = _emit(apex, q1, q3, q0, label, ref, pos, sgn, out, out_lab, n)
+        n = _emit(apex, q1, q2, q3, label, cell, n)
+        n = _emit(apex, q1, q3, q0, label, cell, n)
     return n
 
 
 @njit(cache=True, nogil=True)
-def _prism(p0, p1, p2, r0, r1, r2, label, ref, key, pos, sgn, out, out_lab, n):
+def _prism(p0, p1, p2, r0, r1, r2, label, cell, n):
     """Split the prism with triangles (p0 p1 p2), (r0 r1 r2), pk joined to rk.
 
     V, the node of smallest key, cones the triangle opposite to it and the
     pyramid over the quad opposite to it; the two quads that contain V are
     then split along diagonals from V, as the quad rule demands.
     """
+    key = cell.key
     best = p0
     for v in (p1, p2, r0, r1, r2):
         if key[v] < key[best]:
@@ -202,12 +212,12 @@ def _prism(p0, p1, p2, r0, r1, r2, label, ref, key, pos, sgn, out, out_lab, n):
     elif best == p2:
         p0, p1, p2, r0, r1, r2 = p2, p0, p1, r2, r0, r1
     a0, a1, a2, b0, b1, b2 = p0, p1, p2, r0, r1, r2
-    n = _emit(a0, b0, b1, b2, label, ref, pos, sgn, out, out_lab, n)
-    return _pyramid(a0, a1, a2, b2, b1, label, ref, key, pos, sgn, out, out_lab, n)
+    n = _emit(a0, b0, b1, b2, label, cell, n)
+    return _pyramid(a0, a1, a2, b2, b1, label, cell, n)
 
 
 @njit(cache=True, nogil=True)
-def _clip_side(x, lab, on, label, ref, key, pos, sgn, sets, out, out_lab, n):
+def _clip_side(x, lab, on, label, cell, sets, n):
     """Tets of the part of a tet on the side of label ``x`` (paper Fig. 2 cases).
 
     Vertices are *in* (label x, not ON), *on* (ON: value = level) or *out*;
@@ -233,16 +243,16 @@ def _clip_side(x, lab, on, label, ref, key, pos, sgn, sets, out, out_lab, n):
     if ni == 0:
         return n
     if no == 0:
-        return _emit(0, 1, 2, 3, label, ref, pos, sgn, out, out_lab, n)
+        return _emit(0, 1, 2, 3, label, cell, n)
     if ni == 1:
         i0 = ins[0]
         if no == 3:
             return _emit(i0, 4 + LOCAL_EDGE[i0, outs[0]], 4 + LOCAL_EDGE[i0, outs[1]],
-                         4 + LOCAL_EDGE[i0, outs[2]], label, ref, pos, sgn, out, out_lab, n)
+                         4 + LOCAL_EDGE[i0, outs[2]], label, cell, n)
         if no == 2:
             return _emit(i0, ons[0], 4 + LOCAL_EDGE[i0, outs[0]], 4 + LOCAL_EDGE[i0, outs[1]],
-                         label, ref, pos, sgn, out, out_lab, n)
-        return _emit(i0, ons[0], ons[1], 4 + LOCAL_EDGE[i0, outs[0]], label, ref, pos, sgn, out, out_lab, n)
+                         label, cell, n)
+        return _emit(i0, ons[0], ons[1], 4 + LOCAL_EDGE[i0, outs[0]], label, cell, n)
     if ni == 2:
         i0 = ins[0]
         i1 = ins[1]
@@ -251,18 +261,18 @@ def _clip_side(x, lab, on, label, ref, key, pos, sgn, sets, out, out_lab, n):
             o1 = outs[1]
             return _prism(i0, 4 + LOCAL_EDGE[i0, o0], 4 + LOCAL_EDGE[i0, o1],
                           i1, 4 + LOCAL_EDGE[i1, o0], 4 + LOCAL_EDGE[i1, o1],
-                          label, ref, key, pos, sgn, out, out_lab, n)
+                          label, cell, n)
         o0 = outs[0]
         return _pyramid(ons[0], i0, i1, 4 + LOCAL_EDGE[i1, o0], 4 + LOCAL_EDGE[i0, o0],
-                        label, ref, key, pos, sgn, out, out_lab, n)
+                        label, cell, n)
     # ni == 3, no == 1
     o0 = outs[0]
     return _prism(4 + LOCAL_EDGE[o0, ins[0]], 4 + LOCAL_EDGE[o0, ins[1]], 4 + LOCAL_EDGE[o0, ins[2]],
-                  ins[0], ins[1], ins[2], label, ref, key, pos, sgn, out, out_lab, n)
+                  ins[0], ins[1], ins[2], label, cell, n)
 
 
 @njit(cache=True, nogil=True)
-def _cone(lab, ref, key, pos, sgn, out, out_lab, n):
+def _cone(lab, cell, n):
     """Tets of a tet whose corners carry three or four labels (label maps only).
 
     Each face is partitioned by its own three labels alone (so both tets
@@ -272,6 +282,7 @@ def _cone(lab, ref, key, pos, sgn, out, out_lab, n):
     coned to the tet's centre node (local 10), so the interfaces inside the
     tet are cones that match up between the labels.
     """
+    key = cell.key
     for o in range(4):
         a = (o + 1) % 4
         b = (o + 2) % 4
@@ -281,17 +292,17 @@ def _cone(lab, ref, key, pos, sgn, out, out_lab, n):
         lc = lab[c]
         if la == lb and lb == lc:
             if la != 0:
-                n = _emit(10, a, b, c, la, ref, pos, sgn, out, out_lab, n)
+                n = _emit(10, a, b, c, la, cell, n)
         elif la != lb and lb != lc and la != lc:
             eab = 4 + LOCAL_EDGE[a, b]
             ebc = 4 + LOCAL_EDGE[b, c]
             eca = 4 + LOCAL_EDGE[c, a]
             if la != 0:
-                n = _emit(10, a, eab, eca, la, ref, pos, sgn, out, out_lab, n)
+                n = _emit(10, a, eab, eca, la, cell, n)
             if lb != 0:
-                n = _emit(10, b, ebc, eab, lb, ref, pos, sgn, out, out_lab, n)
+                n = _emit(10, b, ebc, eab, lb, cell, n)
             if lc != 0:
-                n = _emit(10, c, eca, ebc, lc, ref, pos, sgn, out, out_lab, n)
+                n = _emit(10, c, eca, ebc, lc, cell, n)
             # the middle goes to the tissue corner of smallest key: never to
             # the background, so a tissue triple junction does not pinch the
             # outer surface
@@ -302,7 +313,7 @@ def _cone(lab, ref, key, pos, sgn, out, out_lab, n):
                     lm = lab[v]
                     km = key[v]
             if lm != 0:
-                n = _emit(10, eab, ebc, eca, lm, ref, pos, sgn, out, out_lab, n)
+                n = _emit(10, eab, ebc, eca, lm, cell, n)
         else:
             # y is the odd corner, x0 x1 the pair
             if la == lb:
@@ -314,15 +325,15 @@ def _cone(lab, ref, key, pos, sgn, out, out_lab, n):
             e0 = 4 + LOCAL_EDGE[y, x0]
             e1 = 4 + LOCAL_EDGE[y, x1]
             if lab[y] != 0:
-                n = _emit(10, y, e0, e1, lab[y], ref, pos, sgn, out, out_lab, n)
+                n = _emit(10, y, e0, e1, lab[y], cell, n)
             lx = lab[x0]
             if lx != 0:
                 if _quad(x0, x1, e1, e0, key):
-                    n = _emit(10, x0, x1, e1, lx, ref, pos, sgn, out, out_lab, n)
-                    n = _emit(10, x0, e1, e0, lx, ref, pos, sgn, out, out_lab, n)
+                    n = _emit(10, x0, x1, e1, lx, cell, n)
+                    n = _emit(10, x0, e1, e0, lx, cell, n)
                 else:
-                    n = _emit(10, x1, e1, e0, lx, ref, pos, sgn, out, out_lab, n)
-                    n = _emit(10, x1, e0, x0, lx, ref, pos, sgn, out, out_lab, n)
+                    n = _emit(10, x1, e1, e0, lx, cell, n)
+                    n = _emit(10, x1, e0, x0, lx, cell, n)
     return n
 
 

@@ -31,6 +31,8 @@ that share a quadrilateral see the same keys and so pick the same diagonal.
 
 from __future__ import annotations
 
+from collections import namedtuple
+
 import numpy as np
 from numba import njit, prange
 
@@ -46,11 +48,20 @@ from cutkit.isovolume._clip import (  # noqa: F401  (tables re-exported for call
     MODE_SCALAR,
     POPCOUNT,
     REF_CENTRE,
+    Cell,
     _clip_side,
     _cone,
     _emit,
 )
 from cutkit.isovolume._centre import place_centre
+from cutkit.isovolume._structs import Cube
+
+#: Work space of :func:`_cube_pieces`, one per slab: ``ref``, ``key`` (11,) int64, ``pos`` (11, 3)
+#: float64, ``tlab`` (4,) int64, ``ton`` (4,) bool, ``sets`` (3, 4) int64, ``tmp`` (MAX_PIECES, 4)
+#: int64, ``tmp_lab`` (MAX_PIECES,) int32; its output ``out`` (6 MAX_PIECES, 4) int64 (cube refs)
+#: and ``out_lab`` (6 MAX_PIECES,) int32.
+CubeScratch = namedtuple("CubeScratch", ["ref", "key", "pos", "tlab", "ton", "sets", "tmp", "tmp_lab", "out",
+                                         "out_lab"])
 
 
 # --------------------------------------------------------- vertex passes ---
@@ -141,14 +152,16 @@ def _cube_uniform(lab, on, g0, ny, nz):
 
 
 @njit(cache=True, nogil=True)
-def _cube_pieces(i, j, k, ny, nz, n_grid, lab, on, f, level, mode, sgn,
-                 ref, key, pos, tlab, ton, sets, tmp, tmp_lab, out, out_lab):
-    """All tets of cube (i, j, k) into ``out`` (refs) and ``out_lab``; returns their count.
+def _cube_pieces(i, j, k, dims, field, scratch):
+    """All tets of cube (i, j, k) into ``scratch.out`` (refs) and ``scratch.out_lab``; returns their count.
 
-    ref, key : (11,) int64, pos : (11, 3) float64, tlab : (4,) int64,
-    ton : (4,) bool, sets : (3, 4) int64, tmp : (MAX_PIECES, 4) int64, tmp_lab : (MAX_PIECES,) int32
-    are scratch; out : (6 * MAX_PIECES, 4) int64, out_lab : (6 * MAX_PIECES,) int32.
+    ``dims`` (nx, ny, nz); ``field`` a ``_structs.Field``; ``scratch`` a :class:`CubeScratch`.
     """
+    nx, ny, nz = dims
+    n_grid = nx * ny * nz
+    lab, on, f, level, mode, sgn = field
+    ref, key, pos, tlab, ton, sets, tmp, tmp_lab, out, out_lab = scratch
+    cell = Cell(ref, key, pos, sgn, tmp, tmp_lab)
     g0 = (i * ny + j) * nz + k
     n = 0
     # Fast path: a cube of one label and no ON vertex is six whole tets.
@@ -191,7 +204,7 @@ def _cube_pieces(i, j, k, ny, nz, n_grid, lab, on, f, level, mode, sgn,
         m = 0
         if nlab == 1:
             if tlab[0] != 0:
-                m = _emit(0, 1, 2, 3, tlab[0], ref, pos, sgn, tmp, tmp_lab, 0)
+                m = _emit(0, 1, 2, 3, tlab[0], cell, 0)
         else:
             for e in range(6):
                 a = EDGE_A[e]
@@ -228,14 +241,14 @@ def _cube_pieces(i, j, k, ny, nz, n_grid, lab, on, f, level, mode, sgn,
                     if tlab[v] != x0:
                         x1 = tlab[v]
                 if x0 != 0:
-                    m = _clip_side(x0, tlab, ton, x0, ref, key, pos, sgn, sets, tmp, tmp_lab, m)
+                    m = _clip_side(x0, tlab, ton, x0, cell, sets, m)
                 if x1 != 0:
-                    m = _clip_side(x1, tlab, ton, x1, ref, key, pos, sgn, sets, tmp, tmp_lab, m)
+                    m = _clip_side(x1, tlab, ton, x1, cell, sets, m)
             else:
                 ref[10] = REF_CENTRE + t
                 for q in range(3):
                     pos[10, q] = 0.25 * (pos[0, q] + pos[1, q] + pos[2, q] + pos[3, q])
-                m = _cone(tlab, ref, key, pos, sgn, tmp, tmp_lab, m)
+                m = _cone(tlab, cell, m)
         for r in range(m):
             for v in range(4):
                 out[n, v] = tmp[r, v]
@@ -247,25 +260,35 @@ def _cube_pieces(i, j, k, ny, nz, n_grid, lab, on, f, level, mode, sgn,
 # ---------------------------------------------------------- cube passes ---
 
 
+@njit(cache=True, nogil=True)
+def _cube_scratch(out, out_lab):
+    """A fresh :class:`CubeScratch` writing to ``out`` and ``out_lab``."""
+    return CubeScratch(np.empty(11, np.int64), np.empty(11, np.int64), np.zeros((11, 3), np.float64),
+                       np.empty(4, np.int64), np.empty(4, np.bool_), np.empty((3, 4), np.int64),
+                       np.empty((MAX_PIECES, 4), np.int64), np.empty(MAX_PIECES, np.int32), out, out_lab)
+
+
+# The parallel kernels below take each array out of its struct before the prange, one name per
+# line: numba's parfors (0.68) lose writes made through a struct's field inside the loop, or through
+# names unpacked from a tuple argument (tests/test_numba_structs.py checks every parallel kernel).
 @njit(cache=True, parallel=True)
-def count_pieces(lab, on, f, nx, ny, nz, level, mode, sgn, n_tets, n_centres, used):
+def count_pieces(field, dims, counts, used):
     """Per x-slab i, the number of tets and of centre nodes; marks used grid vertices.
 
-    n_tets, n_centres : (nx - 1,) int64 out; used : (n,) uint8, zeroed, out.
-    Two slabs may both set a shared vertex's flag to 1 (same value).
+    ``field`` a ``_structs.Field``, ``dims`` (nx, ny, nz); ``counts`` = (n_tets, n_centres), both
+    (nx - 1,) int64 out; used : (n,) uint8, zeroed, out.  Two slabs may both set a shared vertex's
+    flag to 1 (same value).
     """
-    n_grid = nx * ny * nz
+    nx = dims[0]
+    ny = dims[1]
+    nz = dims[2]
+    lab = field.lab
+    on = field.on
+    n_tets = counts[0]
+    n_centres = counts[1]
     for i in prange(nx - 1):
-        ref = np.empty(11, np.int64)
-        key = np.empty(11, np.int64)
-        pos = np.zeros((11, 3), np.float64)
-        tlab = np.empty(4, np.int64)
-        ton = np.empty(4, np.bool_)
-        sets = np.empty((3, 4), np.int64)
-        tmp = np.empty((MAX_PIECES, 4), np.int64)
-        tmp_lab = np.empty(MAX_PIECES, np.int32)
         out = np.empty((6 * MAX_PIECES, 4), np.int64)
-        out_lab = np.empty(6 * MAX_PIECES, np.int32)
+        scratch = _cube_scratch(out, np.empty(6 * MAX_PIECES, np.int32))
         seen = np.empty(6, np.bool_)
         nt = 0
         nc = 0
@@ -280,8 +303,7 @@ def count_pieces(lab, on, f, nx, ny, nz, level, mode, sgn, n_tets, n_centres, us
                     for c in range(8):
                         used[g0 + (((c >> 2) & 1) * ny + ((c >> 1) & 1)) * nz + (c & 1)] = 1
                     continue
-                m = _cube_pieces(i, j, k, ny, nz, n_grid, lab, on, f, level, mode, sgn,
-                                 ref, key, pos, tlab, ton, sets, tmp, tmp_lab, out, out_lab)
+                m = _cube_pieces(i, j, k, dims, field, scratch)
                 nt += m
                 seen[:] = False
                 for r in range(m):
@@ -299,15 +321,24 @@ def count_pieces(lab, on, f, nx, ny, nz, level, mode, sgn, n_tets, n_centres, us
 
 
 @njit(cache=True, parallel=True)
-def fill_points(lab, on, f, mask, used, vmap, eoff, n_v, cross_s, nx, ny, nz, level, mode, affine, points):
+def fill_points(field, crossings, used, vmap, dims, affine, points):
     """World positions of the used grid vertices and of the crossing points.
 
-    vmap : (n,) int64 node id of each used vertex; eoff : (n,) int64 node id
-    of the first crossing of each vertex's forward edges; cross_s : (n_e,)
-    float64 parameter of crossing node ``n_v + e`` (label maps; see
-    :mod:`._crossings`); affine : (3, 4) float64 index -> world;
-    points : (n_nodes, 3) float64 out.
+    field : ``_structs.Field``; crossings : ``_structs.Crossings`` (label maps
+    read its ``cross_s``; see :mod:`._crossings`); used : (n,) uint8; vmap :
+    (n,) int64 node id of each used vertex; dims : (nx, ny, nz); affine :
+    (3, 4) float64 index -> world; points : (n_nodes, 3) float64 out.
     """
+    nx = dims[0]
+    ny = dims[1]
+    nz = dims[2]
+    f = field.f
+    level = field.level
+    mode = field.mode
+    mask = crossings.mask
+    eoff = crossings.eoff
+    n_v = crossings.n_v
+    cross_s = crossings.cross_s
     for i in prange(nx):
         for j in range(ny):
             for k in range(nz):
@@ -341,25 +372,31 @@ def fill_points(lab, on, f, mask, used, vmap, eoff, n_v, cross_s, nx, ny, nz, le
 
 
 @njit(cache=True, parallel=True)
-def fill_pieces(lab, on, f, mask, vmap, eoff, n_v, cross_s, tet_off, centre_off, nx, ny, nz, level, mode, sgn,
-                affine, tets, tet_labels, points):
+def fill_pieces(field, crossings, vmap, offsets, dims, affine, outputs):
     """Write the tets of every slab at ``tet_off[i]`` and its centre nodes at ``centre_off[i]``.
 
-    tet_off, centre_off : (nx - 1,) int64; tets : (m, 4) int64 out;
-    tet_labels : (m,) int32 out; points : (n_nodes, 3) float64 (centre rows out).
+    field : ``_structs.Field``; crossings : ``_structs.Crossings``; vmap : (n,) int64; offsets =
+    (tet_off, centre_off), both (nx - 1,) int64; dims : (nx, ny, nz); affine : (3, 4) float64;
+    outputs = (tets (m, 4) int64 out, tet_labels (m,) int32 out, points (n_nodes, 3) float64
+    (centre rows out)).
     """
-    n_grid = nx * ny * nz
+    nx = dims[0]
+    ny = dims[1]
+    nz = dims[2]
+    lab = field.lab
+    on = field.on
+    sgn = field.sgn
+    mask = crossings.mask
+    eoff = crossings.eoff
+    tet_off = offsets[0]
+    centre_off = offsets[1]
+    tets = outputs[0]
+    tet_labels = outputs[1]
+    points = outputs[2]
     for i in prange(nx - 1):
-        ref = np.empty(11, np.int64)
-        key = np.empty(11, np.int64)
-        pos = np.zeros((11, 3), np.float64)
-        tlab = np.empty(4, np.int64)
-        ton = np.empty(4, np.bool_)
-        sets = np.empty((3, 4), np.int64)
-        tmp = np.empty((MAX_PIECES, 4), np.int64)
-        tmp_lab = np.empty(MAX_PIECES, np.int32)
         out = np.empty((6 * MAX_PIECES, 4), np.int64)
         out_lab = np.empty(6 * MAX_PIECES, np.int32)
+        scratch = _cube_scratch(out, out_lab)
         centre_id = np.empty(6, np.int64)
         cworld = np.empty((REF_CENTRE, 3))
         cknown = np.zeros(REF_CENTRE, np.bool_)
@@ -388,8 +425,7 @@ def fill_pieces(lab, on, f, mask, vmap, eoff, n_v, cross_s, tet_off, centre_off,
                         tet_labels[nt] = u
                         nt += 1
                     continue
-                m = _cube_pieces(i, j, k, ny, nz, n_grid, lab, on, f, level, mode, sgn,
-                                 ref, key, pos, tlab, ton, sets, tmp, tmp_lab, out, out_lab)
+                m = _cube_pieces(i, j, k, dims, field, scratch)
                 if m == 0:
                     continue
                 centre_id[:] = -1
@@ -409,8 +445,8 @@ def fill_pieces(lab, on, f, mask, vmap, eoff, n_v, cross_s, tet_off, centre_off,
                                 centre_id[t] = nc
                                 # default: the mean of its crossings (with the background
                                 # if it has some), moved where that cone makes a sliver
-                                place_centre(out, m, t, lab, g0, i, j, k, ny, nz, mask, eoff, n_v, cross_s, affine,
-                                             cworld, cknown, cwork, points[nc])
+                                place_centre(out, m, t, lab, Cube(g0, i, j, k, ny, nz), crossings, affine,
+                                             (cworld, cknown, cwork), points[nc])
                                 nc += 1
                             node = centre_id[t]
                         tets[nt, v] = node

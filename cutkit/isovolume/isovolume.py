@@ -19,6 +19,7 @@ import numpy as np
 from cutkit.errors import EmptySegmentationError, InputError
 from cutkit.isovolume import _kernels as K
 from cutkit.isovolume._crossings import label_crossing_params
+from cutkit.isovolume._structs import Crossings, Field
 from cutkit.model.tetmodel import TetModel
 from cutkit.volumes.volume import Volume
 
@@ -167,7 +168,8 @@ def isovolume(volume: Volume, level: float = 0.5, labels=None, snap: float = SNA
     n_tets_slab = np.empty(nx - 1, np.int64)
     n_centres_slab = np.empty(nx - 1, np.int64)
     used = np.zeros(n_grid, np.uint8)
-    K.count_pieces(lab, on, f, nx, ny, nz, level, mode, sgn, n_tets_slab, n_centres_slab, used)
+    field = Field(lab, on, f, level, mode, sgn)
+    K.count_pieces(field, (nx, ny, nz), (n_tets_slab, n_centres_slab), used)
     n_tets = int(n_tets_slab.sum())
     if n_tets == 0:
         what = f"no sample at or above level {level:g}" if mode == K.MODE_SCALAR else "no voxel with a tissue label > 0"
@@ -190,9 +192,9 @@ def isovolume(volume: Volume, level: float = 0.5, labels=None, snap: float = SNA
     cross_s = np.full(n_e if mode == K.MODE_LABELS else 0, 0.5)
     if mode == K.MODE_LABELS:
         label_crossing_params(lab, mask, eoff, n_v, nx, ny, nz, cross_s)
-    K.fill_points(lab, on, f, mask, used, vmap, eoff, n_v, cross_s, nx, ny, nz, level, mode, affine, points)
-    K.fill_pieces(lab, on, f, mask, vmap, eoff, n_v, cross_s, tet_off, centre_off, nx, ny, nz, level, mode, sgn,
-                  affine, tets, tet_labels, points)
+    crossings = Crossings(mask, eoff, n_v, cross_s)
+    K.fill_points(field, crossings, used, vmap, (nx, ny, nz), affine, points)
+    K.fill_pieces(field, crossings, vmap, (tet_off, centre_off), (nx, ny, nz), affine, (tets, tet_labels, points))
 
     stats = IsovolumeStats(
         mode="scalar" if mode == K.MODE_SCALAR else "labels",
