@@ -433,20 +433,26 @@ def test_a_cut_is_preceded_by_a_frame_when_the_newest_frame_is_half_a_period_old
 
 
 def test_the_warm_up_loads_the_kernels_a_stroke_needs_that_its_short_cut_misses():
-    """Before a live session's clock starts: the T-cone kernel of a tet the tip has left and the swept
-    triangle query, each with the argument types a cut passes (C-contiguous float64 / int64 arrays),
-    so the first stroke loads neither mid-cut."""
+    """Before a live session's clock starts: the T-cone kernel of a tet the tip has left, the swept
+    triangle query and the Newton pattern's update, each with the argument types a cut or a resting
+    step passes (C-contiguous float64 / int64 arrays, the hierarchy's structs), so the first stroke
+    loads none of them mid-cut or just after it."""
     from numba import types
 
+    from cutkit.collision import _kernels as CK
     from cutkit.collision import _swept_kernels as SK
     from cutkit.cutting import _kernels_step as KS
     from cutkit.cutting.resubdivision import load_cone_kernel
+    from cutkit.relax import _pattern_kernels as KP
     from cutkit.simulate.warmup import warm_up_missed_kernels
 
     warm_up_missed_kernels()
     f2, i1, i2 = types.float64[:, ::1], types.int64[::1], types.int64[:, ::1]
     f1 = types.float64[::1]
     assert (f2, i1, f1, f1, i2, types.float64, types.int64) in KS.best_cone_apex.signatures
-    assert any(sig[:3] == (f2, i2, types.boolean[::1]) for sig in SK.query_triangle.signatures)
+    assert any(sig[0] == f2 and getattr(sig[1], "instance_class", None) is CK.Surface
+               and getattr(sig[2], "instance_class", None) is CK.Tree for sig in SK.query_triangle.signatures)
+    for kernel in (KP.touched_nodes, KP.update_node_rows, KP.update_element_blocks):
+        assert any(sig[0] == types.int64[:, :] or sig[0] == i2 for sig in kernel.signatures), kernel
     # the unit tet's cone over one face: the regular corner's own angles bound it
     assert 0.0 < load_cone_kernel() <= 90.0

@@ -63,8 +63,10 @@ def warm_up(outputs: bool = True, material_model: str | None = None) -> None:
 
 def warm_up_missed_kernels() -> None:
     """The kernels a stroke calls that the warm-up's short cut misses: the T-cone of a tet the tip
-    has left (:func:`~cutkit.cutting.resubdivision.load_cone_kernel`) and the swept blade's
-    triangle against the surface hierarchy (an entry edge first); 10-30 ms each at a first call."""
+    has left (:func:`~cutkit.cutting.resubdivision.load_cone_kernel`), the swept blade's
+    triangle against the surface hierarchy (an entry edge first) and the update of the Newton
+    matrix's pattern after a stroke (the short cut rebases before any resting step); 10-30 ms each
+    at a first call."""
     from cutkit.collision import SurfaceBVH, query_triangle
     from cutkit.cutting.resubdivision import load_cone_kernel
 
@@ -72,6 +74,22 @@ def warm_up_missed_kernels() -> None:
     points = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
     bvh = SurfaceBVH.build(points, np.array([[0, 1, 2]], np.int64))
     query_triangle(bvh, points, np.array([[0.2, 0.2, -1.0], [0.2, 0.2, 1.0], [0.3, 0.3, 1.0]]))
+    warm_up_pattern_update()
+
+
+def warm_up_pattern_update() -> int:
+    """Build the warm-up slab's Newton pattern, take one element out and update it
+    (:class:`~cutkit.relax.hessian_pattern.HessianPattern`); returns the updates made (1)."""
+    from cutkit.relax.elastic import build_element_model
+    from cutkit.relax.hessian_pattern import HessianPattern
+
+    em = build_element_model(warm_up_model())
+    pattern = HessianPattern(em)
+    pattern.get()
+    em.remove_elements(np.array([0], np.int64))
+    pattern.changed()
+    pattern.get()
+    return pattern.updates
 
 
 def warm_up_conjugate_gradients() -> int:
