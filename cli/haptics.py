@@ -26,7 +26,7 @@ def serve(host, port, model_path, material, priority, scalpel, verbose):
     """Serve the scalpel force model at 1 kHz until Ctrl-C or SIGTERM."""
     import logging
 
-    from cutkit.haptics.priority import raise_priority
+    from cutkit.haptics.priority import drop_priority, raise_priority
     from cutkit.haptics.server import HapticsServer, material_from_model
     from cutkit.scalpel import ScalpelParams
 
@@ -41,7 +41,10 @@ def serve(host, port, model_path, material, priority, scalpel, verbose):
     # one plain line, flushed: scripts and `bench --spawn` read the port from it
     click.echo(f"cutkit haptics: listening on {h}:{p}", nl=True)
     click.get_text_stream("stdout").flush()
-    stats = server.serve(install_signals=True)
+    try:
+        stats = server.serve(install_signals=True)
+    finally:
+        drop_priority()  # the report and the exit at normal priority
     click.echo(f"cutkit haptics: stopped after {stats['ticks']} ticks, {stats['resyncs']} resyncs, "
                f"{stats['connections']} connections, {stats['rejected']} rejected frames ({got} priority)")
 
@@ -62,13 +65,16 @@ def bench(host, port, seconds, spawn, priority, as_json):
     import json
 
     from cutkit.haptics.client import run_bench, spawned_server
-    from cutkit.haptics.priority import raise_priority
+    from cutkit.haptics.priority import drop_priority, raise_priority
 
     with contextlib.ExitStack() as stack:
         if spawn:
             host, port, _ = stack.enter_context(spawned_server("--priority", priority, host=host))
         got = raise_priority(priority)
-        result = run_bench(host, port, seconds)
+        try:
+            result = run_bench(host, port, seconds)
+        finally:
+            drop_priority()
     result.update(host=host, port=port, spawned=bool(spawn), client_priority=got)
     if as_json:
         click.echo(json.dumps(result))
@@ -98,7 +104,7 @@ def play(trajectory, host, port, rate, loop, priority, as_json):
 
     from cutkit.cutting.trajectory import read_trajectory
     from cutkit.haptics.play import play_trajectory
-    from cutkit.haptics.priority import raise_priority
+    from cutkit.haptics.priority import drop_priority, raise_priority
 
     traj = read_trajectory(trajectory)
     stop = threading.Event()
@@ -107,6 +113,7 @@ def play(trajectory, host, port, rate, loop, priority, as_json):
         got = raise_priority(priority)
         result = play_trajectory(traj, host, port, rate_hz=rate, loop=loop, stop=stop)
     finally:
+        drop_priority()  # the report and the exit at normal priority
         signal.signal(signal.SIGINT, old)
     result.update(trajectory=str(trajectory), host=host, port=port, priority=got)
     if as_json:

@@ -424,3 +424,21 @@ def test_fracture_cut_through_the_service():
         f = _until(dev, lambda fr: fr.state in (WITHDRAWING, STATIC) and abs(fr.force[0]) < 1e-12)
         sim.send_sim((0, 0, 0), B, contact=False)
         _until(dev, lambda fr: fr.state == FREE)
+
+
+def test_a_process_leaving_its_loop_drops_to_normal_priority():
+    """After the 1 kHz loop a process's report and exit run at normal priority (a device process that
+    exited at SCHED_FIFO took a core from the live session beside it for 100-120 ms): from realtime
+    (or the high nice value it falls back to) drop_priority returns to SCHED_OTHER and nice >= 0."""
+    import subprocess
+    import sys
+
+    code = ("import os; from cutkit.haptics.priority import raise_priority, drop_priority\n"
+            "got = raise_priority('realtime')\n"
+            "raised = os.sched_getscheduler(0) != os.SCHED_OTHER or os.nice(0) < 0\n"
+            "drop_priority()\n"
+            "print(got, raised, os.sched_getscheduler(0) == os.SCHED_OTHER, os.nice(0) >= 0)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60).stdout.split()
+    got, raised, other, nice_ok = out
+    assert other == "True" and nice_ok == "True"
+    assert raised == ("True" if got in ("realtime", "high") else "False")

@@ -54,6 +54,43 @@ def raise_priority(mode: str) -> str:
     return "normal"
 
 
+def drop_priority() -> None:
+    """Back to normal scheduling: SCHED_OTHER, nice 0 where it was lowered, memory unlocked.
+
+    A process calls it when it leaves its 1 kHz loop: what it does next (a
+    report, the interpreter's exit, 100 ms and more of work) would otherwise
+    run at real-time priority and take a core from the processes beside it
+    (a live session's frames stopped for 100-120 ms when the reference
+    device's process exited at SCHED_FIFO).  Lowering a priority is always
+    allowed; nothing is raised.
+    """
+    if hasattr(os, "sched_setscheduler"):
+        try:
+            if os.sched_getscheduler(0) != os.SCHED_OTHER:
+                os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+        except (OSError, PermissionError):
+            log.warning("could not leave real-time scheduling")
+    try:
+        current = os.nice(0)
+        if current < 0:
+            os.nice(-current)
+    except (OSError, PermissionError):
+        pass
+    _unlock_memory()
+
+
+def _unlock_memory() -> bool:
+    """munlockall(): undo :func:`_lock_memory`."""
+    import ctypes
+    import ctypes.util
+
+    try:
+        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True)
+        return libc.munlockall() == 0
+    except (OSError, AttributeError):
+        return False
+
+
 def _lock_memory() -> bool:
     """mlockall(): keep the process's pages in RAM so that no page fault stalls a tick."""
     import ctypes
