@@ -167,6 +167,7 @@ class NewtonSolver:
         self._amg = None  # (hierarchy, dofs it was built on)
         self._patterns = HessianPattern(em) if pattern is None else pattern
         self._pattern = None
+        self._upper = None  # the pattern's blocks above the diagonal (_block_cg_kernels.upper_blocks)
         self.reset()
 
     def reset(self) -> None:
@@ -197,7 +198,7 @@ class NewtonSolver:
                 return None
         if pattern is not self._pattern:
             self._pattern = pattern
-            self._upper = None  # the pattern's blocks above the diagonal (_block_cg_kernels.upper_blocks)
+            self._upper = None
             self.counts["pattern_builds"] += 1
         return pattern
 
