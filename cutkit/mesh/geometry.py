@@ -520,6 +520,26 @@ def segment_box(p0x, p0y, p0z, dx, dy, dz, bmin, bmax):
     return True
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _direction_and_normal(p0, p1, v0, v1, v2):
+    """(dx, dy, dz) = p1 - p0, (e1x..e2z) = v1 - v0, v2 - v0, the plane normal (nx, ny, nz) =
+    e1 x e2 (not normalised) and its length: the numbers both segment-triangle tests start from."""
+    dx = p1[0] - p0[0]
+    dy = p1[1] - p0[1]
+    dz = p1[2] - p0[2]
+    e1x = v1[0] - v0[0]
+    e1y = v1[1] - v0[1]
+    e1z = v1[2] - v0[2]
+    e2x = v2[0] - v0[0]
+    e2y = v2[1] - v0[1]
+    e2z = v2[2] - v0[2]
+    nx = e1y * e2z - e1z * e2y
+    ny = e1z * e2x - e1x * e2z
+    nz = e1x * e2y - e1y * e2x
+    nlen = math.sqrt(nx * nx + ny * ny + nz * nz)
+    return dx, dy, dz, e1x, e1y, e1z, e2x, e2y, e2z, nx, ny, nz, nlen
+
+
 @njit(cache=True, nogil=True)
 def segment_triangle_hit(p0, p1, v0, v1, v2, out):
     """Möller–Trumbore segment-triangle test of a closed triangle, with its degenerate cases.
@@ -540,20 +560,8 @@ def segment_triangle_hit(p0, p1, v0, v1, v2, out):
         HIT_COPLANAR.  For a coplanar segment ``t`` is where it enters
         the (closed) triangle.
     """
-    dx = p1[0] - p0[0]
-    dy = p1[1] - p0[1]
-    dz = p1[2] - p0[2]
-    e1x = v1[0] - v0[0]
-    e1y = v1[1] - v0[1]
-    e1z = v1[2] - v0[2]
-    e2x = v2[0] - v0[0]
-    e2y = v2[1] - v0[1]
-    e2z = v2[2] - v0[2]
-    # plane normal (not normalised) and its length
-    nx = e1y * e2z - e1z * e2y
-    ny = e1z * e2x - e1x * e2z
-    nz = e1x * e2y - e1y * e2x
-    nlen = math.sqrt(nx * nx + ny * ny + nz * nz)
+    # the segment's direction, the triangle's edges, its plane normal (not normalised) and length
+    dx, dy, dz, e1x, e1y, e1z, e2x, e2y, e2z, nx, ny, nz, nlen = _direction_and_normal(p0, p1, v0, v1, v2)
     dlen = math.sqrt(dx * dx + dy * dy + dz * dz)
     if nlen == 0.0 or dlen == 0.0:
         return -1  # degenerate triangle or segment: no well-defined crossing
@@ -617,19 +625,7 @@ def _hit_kind(u, v, w):
 def _coplanar(p0, p1, v0, v1, v2, out):
     """Clip a segment lying in the triangle's plane to the triangle (Cyrus–Beck); its direction and
     the plane's normal computed as :func:`segment_triangle_hit` computes them (the same numbers)."""
-    dx = p1[0] - p0[0]
-    dy = p1[1] - p0[1]
-    dz = p1[2] - p0[2]
-    e1x = v1[0] - v0[0]
-    e1y = v1[1] - v0[1]
-    e1z = v1[2] - v0[2]
-    e2x = v2[0] - v0[0]
-    e2y = v2[1] - v0[1]
-    e2z = v2[2] - v0[2]
-    nx = e1y * e2z - e1z * e2y
-    ny = e1z * e2x - e1x * e2z
-    nz = e1x * e2y - e1y * e2x
-    nlen = math.sqrt(nx * nx + ny * ny + nz * nz)
+    dx, dy, dz, _, _, _, _, _, _, nx, ny, nz, nlen = _direction_and_normal(p0, p1, v0, v1, v2)
     t0 = 0.0
     t1 = 1.0
     for k in range(3):

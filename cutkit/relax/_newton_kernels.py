@@ -313,6 +313,18 @@ def constrain(pattern, fixed, diagonal_add, data):
         data[d] = 1.0 if fixed[row] else data[d] + diagonal_add[row]
 
 
+@njit(cache=True, nogil=True, inline="always")
+def sort_unique(row):
+    """Sort ``row`` (k,) int64 in place and move its distinct values to the front; returns how many."""
+    row.sort()
+    u = 0
+    for q in range(row.shape[0]):
+        if q == 0 or row[q] != row[q - 1]:
+            row[u] = row[q]
+            u += 1
+    return u
+
+
 @njit(cache=True, nogil=True, parallel=True)
 def node_neighbours(tets, volume, n, halt):
     """Node rows of the pattern: ``node_ptr`` (n + 1,) and sorted ``node_idx``; every node has its
@@ -350,14 +362,7 @@ def node_neighbours(tets, volume, n, halt):
     for i in prange(n):  # sort and drop repeats, in place (rows are independent)
         if flag_up(halt):
             continue
-        row = raw[start[i]:start[i + 1]]
-        row.sort()
-        u = 0
-        for q in range(row.shape[0]):
-            if q == 0 or row[q] != row[q - 1]:
-                row[u] = row[q]
-                u += 1
-        unique[i] = u
+        unique[i] = sort_unique(raw[start[i]:start[i + 1]])
     if flag_up(halt):
         return start, np.empty(0, np.int64), False
     ptr = np.zeros(n + 1, np.int64)

@@ -24,6 +24,7 @@ import numpy as np
 from numba import njit, prange
 
 from cutkit.relax._elastic_kernels import STOP_EVERY
+from cutkit.relax._newton_kernels import sort_unique
 from cutkit.relax._stop_flag import flag_up
 
 
@@ -100,14 +101,7 @@ def update_node_rows(tets, volume, touched, old_ptr, old_idx, halt):
         if not touched[i]:
             length[i] = old_ptr[i + 1] - old_ptr[i]
             continue
-        row = raw[start[i]:start[i + 1]]
-        row.sort()
-        u = 0
-        for q in range(row.shape[0]):
-            if q == 0 or row[q] != row[q - 1]:
-                row[u] = row[q]
-                u += 1
-        length[i] = u
+        length[i] = sort_unique(raw[start[i]:start[i + 1]])
     ptr = np.zeros(n + 1, np.int64)
     for i in range(n):
         ptr[i + 1] = ptr[i] + length[i]
