@@ -325,39 +325,55 @@ def sort_unique(row):
     return u
 
 
-@njit(cache=True, nogil=True, parallel=True)
-def node_neighbours(tets, volume, n, halt):
-    """Node rows of the pattern: ``node_ptr`` (n + 1,) and sorted ``node_idx``; every node has its
-    own diagonal block, the others come from active elements.  ``halt`` ((1,) int64) is read
-    every ``STOP_EVERY`` elements of a pass and before each row's sort: non-zero ends the build,
-    and the third result (whether the rows are whole) is False."""
-    m = tets.shape[0]
-    count = np.ones(n, np.int64)
+@njit(cache=True, nogil=True)
+def gather_rows(tets, volume, rows, halt):
+    """The raw node rows of the nodes ``rows`` (n,) bool marks: each is the node itself, then the
+    four corners of every active element (``volume`` > 0) it is a corner of, in element order,
+    repeats kept (``raw[start[i]:start[i + 1]]``; the other nodes' rows are empty).  ``halt`` is
+    read every ``STOP_EVERY`` elements; returns (start (n + 1,), raw, whether whole)."""
+    n, m = rows.shape[0], tets.shape[0]
+    count = np.zeros(n, np.int64)
+    for i in range(n):
+        if rows[i]:
+            count[i] = 1
     for t in range(m):
         if t % STOP_EVERY == 0 and flag_up(halt):
             return count, np.empty(0, np.int64), False
         if volume[t] > 0.0:
             for a in range(4):
-                count[tets[t, a]] += 4
+                if rows[tets[t, a]]:
+                    count[tets[t, a]] += 4
     start = np.zeros(n + 1, np.int64)
     for i in range(n):
         start[i + 1] = start[i] + count[i]
-    if flag_up(halt):
-        return start, np.empty(0, np.int64), False
     raw = np.empty(start[n], np.int64)
     fill = start[:n].copy()
     for i in range(n):
-        raw[fill[i]] = i
-        fill[i] += 1
+        if rows[i]:
+            raw[fill[i]] = i
+            fill[i] += 1
     for t in range(m):
         if t % STOP_EVERY == 0 and flag_up(halt):
             return start, np.empty(0, np.int64), False
         if volume[t] > 0.0:
             for a in range(4):
                 i = tets[t, a]
-                for b in range(4):
-                    raw[fill[i]] = tets[t, b]
-                    fill[i] += 1
+                if rows[i]:
+                    for b in range(4):
+                        raw[fill[i]] = tets[t, b]
+                        fill[i] += 1
+    return start, raw, True
+
+
+@njit(cache=True, nogil=True, parallel=True)
+def node_neighbours(tets, volume, n, halt):
+    """Node rows of the pattern: ``node_ptr`` (n + 1,) and sorted ``node_idx``; every node has its
+    own diagonal block, the others come from active elements.  ``halt`` ((1,) int64) is read
+    every ``STOP_EVERY`` elements of a pass and before each row's sort: non-zero ends the build,
+    and the third result (whether the rows are whole) is False."""
+    start, raw, whole = gather_rows(tets, volume, np.ones(n, np.bool_), halt)
+    if not whole:
+        return start, raw, False
     unique = np.empty(n, np.int64)
     for i in prange(n):  # sort and drop repeats, in place (rows are independent)
         if flag_up(halt):

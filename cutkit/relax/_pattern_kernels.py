@@ -24,7 +24,7 @@ import numpy as np
 from numba import njit, prange
 
 from cutkit.relax._elastic_kernels import STOP_EVERY
-from cutkit.relax._newton_kernels import sort_unique
+from cutkit.relax._newton_kernels import gather_rows, sort_unique
 from cutkit.relax._stop_flag import flag_up
 
 
@@ -65,37 +65,10 @@ def touched_nodes(tets, volume, old_tets, old_active, n_old, n, halt):
 def update_node_rows(tets, volume, touched, old_ptr, old_idx, halt):
     """The node rows after the change: built afresh for ``touched`` (n,) bool nodes (the appended
     ones among them), copied from ``old_ptr`` (n_old + 1,) / ``old_idx`` for the others.  Returns ``node_ptr`` (n + 1,), ``node_idx`` and whether whole."""
-    n, m = touched.shape[0], tets.shape[0]
-    count = np.zeros(n, np.int64)
-    for i in range(n):
-        if touched[i]:
-            count[i] = 1
-    for t in range(m):
-        if t % STOP_EVERY == 0 and flag_up(halt):
-            return count, np.empty(0, np.int64), False
-        if volume[t] > 0.0:
-            for a in range(4):
-                if touched[tets[t, a]]:
-                    count[tets[t, a]] += 4
-    start = np.zeros(n + 1, np.int64)
-    for i in range(n):
-        start[i + 1] = start[i] + count[i]
-    raw = np.empty(start[n], np.int64)
-    fill = start[:n].copy()
-    for i in range(n):
-        if touched[i]:
-            raw[fill[i]] = i
-            fill[i] += 1
-    for t in range(m):
-        if t % STOP_EVERY == 0 and flag_up(halt):
-            return start, np.empty(0, np.int64), False
-        if volume[t] > 0.0:
-            for a in range(4):
-                i = tets[t, a]
-                if touched[i]:
-                    for b in range(4):
-                        raw[fill[i]] = tets[t, b]
-                        fill[i] += 1
+    n = touched.shape[0]
+    start, raw, whole = gather_rows(tets, volume, touched, halt)
+    if not whole:
+        return start, raw, False
     length = np.empty(n, np.int64)
     for i in prange(n):  # a touched row: sort and drop repeats in place; the others keep their length
         if not touched[i]:
