@@ -478,7 +478,7 @@ class ElasticTissue(TissueBase):
             self.r2[:] = np.einsum("ij,ij->i", r, r)
             if stop is not None:
                 # live and idle: the matrix pattern made now, so that the resting step after the
-                # next stroke only updates it (the knee: 0.15 s less from the hand stopping to rest)
+                # next stroke only updates it (the knee: 0.08-0.10 s of that step, not 0.21-0.28 s)
                 self.hessian_pattern.get(stop)
             return SolveInfo(0, res, res, True, 0), res, 0
         if self._rest_newton is None:
