@@ -29,7 +29,7 @@ Tolerances = namedtuple("Tolerances", ["s_tol", "tol_min", "tol_max", "node_face
                                        "n_indexed_faces"])
 #: Room for a segment's hits: ``face`` (cap,) int64, ``kind`` (cap,) int64 (see
 #: :mod:`cutkit.mesh.geometry`), ``param`` (cap, 4) float64 (t, x, y, z).
-SegmentHits = namedtuple("SegmentHits", ["face", "kind", "param"])
+HitRoom = namedtuple("HitRoom", ["face", "kind", "param"])
 
 
 @njit(cache=True, nogil=True)
@@ -225,7 +225,7 @@ def query_segment(points, surface, tree, p0, p1, hits):
     surface : Surface
     tree : Tree
     p0, p1 : (3,) float64
-    hits : SegmentHits
+    hits : HitRoom
         Filled with the first ``min(count, cap)`` hits.
 
     Returns

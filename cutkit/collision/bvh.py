@@ -481,7 +481,7 @@ class SurfaceBVH:
         while True:
             face, kind, par = self._hit_buffers
             cap = face.shape[0]
-            hits = K.SegmentHits(face, kind, par)
+            hits = K.HitRoom(face, kind, par)
             if brute_force:
                 count = K.brute_segment(points, K.Surface(self.faces, self.face_alive, self.face_leaf), p0, p1, hits)
             else:
