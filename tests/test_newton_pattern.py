@@ -75,9 +75,11 @@ def test_each_kind_of_change_is_carried_over_as_a_full_build_would_make_it():
         em.add_elements(X, tets, np.repeat(mu, k), np.repeat(lam, k), np.repeat(rho, k), ids=ids)
 
     gone = rng.choice(em.n_elements, 5, replace=False)
+    corners = np.unique(em.tets[gone])
     em.remove_elements(gone)
     store.changed()
     assert_same(store.get(), em)
+    assert store.elements_changed == 5 and store.rows_rebuilt == corners.size  # only their corners' rows
     # two new nodes near an element's corners, and two elements on them
     t0 = em.tets[[i for i in range(em.n_elements) if em.volume[i] > 0][0]].copy()
     new = X[t0[:2]] + 0.1

@@ -79,25 +79,23 @@ def drop_priority() -> None:
     _unlock_memory()
 
 
-def _unlock_memory() -> bool:
-    """munlockall(): undo :func:`_lock_memory`."""
+def _libc_call(name: str, *args) -> bool:
+    """libc's ``name(*args) == 0``; False where there is no such libc or function."""
     import ctypes
     import ctypes.util
 
     try:
         libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True)
-        return libc.munlockall() == 0
+        return getattr(libc, name)(*args) == 0
     except (OSError, AttributeError):
         return False
+
+
+def _unlock_memory() -> bool:
+    """munlockall(): undo :func:`_lock_memory`."""
+    return _libc_call("munlockall")
 
 
 def _lock_memory() -> bool:
     """mlockall(): keep the process's pages in RAM so that no page fault stalls a tick."""
-    import ctypes
-    import ctypes.util
-
-    try:
-        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True)
-        return libc.mlockall(MCL_CURRENT | MCL_FUTURE) == 0
-    except (OSError, AttributeError):
-        return False
+    return _libc_call("mlockall", MCL_CURRENT | MCL_FUTURE)

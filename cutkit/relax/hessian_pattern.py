@@ -4,7 +4,7 @@ Built once in full (:func:`cutkit.relax._newton_kernels.node_neighbours`,
 ``element_blocks``, ``scalar_pattern``), then, after each topology change,
 updated where the change was (:mod:`cutkit.relax._pattern_kernels`): the
 same arrays as a full build.  On the demo knee after the shipped incision
-(1,338 of 30,608 nodes touched) an update takes 36-38 ms against 137-141
+(1,338 of 30,608 nodes touched) an update takes 32-38 ms against 137-152
 ms for a full build on one core (``NUMBA_NUM_THREADS=1 python
 benchmarks/newton_pattern.py --json --knee knee.h5``).  The first resting
 step after a stroke needs the pattern of the cut mesh, so this is on the
@@ -36,12 +36,17 @@ class HessianPattern:
     ----------
     builds, updates : int
         Full builds, and updates of a kept pattern, made so far.
+    elements_changed, rows_rebuilt : int
+        Of the last update: the elements switched on, off or rewritten since the pattern before,
+        and the node rows built again (the others were moved).
     """
 
     def __init__(self, em):
         self.em = em
         self.builds = 0
         self.updates = 0
+        self.elements_changed = 0
+        self.rows_rebuilt = 0
         self._pattern = None
         self._tets = None  # (m, 4) int64: the elements' corners when the pattern was made
         self._active = None  # (m,) bool
@@ -100,4 +105,5 @@ class HessianPattern:
         if not whole:
             return None
         self.updates += 1
+        self.elements_changed, self.rows_rebuilt = int(changed), int(np.count_nonzero(touched))
         return KN.Pattern(ptr, idx, blocks, *KN.scalar_pattern(ptr, idx))

@@ -476,7 +476,7 @@ class ElasticTissue(TissueBase):
             self.state.velocities[:] = 0.0
             self.state.time += self.step_s
             self.r2[:] = np.einsum("ij,ij->i", r, r)
-            if stop is not None:
+            if stop is not None and self.em.element != "anp":  # the ANP stencil is the solver's own
                 # live and idle: the matrix pattern made now, so that the resting step after the
                 # next stroke only updates it (the knee: 0.08-0.10 s of that step, not 0.21-0.28 s)
                 self.hessian_pattern.get(stop)
