@@ -107,7 +107,7 @@ def knee_linear(path: str, step_s: float, cholespy: bool) -> dict:
     from cutkit.relax.newton import NewtonSolver, _free_terms, _Potential, node_block_inverse
     from cutkit.simulate.elastic_tissue import ElasticTissue
 
-    tis = ElasticTissue(read_model(path), blade_length=20.0, step_s=step_s, solver="newton")
+    tis = ElasticTissue(read_model(path), step_s=step_s, solver="newton")
     em, x0 = tis.em, tis.state.positions.copy()
     terms = _free_terms(em, x0, step_s, None, None, x0)
     free = ~terms.fixed & (em.adj_degree > 0)[:, None]

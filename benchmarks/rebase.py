@@ -81,7 +81,7 @@ def main() -> None:
             session.rebase()
     again = {k: v[-args.repeat:] for k, v in logs.items()}
     rest = [t - c - s for t, c, s in zip(again["total"], again["cut_mesh"], again["tissue"])]
-    result = {"model": args.model, "tets": int(session.tis.cm.orig_tets.shape[0]), "tissue": type(session.tis).__name__,
+    result = {"model": args.model, "tets": int(session.store.orig_tets.shape[0]), "tissue": type(session.tis).__name__,
               "first_rebase_s": first,
               "rebase_s": {k: float(np.median(v)) for k, v in again.items()} | {"rest": float(np.median(rest))},
               "rebase_s_all": again}

@@ -45,7 +45,7 @@ def _record(run):
     cut = tasks.CutTask._cut
 
     def recording(self, blade_tip, axis, proxy):
-        rec.append((np.array(blade_tip), np.array(proxy), self.tis.cm.n_rebases, np.array(axis)))
+        rec.append((np.array(blade_tip), np.array(proxy), self.cm.n_rebases, np.array(axis)))
         return cut(self, blade_tip, axis, proxy)
 
     tasks.CutTask._cut = recording

@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 import _twins_anp as T
+from _tissues import with_cut_mesh
 from cutkit.errors import InputError
 from cutkit.mesh.geometry import tet_volumes
 from cutkit.mesh.quality import signed_volumes
@@ -253,7 +254,7 @@ def cut_slab(element, nu=0.45, smoothing=0.0):
     ps = Prestress(label=np.array([1], np.int32), fibre_direction=np.array([[0.0, 1.0, 0.0]]),
                    prestrain=np.array([0.1]))
     model = TetModel.from_arrays(p, t, materials=Materials.from_rows([dict(ROW, poisson_ratio=nu)]), prestress=ps)
-    tis = ElasticTissue(model, blade_length=1.6, step_s=0.02, solver="newton", element=element)
+    tis = with_cut_mesh(ElasticTissue(model, step_s=0.02, solver="newton", element=element), 1.6)
     tis.em.deviatoric_smoothing = smoothing
     tis.em.fixed[p[:, 2] == 0] = True
     tis.bc_fixed = p[:, 2] == 0
@@ -348,8 +349,7 @@ def test_simulate_takes_the_element():
         SimulateOptions(element="p2").check()
     p, t = kuhn_box(np.ones(3), (1, 1, 1))
     with pytest.raises(InputError, match="newton"):
-        ElasticTissue(TetModel.from_arrays(p, t, materials=solid(0.45)), blade_length=1.0, step_s=0.02,
-                      solver="vbd", element="anp")
+        ElasticTissue(TetModel.from_arrays(p, t, materials=solid(0.45)), step_s=0.02, solver="vbd", element="anp")
 
 
 
@@ -362,9 +362,9 @@ def test_a_run_takes_the_smoothing_that_meets_the_bound_unless_told():
     p, t = kuhn_box(np.ones(3), (1, 1, 1))
     m = TetModel.from_arrays(p, t, materials=solid(0.45))
     for given, want in ((None, anp.ANP_SMOOTHING), (0.0, 0.0), (0.3, 0.3)):
-        tis = make_tissue(m, "neohookean", SimulateOptions(element="anp", deviatoric_smoothing=given), 1.0)
+        tis = make_tissue(m, None, "neohookean", SimulateOptions(element="anp", deviatoric_smoothing=given))
         assert tis.em.element == "anp" and tis.em.deviatoric_smoothing == want
-    assert make_tissue(m, "neohookean", SimulateOptions(), 1.0).em.deviatoric_smoothing == 0.0
+    assert make_tissue(m, None, "neohookean", SimulateOptions()).em.deviatoric_smoothing == 0.0
     with pytest.raises(InputError, match="needs element anp"):
         SimulateOptions(deviatoric_smoothing=0.5).check()
     with pytest.raises(InputError, match=r"must lie in \[0, 1\), got 1.0"):

@@ -19,6 +19,8 @@ from cutkit.cutting import _kernels as K
 from cutkit.cutting import _kernels_split as KP
 from cutkit.cutting import _kernels_step as KS
 from cutkit.mesh import geometry as G
+from cutkit.mesh.geometry import clamp_bary
+from cutkit.tissue import _store_kernels as SK
 from cutkit.mesh.generate import box_mesh
 
 
@@ -131,15 +133,15 @@ def test_clamp_set_node_min_volume_match_twins():
     for k, lo in ((3, 0.1), (4, 0.05), (3, 1e-3), (2, 0.0)):
         for _ in range(50):
             b = rng.uniform(-0.5, 1.0, k)
-            np.testing.assert_allclose(KS.clamp_bary(b, lo), clamp_bary_twin(b, lo), atol=1e-15)
-        np.testing.assert_allclose(KS.clamp_bary(-np.ones(k), lo), clamp_bary_twin(-np.ones(k), lo))
+            np.testing.assert_allclose(clamp_bary(b, lo), clamp_bary_twin(b, lo), atol=1e-15)
+        np.testing.assert_allclose(clamp_bary(-np.ones(k), lo), clamp_bary_twin(-np.ones(k), lo))
     x, X, uvw = rng.normal(size=(3, 10, 3))
     dn, dw = -np.ones((10, 4), np.int64), np.zeros((10, 4))
     for k in (2, 3, 4):
         nodes = rng.choice(6, k, replace=False).astype(np.int64)
         w = rng.random(k)
         for tex in (uvw, np.zeros((0, 3))):
-            KS.set_node(x, X, tex, dn, dw, 8, nodes, w)
+            SK.set_node(x, X, tex, dn, dw, 8, nodes, w)
             rx, rX, ru = set_node_twin(x, X, tex if len(tex) else None, nodes, w)
             np.testing.assert_allclose(x[8], rx, atol=1e-14)
             np.testing.assert_allclose(X[8], rX, atol=1e-14)
@@ -148,7 +150,7 @@ def test_clamp_set_node_min_volume_match_twins():
             assert list(dn[8, :k]) == list(nodes) and (dn[8, k:] == -1).all() and (dw[8, k:] == 0).all()
             # clamped and set in one call: the weights are the clamp's
             w_raw = rng.uniform(-0.3, 1.0, k)
-            KS.set_node_clamped(x, X, tex, dn, dw, 9, nodes, w_raw, 0.05)
+            SK.set_node_clamped(x, X, tex, dn, dw, 9, nodes, w_raw, 0.05)
             rx, rX, ru = set_node_twin(x, X, tex if len(tex) else None, nodes, clamp_bary_twin(w_raw, 0.05))
             np.testing.assert_allclose(x[9], rx, atol=1e-14)
             np.testing.assert_allclose(dw[9, :k], clamp_bary_twin(w_raw, 0.05), atol=1e-15)

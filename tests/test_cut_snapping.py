@@ -9,6 +9,7 @@ boundary vertex.
 import numpy as np
 import pytest
 
+from _tissues import with_cut_mesh
 from _cut_paths import jittered_block
 
 from cutkit.cutting import CutMesh, cut_step, to_model
@@ -61,7 +62,7 @@ def test_an_interior_vertex_moves_away_keeping_volume_and_shape(seed):
     v0 = signed_volumes(p, t).sum()
     star = _star_tets(t, v)
     before = min_dihedral_angles(p, star).min()
-    cm._delta_reset()
+    cm.store.begin_step()
     s_new = SN.snap_away(cm, e, s, swept)
     assert cm.snap_counts.get("moved", 0) + cm.snap_counts.get("moved part way", 0) == 1
     x = cm.points
@@ -75,7 +76,8 @@ def test_an_interior_vertex_moves_away_keeping_volume_and_shape(seed):
     assert 0 < np.linalg.norm(d) <= SN.SNAP_MOVE_MAX * shortest[shortest > 0].min() + 1e-12
     assert d @ normal > 0  # v lies above the plane
     assert np.allclose(cm.rest_points[v], x[v])
-    assert cm._delta["moved_nodes"] == [v] and np.array_equal(cm._delta["moved_from"][v], p[v])
+    log = cm.store.step_log
+    assert log.moved_nodes == [v] and np.array_equal(log.moved_from[v], p[v])
     # the crossing, from the plane distances of the edge's ends now
     a, b = cm.edges[e]
     ha, hb = ((x[[a, b]] - swept[0, 0]) @ normal).tolist()
@@ -92,7 +94,7 @@ def test_a_vertex_on_a_flat_face_moves_within_the_face():
     swept = _plane_through(p[v] + 0.05 * normal, normal)
     e, s, near = _near_crossing(cm, v, swept, normal)
     v0 = signed_volumes(p, t).sum()
-    cm._delta_reset()
+    cm.store.begin_step()
     SN.snap_away(cm, e, s, swept)
     x = cm.points
     assert v in cm.snapped_nodes
@@ -170,8 +172,7 @@ def test_the_element_tissue_places_a_snapped_vertex_through_the_old_shape():
     p = p + np.where(inner[:, None], rng.uniform(-0.2, 0.2, p.shape), 0.0)
     ps = Prestress(label=np.array([1], np.int32), fibre_direction=np.array([[0.0, 1.0, 0.0]]),
                    prestrain=np.array([0.1]))
-    tis = ElasticTissue(TetModel.from_arrays(p, t, materials=Materials.from_rows([row]), prestress=ps),
-                        blade_length=1.6, step_s=0.02)
+    tis = with_cut_mesh(ElasticTissue(TetModel.from_arrays(p, t, materials=Materials.from_rows([row]), prestress=ps), step_s=0.02), 1.6)
     tis.em.fixed[p[:, 2] == 0] = True
     tis.cm.snap_vertices = True
     X = tis.cm.rest_points

@@ -2,6 +2,7 @@
 
 import numpy as np
 
+from _tissues import with_cut_mesh
 from cutkit.mesh.generate import box_mesh
 from cutkit.mesh.quality import signed_volumes
 from cutkit.model.tetmodel import Materials, TetModel
@@ -14,7 +15,7 @@ def tissue(solver="hybrid"):
                mu_static=1e-6, mu_dynamic=1e-6, rho_dynamic=1e-8, alpha_static=0.1, alpha_dynamic=0.1,
                c_edge=1.0, c_shape=1.0)
     model = TetModel.from_arrays(p, t, materials=Materials.from_rows([row]))
-    return ElasticTissue(model, blade_length=10.0, step_s=0.004, solver=solver)
+    return with_cut_mesh(ElasticTissue(model, step_s=0.004, solver=solver), 10.0)
 
 
 def interior_node(tis):

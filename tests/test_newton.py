@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 import _twins_newton as T
+from _tissues import with_cut_mesh
 from _fem_reference import kuhn_box, trust_region_minimum
 from _twins_elastic import deformation_gradients
 from cutkit.cutting import cut_step
@@ -160,7 +161,7 @@ def cut_slab():
     """A prestressed slab (fibres across the cut, base held) cut half way down by a blade."""
     p, t = kuhn_box((6.0, 3.0, 3.0), (6, 3, 3))
     model = model_of(p, t, prestrain=0.1, fibre=(0.0, 1.0, 0.0))
-    tis = ElasticTissue(model, blade_length=1.6, step_s=0.02)
+    tis = with_cut_mesh(ElasticTissue(model, step_s=0.02), 1.6)
     tis.em.fixed[p[:, 2] == 0] = True
     tis.bc_fixed = p[:, 2] == 0
     for xb in np.linspace(-0.5, 6.5, 15):

@@ -3,6 +3,7 @@ and a NumPy twin, array for array, after each change."""
 
 import numpy as np
 
+from _tissues import with_cut_mesh
 from _fem_reference import kuhn_box
 from cutkit.cutting import cut_step
 from cutkit.relax import _newton_kernels as KN
@@ -107,7 +108,7 @@ def test_a_cut_slab_keeps_its_pattern_from_cut_to_cut(monkeypatch):
     much of this small slab a step touched)."""
     monkeypatch.setattr(hessian_pattern, "FULL_BUILD_FRACTION", 1.0)
     p, t = kuhn_box((6.0, 3.0, 3.0), (6, 3, 3))
-    tis = ElasticTissue(model_of(p, t), blade_length=1.6, step_s=0.02)
+    tis = with_cut_mesh(ElasticTissue(model_of(p, t), step_s=0.02), 1.6)
     solver = NewtonSolver(tis.em, pattern=tis.hessian_pattern)
     assert_same(solver.pattern(), tis.em)
     for xb in np.linspace(-0.5, 6.5, 15):
@@ -144,7 +145,7 @@ def test_a_live_tissue_at_rest_makes_its_pattern_while_idle_and_an_offline_one_d
     offline (no flag) nothing is made that no step needs."""
     p, t = kuhn_box((4.0, 3.0, 3.0), (4, 3, 3))
     for stop, builds in ((np.zeros(1, np.int64), 1), (None, 0)):
-        tis = ElasticTissue(model_of(p, t), blade_length=1.6, step_s=0.02)
+        tis = with_cut_mesh(ElasticTissue(model_of(p, t), step_s=0.02), 1.6)
         tis.advance(np.zeros((tis.n_nodes, 3)), 0.1, stop)
         assert tis.counts["resting_steps"] > 0
         assert tis.hessian_pattern.builds == builds

@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 
+from _tissues import with_cut_mesh
 from _fem_reference import kuhn_box
 from cutkit.cutting import cut_step
 from cutkit.errors import CutkitError
@@ -23,7 +24,7 @@ def slab(prestrain=0.1, solver="newton"):
     ps = Prestress(label=np.array([1], np.int32), fibre_direction=np.array([[0.0, 1.0, 0.0]]),
                    prestrain=np.array([prestrain]))
     model = TetModel.from_arrays(p, t, materials=Materials.from_rows([ROW]), prestress=ps)
-    tis = ElasticTissue(model, blade_length=1.6, step_s=0.02, solver=solver)
+    tis = with_cut_mesh(ElasticTissue(model, step_s=0.02, solver=solver), 1.6)
     tis.em.fixed[p[:, 2] == 0] = True
     tis.bc_fixed = p[:, 2] == 0
     return tis
@@ -118,7 +119,7 @@ def test_a_rebase_keeps_the_element_of_the_tissue():
     deviatoric share), so a later stroke is relaxed with the element the run asked for."""
     p, t = kuhn_box((6.0, 3.0, 3.0), (6, 3, 3))
     model = TetModel.from_arrays(p, t, materials=Materials.from_rows([ROW]))
-    tis = ElasticTissue(model, blade_length=1.6, step_s=0.02, solver="newton", element="anp")
+    tis = with_cut_mesh(ElasticTissue(model, step_s=0.02, solver="newton", element="anp"), 1.6)
     tis.em.deviatoric_smoothing = 0.7
     for xb in np.linspace(-0.5, 3.0, 4):
         tis.apply_cut(cut_step(tis.cm, [xb, 1.37, 3.5], [0.0, 0.0, 1.0]))

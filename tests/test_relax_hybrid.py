@@ -5,6 +5,7 @@ reaches, no tet ever inverted; a step the sweeps finish alone is untouched."""
 import numpy as np
 import pytest
 
+from _tissues import with_cut_mesh
 from _fem_reference import kuhn_box, trust_region_minimum
 from _twins_elastic import deformation_gradients
 from cutkit.errors import CutkitError
@@ -26,7 +27,7 @@ def pressed(solver, load, rest_rtol=None):
     stays the same, so the hybrid's steps after the first rest unless ``rest_rtol`` is None)."""
     p, t = kuhn_box((3.0, 3.0, 2.0), (3, 3, 2))
     model = TetModel.from_arrays(p, t, materials=Materials.from_rows([ROW]))
-    tis = ElasticTissue(model, blade_length=1.0, step_s=H, solver=solver, rest_rtol=rest_rtol)
+    tis = with_cut_mesh(ElasticTissue(model, step_s=H, solver=solver, rest_rtol=rest_rtol), 1.0)
     tis.em.fixed[p[:, 2] == 0] = True
     tis.bc_fixed = p[:, 2] == 0
     tis.em.forget_colour_classes()
@@ -259,7 +260,7 @@ def test_a_cut_or_a_new_load_ends_the_rest_and_the_rest_tolerance_is_checked():
     model = TetModel.from_arrays(p, t, materials=Materials.from_rows([ROW]))
     for bad in (0.0, -1.0, float("nan")):
         with pytest.raises(CutkitError, match="rest_rtol must be a positive number or None"):
-            ElasticTissue(model, blade_length=1.0, step_s=H, solver="hybrid", rest_rtol=bad)
+            ElasticTissue(model, step_s=H, solver="hybrid", rest_rtol=bad)
 
 
 def test_what_is_written_does_not_change_a_hybrid_run_with_resting_steps(tmp_path):

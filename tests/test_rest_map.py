@@ -33,7 +33,8 @@ def _block(seed=0):
 def _displacement(cm, x, X, tip, axis, seeds=None):
     """The library's blade displacement: the flood fill from ``seeds`` (default: the active tets), the weights."""
     radius = rest_map_radius(X[:cm.n_orig_points], cm.orig_tets)
-    nodes, d2 = BladeNeighbourhood(cm, radius).nodes(cm, x, cm.active_tets if seeds is None else seeds, tip, axis)
+    nodes, d2 = BladeNeighbourhood(cm.store, radius).nodes(cm.store, x, cm.active_tets if seeds is None else seeds,
+                                                     tip - BLADE * axis, tip)
     return rest_displacement(x, X, nodes, blade_weights(d2, radius))
 
 
@@ -54,13 +55,13 @@ def test_flood_fill_finds_every_node_near_the_blade(seed):
     rng = np.random.default_rng(100 + seed)
     x = X + rng.normal(0.0, 0.1, X.shape)
     radius = rest_map_radius(X[:cm.n_orig_points], cm.orig_tets)
-    hood = BladeNeighbourhood(cm, radius)
+    hood = BladeNeighbourhood(cm.store, radius)
     for xx in np.linspace(5.0, 9.0, 9):
         tip = np.array([xx, 3.3 + rng.uniform(-0.6, 0.6), 2.6 + rng.uniform(-0.6, 0.6)])
         axis = a + rng.normal(0, 0.2, 3)
         axis /= np.linalg.norm(axis)
         cut_step(cm, tip, axis)  # its active tets are the seeds, as in a session
-        nodes, d2 = hood.nodes(cm, x, cm.active_tets, tip, axis)
+        nodes, d2 = hood.nodes(cm.store, x, cm.active_tets, tip - BLADE * axis, tip)
         want = nodes_near_blade_twin(x, tip - BLADE * axis, tip, radius, range(cm.n_orig_points))
         assert len(want) > 10 and sorted(nodes.tolist()) == sorted(want)
         np.testing.assert_allclose(d2, [want[i] for i in nodes.tolist()], rtol=1e-12, atol=1e-12)
@@ -95,14 +96,14 @@ def test_rest_pose_moves_continuously_with_the_blade():
     rng = np.random.default_rng(7)
     x = X + rng.normal(0.0, 0.3, X.shape)  # rough: every node its own displacement
     radius = rest_map_radius(X[:cm.n_orig_points], cm.orig_tets)
-    hood = BladeNeighbourhood(cm, radius)
+    hood = BladeNeighbourhood(cm.store, radius)
     every_tet = np.arange(cm.orig_tets.shape[0])  # seeds everywhere: the weights alone make it continuous
     step = 1e-3
     xs = np.arange(2.0, 4.0, step)
     u = []
     for xx in xs:
         tip = np.array([xx, 3.3, 2.6])
-        near, d2 = hood.nodes(cm, x, every_tet, tip, a)
+        near, d2 = hood.nodes(cm.store, x, every_tet, tip - BLADE * a, tip)
         u.append(rest_displacement(x, X, near, blade_weights(d2, radius)))
     u = np.array(u)
     jump = np.linalg.norm(np.diff(u, axis=0), axis=1).max()

@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 
+from _tissues import with_cut_mesh
 from cutkit.assign.defaults import DEFAULT_MATERIALS
 from cutkit.cutting.trajectory import straight_incision
 from cutkit.mesh.generate import box_mesh
@@ -70,7 +71,7 @@ def settled(model):
     """A fresh element tissue of ``model`` settled as ``simulate`` settles it: (report, positions)."""
     from cutkit.simulate.elastic_tissue import ElasticTissue
 
-    tis = ElasticTissue(model, blade_length=10.0, step_s=0.004)
+    tis = with_cut_mesh(ElasticTissue(model, step_s=0.004), 10.0)
     report = tis.settle(8, 1e-3)
     return report, tis.positions.copy()
 

@@ -6,6 +6,7 @@ import json
 import numpy as np
 import pytest
 
+from _tissues import with_cut_mesh
 from cutkit.assign.defaults import DEFAULT_MATERIALS
 from cutkit.cli.main import main
 from cutkit.cutting.trajectory import straight_incision, write_trajectory
@@ -199,7 +200,7 @@ def test_spring_bookkeeping_matches_a_fresh_build_after_cuts():
     from cutkit.relax import build_spring_model
     from cutkit.simulate.tissue import Tissue
 
-    tis = Tissue(slab(), blade_length=20.0, dt0=1e-3, n_lists=3, tolerance_fraction=1e-3)
+    tis = with_cut_mesh(Tissue(slab(), dt0=1e-3, n_lists=3, tolerance_fraction=1e-3), 20.0)
     for x in np.linspace(5.0, 20.0, 16):
         res = cut_step(tis.cm, [x, 4.0, 8.3], [0.0, 1.0, 0.0])
         tis.apply_cut(res)

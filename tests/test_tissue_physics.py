@@ -4,6 +4,7 @@ import inspect
 
 import pytest
 
+from _tissues import with_cut_mesh
 from cutkit.tissue import TissuePhysics
 
 
@@ -71,11 +72,11 @@ def test_the_blade_load_goes_by_mass_over_two_rings_and_never_across_a_cut(mater
     if material == "springs":
         from cutkit.simulate.tissue import Tissue
 
-        tis = Tissue(model, blade_length=10.0, dt0=1e-3, n_lists=1, tolerance_fraction=1e-3)
+        tis = with_cut_mesh(Tissue(model, dt0=1e-3, n_lists=1, tolerance_fraction=1e-3), 10.0)
     else:
         from cutkit.simulate.elastic_tissue import ElasticTissue
 
-        tis = ElasticTissue(model, blade_length=10.0, step_s=0.004)
+        tis = with_cut_mesh(ElasticTissue(model, step_s=0.004), 10.0)
     x = model.points
     seeds = np.flatnonzero((x[:, 0] == 3.0) & (x[:, 1] == 1.0) & (x[:, 2] == 1.0))  # 1 mm from the other box
     nodes, shares = tis.load_shares(seeds)
@@ -96,7 +97,7 @@ def test_node_rings_kernel_equals_a_breadth_first_search():
     from cutkit.simulate.elastic_tissue import ElasticTissue
 
     model, _ = _two_touching_boxes()
-    tis = ElasticTissue(model, blade_length=10.0, step_s=0.004)
+    tis = with_cut_mesh(ElasticTissue(model, step_s=0.004), 10.0)
     seeds = np.array([3, 40, 3], np.int64)
     for rings in range(4):
         got = node_rings(tis.em.adjacency, seeds, rings, tis.em.n_nodes)

@@ -7,8 +7,7 @@
   met by the swept surface, faces crossed by the blade) in visit order, so
   the cut state machine (Python, :mod:`cutkit.cutting.cutmesh`) replays
   them exactly as a per-tet Python loop would;
-* :func:`clamp_bary`, :func:`set_node`, :func:`set_node_clamped`,
-  :func:`tet_mask`, :func:`cut_nodes_centroid`,
+* :func:`tet_mask`, :func:`cut_nodes_centroid`,
   :func:`best_cone_apex`: the small per-node / per-candidate work of the
   subdivision (the face patterns and compact splits are in
   :mod:`cutkit.cutting._kernels_split`).
@@ -22,7 +21,7 @@ import numpy as np
 from numba import njit
 
 from cutkit.cutting._kernels import tet_sweep
-from cutkit.mesh.geometry import TET_EDGES, segment_meets_tet, tet_dihedrals
+from cutkit.mesh.geometry import TET_EDGES, clamp_bary, segment_meets_tet, tet_dihedrals
 
 #: The walk stops in a tet whose barycentric coordinates of the target are all >= -WALK_EPS.
 WALK_EPS = 1e-12
@@ -318,83 +317,6 @@ def sweep(x, mesh, stamp, step, cut, buf):
     counts[2] = n_ev
     return done
 
-
-@njit(cache=True, nogil=True)
-def clamp_bary(b, lo):
-    """Barycentric weights made valid and kept >= ``lo``.
-
-    Negative weights are set to 0 and the rest normalised (all equal if
-    none is positive); then the weights are mixed with the centroid just
-    enough that the smallest is ``lo``.
-
-    Parameters
-    ----------
-    b : (k,) float64
-    lo : float  smallest weight allowed, < 1 / k
-
-    Returns
-    -------
-    (k,) float64  new array
-    """
-    k = b.size
-    out = np.empty(k)
-    s = 0.0
-    for i in range(k):
-        out[i] = max(b[i], 0.0)
-        s += out[i]
-    m = np.inf
-    for i in range(k):
-        out[i] = out[i] / s if s > 0.0 else 1.0 / k
-        m = min(m, out[i])
-    if m < lo:
-        c = 1.0 / k
-        w = (lo - m) / (c - m)
-        for i in range(k):
-            out[i] = (1.0 - w) * out[i] + w * c
-    return out
-
-
-@njit(cache=True, nogil=True)
-def set_node(x, X, uvw, def_nodes, def_w, i, nodes, w):
-    """Define node ``i`` by weights on original nodes and interpolate it.
-
-    Parameters
-    ----------
-    x, X : (cap, 3) float64  current and rest positions (row i written)
-    uvw : (cap, 3) or (0, 3) float64  texture coordinates (written if it has row i)
-    def_nodes : (cap, 4) int64;  def_w : (cap, 4) float64  node definitions (row i written)
-    i : int
-    nodes : (k,) int64  defining original nodes, k <= 4
-    w : (k,) float64  weights
-    """
-    for c in range(4):
-        def_nodes[i, c] = -1
-        def_w[i, c] = 0.0
-    for c in range(nodes.size):
-        def_nodes[i, c] = nodes[c]
-        def_w[i, c] = w[c]
-    has_uvw = uvw.shape[0] > i
-    for d in range(3):
-        sx = 0.0
-        sX = 0.0
-        su = 0.0
-        for c in range(nodes.size):
-            sx += w[c] * x[nodes[c], d]
-            sX += w[c] * X[nodes[c], d]
-            if has_uvw:
-                su += w[c] * uvw[nodes[c], d]
-        x[i, d] = sx
-        X[i, d] = sX
-        if has_uvw:
-            uvw[i, d] = su
-
-
-
-@njit(cache=True, nogil=True)
-def set_node_clamped(x, X, uvw, def_nodes, def_w, i, nodes, w, lo):
-    """:func:`set_node` with the weights :func:`clamp_bary` ``(w, lo)`` first, in one call (a notch
-    node F following the blade across its face: a few dozen per cut step)."""
-    set_node(x, X, uvw, def_nodes, def_w, i, nodes, clamp_bary(w, lo))
 
 @njit(cache=True, nogil=True)
 def best_cone_apex(x, corners, tb, blends, tris, bary_min, spare):

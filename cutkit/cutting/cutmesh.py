@@ -27,7 +27,7 @@ import numpy as np
 
 from cutkit.errors import InputError
 from cutkit.mesh.geometry import TET_EDGES, min_volume
-from cutkit.mesh.topology import edge_to_tets, face_topology, unique_edges
+from cutkit.mesh.topology import edge_to_tets
 from cutkit.cutting import subdivision as S
 from cutkit.cutting import _kernels_step as K
 from cutkit.cutting.crumbs import init_crumbs
@@ -35,17 +35,10 @@ from cutkit.cutting.rebase import cut_twins, init_records, rebase, twin_face_bar
 from cutkit.cutting.resubdivision import resubdivide
 from cutkit.cutting.snapping import init_snapping
 from cutkit.cutting.tolerances import EDGE_SNAP, FACE_BARY_MIN, TET_BARY_MIN, clamp_bary
+from cutkit.tissue.store import TissueStore
 
 
 _TET_EDGES_L = TET_EDGES.tolist()
-#: Texture coordinates placeholder for :func:`_kernels_step.set_node` (no texture).
-_NO_UVW = np.zeros((0, 3))
-#: Spare tet rows a cut state starts with: this fraction of its original tets, at least
-#: :data:`TET_ROOM_MIN`.  A stroke that cuts a few hundred tets adds a few thousand, and growing
-#: the rows copies every tet array of the cut mesh and of the tissue (76 ms on the demo knee's
-#: 172k tets, on the thread a live cut waits for), so two or three strokes fit without it.
-TET_ROOM_FRACTION = 0.125
-TET_ROOM_MIN = 4096
 
 
 def _vol(x, t):
@@ -74,51 +67,31 @@ class CutMesh:
 
     def __init__(self, points, tets, rest_points=None, texcoords=None, labels=None,
                  blade_length=20.0, centre_nodes=False, compact_splits=True, snap_vertices=False):
-        points = np.ascontiguousarray(points, np.float64)
-        tets = np.ascontiguousarray(tets, np.int64)
-        if points.ndim != 2 or points.shape[1] != 3:
-            raise InputError(f"points: shape {points.shape}, expected (n, 3)")
-        if tets.ndim != 2 or tets.shape[1] != 4:
-            raise InputError(f"tets: shape {tets.shape}, expected (m, 4)")
+        store = TissueStore(points, tets, rest_points=rest_points, texcoords=texcoords, labels=labels)
+        self._cut_over(store, blade_length, centre_nodes, compact_splits, snap_vertices)
+
+    @classmethod
+    def over(cls, store: TissueStore, blade_length=20.0, centre_nodes=False, compact_splits=True,
+             snap_vertices=False) -> CutMesh:
+        """The cut state of the tissue ``store`` (nothing cut since its last rebase); cuts write into it."""
+        cm = cls.__new__(cls)
+        cm._cut_over(store, blade_length, centre_nodes, compact_splits, snap_vertices)
+        return cm
+
+    def _cut_over(self, store, blade_length, centre_nodes, compact_splits, snap_vertices):
         if not blade_length > 0:
             raise InputError(f"blade_length: {blade_length}, expected > 0")
+        self.store = store
         self.blade_length = float(blade_length)
         self.centre_nodes = bool(centre_nodes)
         self.compact_splits = bool(compact_splits)
-        n0, m0 = points.shape[0], tets.shape[0]
-        self.n_orig_points = n0
-        self.orig_tets = tets
-        self.edges, self.tet_edges = unique_edges(tets)
-        topo = face_topology(tets)
-        self.faces, self.tet_faces, self.face_tets, self.neighbors = (topo.faces, topo.tet_faces, topo.face_tets,
-                                                                      topo.neighbors)
-        # the original tets' boundary, outward (surface collision, live views): one truth until the rebase
-        self.orig_boundary_faces, self.orig_boundary_face_tet = topo.boundary_faces, topo.boundary_face_tet
-        self.orig_boundary_faces.flags.writeable = self.orig_boundary_face_tet.flags.writeable = False
+        m0 = store.n_orig_tets
         # edge -> tets ring (CSR), built once
         self.edge_tet_off, self.edge_tet_idx = edge_to_tets(self.tet_edges, self.edges.shape[0])
         # face -> its 3 global edges
         self.face_edges = np.zeros((self.faces.shape[0], 3), np.int64)
         self.face_edges[self.tet_faces.ravel()] = self.tet_edges[:, S.FACE_EDGES].reshape(-1, 3)
-        # ---- state: nodes (growable)
-        cap = n0 + 1024
-        self._x = np.zeros((cap, 3)); self._x[:n0] = points
-        self._X = np.zeros((cap, 3)); self._X[:n0] = points if rest_points is None else rest_points
-        self._uvw = None
-        if texcoords is not None:
-            self._uvw = np.zeros((cap, 3)); self._uvw[:n0] = texcoords
-        self.n_points = n0
-        # node definition for re-interpolation: up to 4 original nodes + weights
-        self._def_nodes = -np.ones((cap, 4), np.int64)
-        self._def_w = np.zeros((cap, 4))
-        # ---- state: tets (growable, with alive flag); tet i < m0 is original i
-        tcap = m0 + max(TET_ROOM_MIN, int(TET_ROOM_FRACTION * m0))
-        self._tets = np.zeros((tcap, 4), np.int64); self._tets[:m0] = tets
-        self._alive = np.zeros(tcap, bool); self._alive[:m0] = True
-        self._tet_orig = np.zeros(tcap, np.int64); self._tet_orig[:m0] = np.arange(m0)
-        self.n_tets_total = m0
         self._sweep_buf = None  # work buffers of the local traversal (sweep_buffers)
-        self.labels = np.zeros(m0, np.int32) if labels is None else np.asarray(labels, np.int32)
         self.subtets = {}  # original tet -> list of current tet ids (only for cut tets)
         # ---- cut state
         self.edge_t = np.full(self.edges.shape[0], np.nan)
@@ -140,8 +113,7 @@ class CutMesh:
         self.tip_tet = -1
         self.prev_pose = None
         self.started_inside = False  # the blade's first pose lay inside the tissue (cut_step)
-        self._delta_reset()
-        init_records(self, n0, m0)  # what outlives a rebase (model counts, earlier strokes' cut surface)
+        init_records(self)  # what outlives a rebase (model counts, earlier strokes' cut surface)
         init_crumbs(self)  # pieces cut loose below CRUMB_VOLUME_FRACTION of the model are removed
         init_snapping(self, snap_vertices)  # vertices moved away from the cut instead of slivers
 
@@ -161,119 +133,23 @@ class CutMesh:
         """
         return rebase(self)
 
-    # ------------------------------------------------------------------ nodes
-    def _grow_nodes(self):
-        cap = self._x.shape[0]
-        if self.n_points < cap:
-            return
-        new = cap * 2
-        for name in ("_x", "_X", "_uvw", "_def_w"):
-            a = getattr(self, name)
-            if a is not None:
-                b = np.zeros((new,) + a.shape[1:]); b[:cap] = a; setattr(self, name, b)
-        d = -np.ones((new, 4), np.int64); d[:cap] = self._def_nodes; self._def_nodes = d
-
+    # ------------------------------------------------------------------ nodes (written through the store)
     def _new_node(self, nodes, w, lo=None):
-        self._grow_nodes()
-        i = self.n_points
-        self.n_points += 1
-        self._set_node(i, nodes, w, lo)
-        self._delta["added_nodes"].append(i)
-        return i
-
-    def _set_node(self, i, nodes, w, lo=None):
-        """Define node i by weights w (k,) on original nodes (k,) and interpolate x, X, uvw; with
-        ``lo``, the weights are clamped to at least ``lo`` first (``_clamp_bary``), in the same call."""
-        uvw = _NO_UVW if self._uvw is None else self._uvw
-        nodes, w = np.asarray(nodes, np.int64), np.asarray(w, np.float64)
-        if lo is None:
-            K.set_node(self._x, self._X, uvw, self._def_nodes, self._def_w, i, nodes, w)
-        else:
-            K.set_node_clamped(self._x, self._X, uvw, self._def_nodes, self._def_w, i, nodes, w, float(lo))
+        return self.store.add_node(nodes, w, lo)
 
     def _move_node(self, i, nodes, w, lo=None):
-        # the rest position before the step's first move of the node: the tissue maps the
-        # node's new place through the old shape of the tets around it
-        moved_from = self._delta["moved_from"]
-        if i not in moved_from:
-            moved_from[i] = self._X[i].copy()
-        self._set_node(i, nodes, w, lo)
-        self._delta["moved_nodes"].append(i)
+        self.store.move_node(i, nodes, w, lo)
 
     def move_original_node(self, v, dx, dX, duvw=None):
         """Move original node ``v`` by ``dx`` (3,) current, ``dX`` (3,) rest, ``duvw`` (3,) texture (or None).
 
         Recorded as a moved node of the step (:mod:`.snapping`: a vertex moved away from the cut).
         """
-        moved_from = self._delta["moved_from"]
-        if v not in moved_from:
-            moved_from[v] = self._X[v].copy()
-        self._x[v] += dx
-        self._X[v] += dX
-        if duvw is not None and self._uvw is not None:
-            self._uvw[v] += duvw
-        self._delta["moved_nodes"].append(v)
+        self.store.move_original_node(v, dx, dX, duvw)
 
     def reinterpolate_node(self, i, nodes, w):
         """Place cut node ``i`` again by its weights ``w`` (k,) on original ``nodes`` (k,) (one moved)."""
         self._move_node(i, nodes, w)
-
-    @property
-    def points(self):
-        """(n_points, 3) float64 current positions (a view)."""
-        return self._x[:self.n_points]
-
-    @property
-    def rest_points(self):
-        return self._X[:self.n_points]
-
-    @property
-    def texcoords(self):
-        return None if self._uvw is None else self._uvw[:self.n_points]
-
-    @property
-    def tets(self):
-        """(k, 4) int64 alive tetrahedra (a copy)."""
-        return self._tets[:self.n_tets_total][self._alive[:self.n_tets_total]]
-
-    @property
-    def tet_origin(self):
-        """(k,) int64 original tet of each alive tet."""
-        return self._tet_orig[:self.n_tets_total][self._alive[:self.n_tets_total]]
-
-    @property
-    def tet_capacity(self) -> int:
-        """Tet ids the arrays have room for before they grow (:data:`TET_ROOM_FRACTION`)."""
-        return int(self._tets.shape[0])
-
-    @property
-    def tet_corners(self):
-        """(n_tets_total, 4) int64 corners of every tet id, dead ones included (a view)."""
-        return self._tets[:self.n_tets_total]
-
-    @property
-    def tet_origins(self):
-        """(n_tets_total,) int64 original tet of every tet id, dead ones included (a view)."""
-        return self._tet_orig[:self.n_tets_total]
-
-    @property
-    def tet_alive(self):
-        """(n_tets_total,) bool whether each tet id is alive (a view)."""
-        return self._alive[:self.n_tets_total]
-
-    @property
-    def defining_nodes(self):
-        """(n_points, 4) int64 original nodes each node interpolates, -1 padded (a view)."""
-        return self._def_nodes[:self.n_points]
-
-    @property
-    def defining_weights(self):
-        """(n_points, 4) float64 the interpolation weights of :attr:`defining_nodes` (a view)."""
-        return self._def_w[:self.n_points]
-
-    # ------------------------------------------------------------------ deltas
-    def _delta_reset(self):
-        self._delta = {"added_nodes": [], "moved_nodes": [], "removed_tets": [], "added_tets": [], "moved_from": {}}
 
     # ------------------------------------------------------------------ cut state
     def edge_ring(self, e):
@@ -503,9 +379,7 @@ class CutMesh:
         Their original tets keep their cut state; a later re-subdivision of
         one of them makes its sub-tets again (crumbs: :mod:`.crumbs`).
         """
-        ids = np.asarray(ids, np.int64)
-        self._alive[ids] = False
-        self._delta["removed_tets"].extend(ids.tolist())
+        self.store.remove_tets(ids)
 
     def sweep_buffers(self) -> dict:
         """The work buffers of the local traversal (``step._sweep``), made on first use and kept.
@@ -523,18 +397,40 @@ class CutMesh:
                                "counts": np.zeros(3, np.int64)}
         return self._sweep_buf
 
-    def _add_tets(self, new, o):
-        """Append the tets ``new`` (list of 4-tuples) as sub-tets of original ``o``; returns their ids."""
-        k = len(new)
-        n0 = self.n_tets_total
-        while n0 + k > self._tets.shape[0]:
-            cap = self._tets.shape[0] * 2
-            t = np.zeros((cap, 4), np.int64); t[:n0] = self._tets[:n0]
-            a = np.zeros(cap, bool); a[:n0] = self._alive[:n0]
-            g = np.zeros(cap, np.int64); g[:n0] = self._tet_orig[:n0]
-            self._tets, self._alive, self._tet_orig = t, a, g
-        self._tets[n0:n0 + k] = new
-        self._alive[n0:n0 + k] = True
-        self._tet_orig[n0:n0 + k] = o
-        self.n_tets_total = n0 + k
-        return list(range(n0, n0 + k))
+
+def _read_from_store(name: str, doc: str) -> property:
+    """A read-only attribute of :class:`CutMesh` that is its store's ``name``."""
+    return property(lambda cm: getattr(cm.store, name), doc=doc)
+
+
+def _buffer_of_store(group: str, name: str, doc: str) -> property:
+    """A read-only attribute of :class:`CutMesh` that is one of its store's buffers (spare rows included)."""
+    return property(lambda cm: getattr(getattr(cm.store, group), name), doc=doc)
+
+
+# What the cutting reads of the tissue store under its own names (one truth: the store's arrays).
+for _name, _doc in (
+        ("orig_tets", "(m0, 4) int64 the original tets"), ("labels", "(m0,) int32 label of each original tet"),
+        ("n_orig_points", "int nodes an original tet may use"), ("n_points", "int nodes so far"),
+        ("n_tets_total", "int tet ids so far"), ("edges", "(e, 2) int64 edges of the original tets"),
+        ("tet_edges", "(m0, 6) int64"), ("faces", "(f, 3) int64 faces of the original tets"),
+        ("tet_faces", "(m0, 4) int64"), ("face_tets", "(f, 2) int64"), ("neighbors", "(m0, 4) int64"),
+        ("orig_boundary_faces", "(b, 3) int64 the original tets' outward boundary faces"),
+        ("orig_boundary_face_tet", "(b,) int64 their tets"), ("points", "(n, 3) float64 current positions (a view)"),
+        ("rest_points", "(n, 3) float64 rest positions (a view)"), ("texcoords", "(n, 3) float64 or None"),
+        ("tets", "(k, 4) int64 alive tetrahedra (a copy)"), ("tet_origin", "(k,) int64 original tet of each alive tet"),
+        ("tet_capacity", "tet ids the arrays have room for"), ("tet_corners", "(n_tets_total, 4) int64 (a view)"),
+        ("tet_origins", "(n_tets_total,) int64 (a view)"), ("tet_alive", "(n_tets_total,) bool (a view)"),
+        ("defining_nodes", "(n, 4) int64 (a view)"), ("defining_weights", "(n, 4) float64 (a view)"),
+        ("n_model_points", "int nodes of the model as loaded"), ("n_model_tets", "int tets of the model as loaded"),
+        ("model_tet", "(m0,) int64"), ("orig_made_by_cut", "(m0,) bool"), ("model_node", "(n0,) int64"),
+        ("n_rebases", "int")):
+    setattr(CutMesh, _name, _read_from_store({"n_orig_points": "n_orig_nodes", "n_points": "n_nodes",
+                                              "orig_boundary_faces": "boundary_faces",
+                                              "orig_boundary_face_tet": "boundary_face_tet",
+                                              "n_model_points": "n_model_nodes"}.get(_name, _name), _doc))
+for _name, _group, _field in (("_x", "node_buffers", "x"), ("_X", "node_buffers", "X"),
+                              ("_uvw", "node_buffers", "uvw"), ("_def_nodes", "node_buffers", "parents"),
+                              ("_def_w", "node_buffers", "weights"), ("_tets", "tet_buffers", "corners"),
+                              ("_alive", "tet_buffers", "alive"), ("_tet_orig", "tet_buffers", "origin")):
+    setattr(CutMesh, _name, _buffer_of_store(_group, _field, f"the store's {_group}.{_field}"))

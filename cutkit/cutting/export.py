@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from cutkit.cutting.cutmesh import CutMesh
-from cutkit.cutting.rebase import made_by_cut, node_model_source
+from cutkit.cutting.rebase import made_by_cut
 
 
 def compact_nodes(tets, n_points):
@@ -82,7 +82,7 @@ def to_model(cm: CutMesh, model=None, points=None, point_data=None):
     texcoords = None if cm.texcoords is None else cm.texcoords[kept].copy()
     if model is not None:
         # new nodes take their first defining node's value (traced back to the model's nodes)
-        src = node_model_source(cm, kept)
+        src = cm.store.node_model_source(kept)
         mtet = cm.model_tet[origin]
         for k, v in model.point_data.items():
             if v.shape[0] == cm.n_model_points and k != "new_node":

@@ -23,52 +23,26 @@ from __future__ import annotations
 import numpy as np
 
 
-def init_records(cm, n_model_points, n_model_tets):
-    """Records of the model as loaded, on a new CutMesh (nothing cut yet, no rebase).
+def init_records(cm):
+    """The cutting's records on a new CutMesh (the store keeps the model's: :class:`~cutkit.tissue.store.TissueStore`).
 
     Sets on ``cm``:
 
-    * ``n_model_points`` : int, nodes of the model as loaded; nodes with a
-      larger id were made by cuts (kept across rebases).
-    * ``n_model_tets`` : int, tetrahedra of the model as loaded.
-    * ``model_tet`` : (m0,) int64, model tetrahedron of each original tet.
-    * ``orig_made_by_cut`` : (m0,) bool, original tet made by an earlier stroke.
-    * ``model_node`` : (n0,) int64, model node each original node takes point
-      data from (itself for a model node, its first defining node's for a cut node).
     * ``cut_faces_before`` : set of sorted (3,) tuples, faces of the original
       tets that are cut surface of earlier strokes.
-    * ``n_rebases`` : int.
     * ``uncut_before`` : int, edges the earlier strokes met and left uncut
       (:meth:`~cutkit.cutting.cutmesh.CutMesh.edges_left_uncut`).
     """
-    cm.n_model_points = int(n_model_points)
-    cm.n_model_tets = int(n_model_tets)
-    cm.model_tet = np.arange(n_model_tets, dtype=np.int64)
-    cm.orig_made_by_cut = np.zeros(n_model_tets, bool)
-    cm.model_node = np.arange(n_model_points, dtype=np.int64)
     cm.cut_faces_before = set()
-    cm.n_rebases = 0
     cm.uncut_before = 0
     cm.uncut_places_before = np.zeros((0, 3))  # their rest midpoints, mm (CutMesh.uncut_edge_places)
-    cm.node_rep = np.arange(n_model_points, dtype=np.int64)  # see _node_reps
+    cm.node_rep = np.arange(cm.n_points, dtype=np.int64)  # see _node_reps
     cm.edge_twins, cm.face_twins = {}, {}  # see find_twins
 
 
 def made_by_cut(cm, ids):
     """(k,) bool: whether each tet of ``ids`` (k,) int64 (CutMesh numbering) was made by a cut, in any stroke."""
-    ids = np.asarray(ids, np.int64)
-    return (ids >= cm.orig_tets.shape[0]) | cm.orig_made_by_cut[cm._tet_orig[ids]]
-
-
-def node_model_source(cm, nodes):
-    """(k,) int64 model node each of ``nodes`` (k,) int64 takes point data from.
-
-    A node made in the current stroke takes its first defining (original)
-    node's source; an original node its recorded one.
-    """
-    nodes = np.asarray(nodes, np.int64)
-    first = np.where(nodes < cm.n_orig_points, nodes, cm._def_nodes[nodes, 0])
-    return cm.model_node[first]
+    return cm.store.made_by_cut(ids)
 
 
 def cut_surface_mask(cm, faces):
@@ -140,28 +114,19 @@ def rebase(cm):
     from cutkit.cutting.crumbs import crumb_volume
 
     cut_faces = {tuple(f) for f in np.sort(cut_surface_faces(cm), axis=1).tolist()}
-    n = cm.n_points
-    ids = np.flatnonzero(cm._alive[:cm.n_tets_total])
-    origin = cm._tet_orig[ids]
-    made = made_by_cut(cm, ids)
-    model_node = node_model_source(cm, np.arange(n))
-    fresh = type(cm)(cm._x[:n], cm._tets[ids], rest_points=cm._X[:n],
-                    texcoords=None if cm._uvw is None else cm._uvw[:n], labels=cm.labels[origin],
-                    blade_length=cm.blade_length, centre_nodes=cm.centre_nodes, compact_splits=cm.compact_splits,
-                    snap_vertices=cm.snap_vertices)
-    fresh.n_model_points, fresh.n_model_tets = cm.n_model_points, cm.n_model_tets
-    fresh.model_tet = cm.model_tet[origin]
-    fresh.orig_made_by_cut = made
-    fresh.model_node = model_node
+    node_rep = _node_reps(cm)
+    crumbs_before = crumb_volume(cm)
+    uncut, uncut_places = cm.edges_left_uncut(), cm.uncut_edge_places()
+    ids = cm.store.rebase()  # the one renumbering: every holder of the store sees it
+    fresh = type(cm).over(cm.store, blade_length=cm.blade_length, centre_nodes=cm.centre_nodes,
+                          compact_splits=cm.compact_splits, snap_vertices=cm.snap_vertices)
     fresh.cut_faces_before = cut_faces
-    fresh.n_rebases = cm.n_rebases + 1
-    fresh.uncut_before = cm.edges_left_uncut()
-    fresh.uncut_places_before = cm.uncut_edge_places()
+    fresh.uncut_before, fresh.uncut_places_before = uncut, uncut_places
     fresh.step_count = cm.step_count
     fresh.started_inside = cm.started_inside
-    fresh.node_rep = _node_reps(cm)
+    fresh.node_rep = node_rep
     fresh.model_volume = cm.model_volume  # crumbs are measured against the model as loaded
-    fresh.crumb_volume_before = crumb_volume(cm)
+    fresh.crumb_volume_before = crumbs_before
     fresh.crumb_count = cm.crumb_count
     fresh.snapped_nodes, fresh.snap_counts = cm.snapped_nodes, cm.snap_counts  # snapping.py
     find_twins(fresh)

@@ -83,10 +83,9 @@ def resubdivide(cm, o):
     # replace the old sub-tets
     old = forget_crumb_tets(cm, cm.subtets.get(o, [o]))  # a crumb's tets are dead already
     cm.remove_tets(old)
-    ids = cm._add_tets(new, o)
+    ids = cm.store.add_tets(new, o)
     cm.subtets[o] = ids
-    cm.sub_start[o], cm.sub_count[o] = ids[0], len(ids)  # contiguous (_add_tets)
-    cm._delta["added_tets"].extend(ids)
+    cm.sub_start[o], cm.sub_count[o] = ids[0], len(ids)  # contiguous (TissueStore.add_tets)
     # a partly cut tet across a split face follows the diagonal this split chose
     for nb in fix_diagonals(cm, o, choice):
         resubdivide(cm, nb)
@@ -123,13 +122,10 @@ def _best_T(cm, v, tb, tris, free):
     With ``free`` (no tip inside), T is moved from the cut nodes' centroid
     ``tb`` towards the tet's centroid by each of ``T_BLENDS`` and the
     best-shaped cone is kept.  The candidates are tried in the spare row
-    ``n_points`` of the node arrays (no node is made), all in one kernel
+    ``n_points`` of the store's node arrays (no node is made), all in one kernel
     call (``_kernels_step.best_cone_apex``).
     """
-    if cm._x.shape[0] <= cm.n_points:
-        cm.n_points += 1  # make _grow_nodes double the arrays
-        cm._grow_nodes()
-        cm.n_points -= 1
+    cm.store.reserve_nodes(1)  # the spare row
     b, angle = K.best_cone_apex(cm._x, np.asarray(v, np.int64), np.asarray(tb, np.float64),
                                 _T_BLENDS if free else _T_AT_CENTROID, tris, TET_BARY_MIN, cm.n_points)
     return b, float(angle)

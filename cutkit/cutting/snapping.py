@@ -309,7 +309,7 @@ def recrossed(cm, e: int, s: float, swept) -> float:
     all: -1).
     """
     a, b = (int(i) for i in cm.edges[e])
-    moved = cm._delta["moved_from"]
+    moved = cm.store.step_log.moved_from
     if not cm.snapped_nodes or (a not in moved and b not in moved):
         return s
     for tri in swept:
@@ -324,7 +324,7 @@ def new_crossings(cm, swept):
     nor deferred: list of (edge, parameter).  The sweep's events were found before the moves."""
     if not cm.snapped_nodes:
         return []
-    moved = [v for v in cm._delta["moved_from"] if v < cm.n_orig_points and v in cm.snapped_nodes]
+    moved = [v for v in cm.store.step_log.moved_from if v < cm.n_orig_points and v in cm.snapped_nodes]
     out = []
     for v in moved:
         for o in _star(cm, v).tolist():

@@ -189,7 +189,7 @@ def cut_step(cm: CutMesh, tip, a) -> StepResult:
     a : (3,) float64  unit vector along the blade, handle to tip
     """
     tip, a = _blade_pose(tip, a)
-    cm._delta_reset()
+    cm.store.begin_step()
     n_nodes_before = cm.n_points
     cm.step_count += 1
     stamp = cm.step_count
@@ -314,19 +314,19 @@ def _follow_tip(cm: CutMesh, tip_tet: int, P1, changed: set) -> None:
 def _step_result(cm: CutMesh, n_nodes_before: int, cut_edges: list, tip_tet: int) -> StepResult:
     """Remove the step's crumbs and gather its net change into a :class:`StepResult`."""
     # a piece this step set loose below CRUMB_VOLUME_FRACTION of the model is removed (crumbs.py)
-    made = np.array(cm._delta["added_tets"], np.int64)
+    made = np.array(cm.store.step_log.added_tets, np.int64)
     remove_crumbs(cm, made[cm._alive[made]] if made.size else made)
-    d = cm._delta
-    moved = np.unique(np.array(d["moved_nodes"], np.int64))
+    d = cm.store.step_log
+    moved = np.unique(np.array(d.moved_nodes, np.int64))
     # net change: a tet made and unmade within the step (re-subdivided twice) is in neither
-    added = np.array(d["added_tets"], np.int64)
-    removed = np.array(d["removed_tets"], np.int64)
+    added = np.array(d.added_tets, np.int64)
+    removed = np.array(d.removed_tets, np.int64)
     if added.size and not cm._alive[added].all():
         transient = added[~cm._alive[added]]
         added, removed = added[cm._alive[added]], removed[~np.isin(removed, transient)]
-    moved_from = np.array([d["moved_from"][i] for i in moved.tolist()], np.float64).reshape(-1, 3)
+    moved_from = np.array([d.moved_from[i] for i in moved.tolist()], np.float64).reshape(-1, 3)
     return StepResult(
-        added_nodes=np.array(d["added_nodes"], np.int64),
+        added_nodes=np.array(d.added_nodes, np.int64),
         moved_nodes=moved,
         moved_from=moved_from,
         removed_tets=removed,

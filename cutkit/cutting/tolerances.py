@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from cutkit.cutting import _kernels_step as K
+from cutkit.mesh.geometry import clamp_bary as _clamp_bary_kernel
 
 #: Edge intersection parameters are clamped into [EDGE_SNAP, 1 - EDGE_SNAP]
 #: (a crossing near a vertex, or through it, becomes a crossing near it).
@@ -23,7 +23,7 @@ TET_BARY_MIN = 0.15
 
 
 def clamp_bary(b, lo):
-    """Valid barycentric weights, each >= ``lo`` (``_kernels_step.clamp_bary``).
+    """Valid barycentric weights, each >= ``lo`` (:func:`cutkit.mesh.geometry.clamp_bary`).
 
     Parameters
     ----------
@@ -34,4 +34,4 @@ def clamp_bary(b, lo):
     -------
     (k,) float64
     """
-    return K.clamp_bary(np.asarray(b, np.float64), float(lo))
+    return _clamp_bary_kernel(np.asarray(b, np.float64), float(lo))

@@ -31,6 +31,7 @@ from numba import njit, prange
 
 __all__ = [
     "TET_FACES",
+    "clamp_bary",
     "TET_FACES_INWARD",
     "TET_EDGES",
     "EDGE_FACES",
@@ -873,3 +874,38 @@ def point_on_triangle(x, pa, pb, pc, rel_tol):
         if dx * dx + dy * dy + dz * dz <= tol * tol:
             return False
     return True
+
+
+@njit(cache=True, nogil=True)
+def clamp_bary(b, lo):
+    """Barycentric weights made valid and kept >= ``lo``.
+
+    Negative weights are set to 0 and the rest normalised (all equal if
+    none is positive); then the weights are mixed with the centroid just
+    enough that the smallest is ``lo``.
+
+    Parameters
+    ----------
+    b : (k,) float64
+    lo : float  smallest weight allowed, < 1 / k
+
+    Returns
+    -------
+    (k,) float64  new array
+    """
+    k = b.size
+    out = np.empty(k)
+    s = 0.0
+    for i in range(k):
+        out[i] = max(b[i], 0.0)
+        s += out[i]
+    m = np.inf
+    for i in range(k):
+        out[i] = out[i] / s if s > 0.0 else 1.0 / k
+        m = min(m, out[i])
+    if m < lo:
+        c = 1.0 / k
+        w = (lo - m) / (c - m)
+        for i in range(k):
+            out[i] = (1.0 - w) * out[i] + w * c
+    return out

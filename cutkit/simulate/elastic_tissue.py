@@ -25,7 +25,6 @@ import time
 
 import numpy as np
 
-from cutkit.cutting import CutMesh
 from cutkit.relax.elastic import (
     ElementModel,
     ElementState,
@@ -42,6 +41,7 @@ from cutkit.relax.materials import material_of_tets, prestress_of_tets
 from cutkit.simulate._kernels import old_shape_corners, place_through_old_shape, step_tet_sets
 from cutkit.simulate.rest_map import rest_map_radius
 from cutkit.simulate.tissue_base import TissueBase
+from cutkit.tissue.store import TissueStore
 
 #: Each implicit step of a simulation is solved until its residual is below
 #: this fraction of the model's force scale (the out-of-balance force of the
@@ -202,12 +202,10 @@ class ElasticTissue(TissueBase):
     ----------
     model : TetModel
         Needs a materials row (with a Poisson ratio) for every label.
-    blade_length : float
-        mm.
+    store : TissueStore, optional
+        The nodes and tets it reads (default: the model's own, nothing cut).
     step_s : float
         Implicit step, s.
-    centre_nodes : bool
-        Fig. 2c centre nodes in split faces.
     poisson_ratio : float, optional
         Overrides the materials table for every label.
     step_rtol : float
@@ -239,7 +237,7 @@ class ElasticTissue(TissueBase):
         each step's polish, 0 where the sweeps converged).
     """
 
-    def __init__(self, model, *, blade_length: float, step_s: float, centre_nodes: bool = False,
+    def __init__(self, model, store: TissueStore | None = None, *, step_s: float,
                  poisson_ratio: float | None = None, step_rtol: float = STEP_RTOL,
                  step_max_iterations: int = STEP_MAX_ITERATIONS, solver: str = DEFAULT_SOLVER,
                  element: str = "nh", deviatoric_smoothing: float | None = None,
@@ -253,7 +251,7 @@ class ElasticTissue(TissueBase):
             raise InputError("element anp is solved by the newton solver only")
         self.solver = solver
         self.model = model
-        self.cm = cm = CutMesh.from_model(model, blade_length=blade_length, centre_nodes=centre_nodes)
+        self.store = store = TissueStore.from_model(model) if store is None else store
         self.rest_map_radius = rest_map_radius(model.points, model.tets)
         self.step_s = float(step_s)
         self.step_rtol = float(step_rtol)
@@ -261,16 +259,16 @@ class ElasticTissue(TissueBase):
         if rest_rtol is not None and not (np.isfinite(rest_rtol) and rest_rtol > 0):
             raise InputError(f"rest_rtol must be a positive number or None, not {rest_rtol!r}")
         self.rest_rtol = None if rest_rtol is None else float(rest_rtol)
-        n, m = cm.n_orig_points, cm.orig_tets.shape[0]
+        n, m = store.n_orig_nodes, store.orig_tets.shape[0]
         self.n_orig_tets = m
         # material of each original tet (a sub-tet has its original's)
-        mat = material_of_tets(model, cm.labels, poisson_ratio=poisson_ratio)
+        mat = material_of_tets(model, store.labels, poisson_ratio=poisson_ratio)
         self.mu, self.lam, self.density = mat["mu"], mat["lam"], mat["density"]
-        self.prestrain, self.fibre = prestress_of_tets(model, cm.labels)
-        self.em = em = ElementModel.empty(n, cm.tet_capacity)
-        em.add_elements(cm.rest_points[:n], cm.orig_tets, self.mu, self.lam, self.density, self.prestrain, self.fibre,
+        self.prestrain, self.fibre = prestress_of_tets(model, store.labels)
+        self.em = em = ElementModel.empty(n, store.tet_capacity)
+        em.add_elements(store.rest_points[:n], store.orig_tets, self.mu, self.lam, self.density, self.prestrain, self.fibre,
                         ids=np.arange(m))
-        em.damping[:] = node_damping(n, cm.orig_tets, mat["damping"])
+        em.damping[:] = node_damping(n, store.orig_tets, mat["damping"])
         self.bc_fixed = fixed_nodes_mask(model)
         em.fixed[:] = self.bc_fixed[:, None]
         em.element = element
@@ -336,7 +334,7 @@ class ElasticTissue(TissueBase):
 
     @property
     def rest_positions(self) -> np.ndarray:
-        return self.cm.rest_points[: self.em.n_nodes]
+        return self.store.rest_points[: self.em.n_nodes]
 
     @property
     def velocities(self) -> np.ndarray:
@@ -639,7 +637,7 @@ class ElasticTissue(TissueBase):
         counts : dict
             ``nodes_added``, ``elements_added``, ``elements_removed``.
         """
-        cm, em = self.cm, self.em
+        store, em = self.store, self.em
         n_old, n_new = em.n_nodes, delta.n_nodes_after
         moved = delta.moved_nodes
         old_moved = moved[moved < n_old]
@@ -659,17 +657,17 @@ class ElasticTissue(TissueBase):
         em.remove_elements(np.concatenate([removed, again]))
         redo = np.concatenate([added, again])
         if redo.size:
-            orig = cm.tet_origins[redo]
-            em.add_elements(cm.rest_points, cm.tet_corners[redo], self.mu[orig], self.lam[orig], self.density[orig],
+            orig = store.tet_origins[redo]
+            em.add_elements(store.rest_points, store.tet_corners[redo], self.mu[orig], self.lam[orig], self.density[orig],
                             self.prestrain[orig], self.fibre[orig], ids=redo)
             placed = np.concatenate([old_moved, np.arange(n_old, n_new)])
             self._unfold(redo, placed, np.concatenate([x_before, self.state.positions[n_old:n_new]]))
-        self._hold_orphans(np.unique(np.concatenate([cm.tet_corners[np.concatenate([removed, redo])].ravel(),
+        self._hold_orphans(np.unique(np.concatenate([store.tet_corners[np.concatenate([removed, redo])].ravel(),
                                                      np.arange(n_old, n_new)])))
         self._recolour(added, n_old)
         if self.r2.shape[0] < em.n_nodes:
             self.r2 = append_rows(self.r2, np.zeros(em.n_nodes - self.r2.shape[0]))
-        self.kept_forces.changed(cm.tet_corners[np.concatenate([removed, redo])])  # their corners' sums changed
+        self.kept_forces.changed(store.tet_corners[np.concatenate([removed, redo])])  # their corners' sums changed
         self.kept_ratios.changed(np.concatenate([removed, again, redo]))
         touched = [np.arange(n_old, em.n_nodes), moved]
         if redo.size:
@@ -721,11 +719,11 @@ class ElasticTissue(TissueBase):
             Their positions before the step (new nodes: as placed).
         """
         x, em = self.state.positions, self.em
-        q = self.cm.tet_corners[tets]
+        q = self.store.tet_corners[tets]
         folded = signed_volumes_serial(x, q) <= 0.0
         if not folded.any():
             return
-        X = self.cm.rest_points[: em.n_nodes]
+        X = self.store.rest_points[: em.n_nodes]
         interp = self.interpolate_positions(placed)
         for k in np.flatnonzero(np.isin(placed, q[folded])):
             i = placed[k]
@@ -805,7 +803,7 @@ class ElasticTissue(TissueBase):
             with no rest volume are left out.
         """
         order = np.argsort(moved)
-        return old_shape_corners(self.cm.tet_corners[tets], self.cm.rest_points, self.state.positions, self.state.positions.shape[0],
+        return old_shape_corners(self.store.tet_corners[tets], self.store.rest_points, self.state.positions, self.state.positions.shape[0],
                                  np.ascontiguousarray(moved[order]), np.ascontiguousarray(moved_from[order]))
 
     def _through_old_shape(self, old_shape, nodes: np.ndarray) -> np.ndarray:
@@ -826,7 +824,7 @@ class ElasticTissue(TissueBase):
         x = self.interpolate_positions(nodes)
         X, xc, Tinv = old_shape
         if X.shape[0] and nodes.size:
-            place_through_old_shape(np.ascontiguousarray(self.cm.rest_points[nodes]), X, xc, Tinv, PLACE_REACH, x)
+            place_through_old_shape(np.ascontiguousarray(self.store.rest_points[nodes]), X, xc, Tinv, PLACE_REACH, x)
         return x
 
     def _hold_orphans(self, nodes: np.ndarray) -> None:
@@ -871,22 +869,22 @@ class ElasticTissue(TissueBase):
 
         Parameters as :meth:`TissueBase.rebase <cutkit.simulate.tissue_base.TissueBase.rebase>`.
         """
-        cm, old = self.cm, self.em
+        store, old = self.store, self.em
         old_orig = np.asarray(old_orig, np.int64)
         self.mu, self.lam, self.density = self.mu[old_orig], self.lam[old_orig], self.density[old_orig]
         self.prestrain, self.fibre = self.prestrain[old_orig], self.fibre[old_orig]
         m = int(np.asarray(old_of_new).shape[0])
         self.n_orig_tets = m
         n = old.n_nodes
-        em = ElementModel.empty(n, cm.tet_capacity)
+        em = ElementModel.empty(n, store.tet_capacity)
         em.damping[:] = old.damping
         em.fixed[:] = old.fixed
         em.colour[:] = old.colour  # the same tets on the same nodes: the colouring stays valid
         em.element, em.deviatoric_smoothing = old.element, old.deviatoric_smoothing
         self.kept_forces.forget()
         self.kept_ratios.forget()
-        em.reserve_rows(cm.orig_tets)  # the rows in sweep order before they are filled: no copy after
-        em.add_elements(cm.rest_points[:n], cm.orig_tets, self.mu, self.lam, self.density, self.prestrain, self.fibre,
+        em.reserve_rows(store.orig_tets)  # the rows in sweep order before they are filled: no copy after
+        em.add_elements(store.rest_points[:n], store.orig_tets, self.mu, self.lam, self.density, self.prestrain, self.fibre,
                         ids=np.arange(m))
         self.em = em
         self.hessian_pattern = HessianPattern(em)  # the nodes are numbered afresh: built in full

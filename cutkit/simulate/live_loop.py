@@ -134,8 +134,8 @@ class LiveLoop:
         self.ticks = 0
         self.geometry_skipped = 0
         self.forces = ForceRecorder(1 << 14)
-        self.colours = NodeColours(model, s.tis.cm)
-        self.boundary = OuterBoundary(s.tis.cm, s.contact.faces, s.contact.face_tet)
+        self.colours = NodeColours(model, s.cut_mesh)
+        self.boundary = OuterBoundary(s.cut_mesh, s.contact.faces, s.contact.face_tet)
         s.on_rebase.append(self.boundary.rebase)
         # a stroke's rebase runs off this thread; the poses meanwhile are held, then ticked and cut
         # (on a stepped clock it is waited for at once: _start_rebase)
@@ -499,7 +499,7 @@ class LiveLoop:
         if self.still is not None:  # a rebase runs: the tissue as the stroke left it, the blade moves on
             points, rgb, tets_cut = self.still.points, self.still.rgb, self.still.tets_cut
         else:
-            cm = s.tis.cm
+            cm = s.cut_mesh
             points = np.array(s.tis.positions, np.float64)
             version = (cm.n_rebases, cm.n_tets_total)
             if version != self.faces_version:

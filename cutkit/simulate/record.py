@@ -27,7 +27,7 @@ class FrameRecorder:
         self.session = session
         self.series = SeriesWriter(Path(out_dir), "cut")
         self.surface = SurfaceSeries(out_dir)
-        self.colours = NodeColours(session.model, session.tis.cm)
+        self.colours = NodeColours(session.model, session.cut_mesh)
 
     @property
     def n_frames(self) -> int:
@@ -40,7 +40,7 @@ class FrameRecorder:
 
         s = self.session
         t1 = time.perf_counter()
-        tis, cm = s.tis, s.tis.cm
+        tis, cm = s.tis, s.cut_mesh
         with s.lock:
             tets, ids = tis.alive_tets()
             n = tis.n_nodes
@@ -149,7 +149,7 @@ def volume_change(tis) -> float:
     """Deformed total volume of the live tets over their rest volume, minus 1 (a cut keeps the rest volume)."""
     from cutkit.mesh.quality import signed_volumes
 
-    tets = tis.cm.tets
+    tets = tis.store.tets
     if len(tets) == 0:
         return 0.0
     rest = float(signed_volumes(tis.rest_positions, tets).sum())
@@ -172,7 +172,7 @@ def summary(session, *, model_path, loop_wall: float, t_traj_end, opening_at_tra
             forces: ForceRecorder, interrupted: bool, rates: bool) -> dict:
     """What ``summary.json`` holds (docs/simulate.md)."""
     tis, counts, task_s, opt = session.tis, session.counts, session.task_s, session.opt
-    cm = tis.cm
+    cm = session.cut_mesh
     simulated = tis.time
     n_cut, new_tets = session.tets_cut, session.new_tets  # summed over the strokes
     opening = session.opening()
@@ -257,7 +257,7 @@ def closing_warnings(session, tips=None) -> None:
         session.warnings.append(f"the blade touched the tissue but never cut it ({reached} not reached)")
     from cutkit.cutting.contact import uncut_edges_line
 
-    line = uncut_edges_line(session.tis.cm)  # crossed edges left uncut, counted and named
+    line = uncut_edges_line(session.cut_mesh)  # crossed edges left uncut, counted and named
     if line:
         session.warnings.append(line)
 
@@ -269,7 +269,7 @@ def write_cut_model(session, out_dir, summary_: dict) -> None:
 
     t1 = time.perf_counter()
     with session.lock:
-        m = cut_model(session.tis, session.model, summary_)
+        m = cut_model(session.cut_mesh, session.tis, session.model, summary_)
     write_model(Path(out_dir) / "model.h5", m)
     session.task_s["output"] += time.perf_counter() - t1
 

@@ -59,38 +59,37 @@ class BladeNeighbourhood:
 
     Parameters
     ----------
-    cm : CutMesh
+    store : TissueStore
     radius : float  mm (:func:`rest_map_radius`)
     """
 
-    def __init__(self, cm, radius: float):
-        self.n_rebases = cm.n_rebases
+    def __init__(self, store, radius: float):
+        self.n_rebases = store.n_rebases
         self.radius = float(radius)
-        self.tet_stamp = np.zeros(cm.orig_tets.shape[0], np.int64)
-        self.node_stamp = np.zeros(cm.n_orig_points, np.int64)
-        self.stack = np.empty(cm.orig_tets.shape[0], np.int64)
-        self.out = np.empty(cm.n_orig_points, np.int64)
-        self.out_d2 = np.empty(cm.n_orig_points, np.float64)
+        self.tet_stamp = np.zeros(store.orig_tets.shape[0], np.int64)
+        self.node_stamp = np.zeros(store.n_orig_nodes, np.int64)
+        self.stack = np.empty(store.orig_tets.shape[0], np.int64)
+        self.out = np.empty(store.n_orig_nodes, np.int64)
+        self.out_d2 = np.empty(store.n_orig_nodes, np.float64)
         self.mark = 0
 
-    def nodes(self, cm, positions, seeds, tip, axis):
+    def nodes(self, store, positions, seeds, back, tip):
         """The original nodes (k,) int64 within the radius of the blade (deformed positions) and their
         squared distances (k,) float64 to it (views into buffers the next call overwrites).
 
         Parameters
         ----------
-        cm : CutMesh
-        positions : (n, 3) float64  the tissue's nodes (cut mesh numbering)
+        store : TissueStore
+        positions : (n, 3) float64  the tissue's nodes (the store's numbering)
         seeds : (s,) int64  original tets to start from (the last cut step's active tets)
-        tip : (3,) float64  the blade's tip, mm
-        axis : (3,) float64  unit vector along the blade, handle to tip
+        back, tip : (3,) float64  the blade's ends, mm
         """
         from cutkit.simulate._rest_map_kernels import FloodFill, nodes_near_blade
 
         self.mark += 1
-        blade = np.array([tip - cm.blade_length * axis, tip], np.float64)
+        blade = np.array([back, tip], np.float64)
         fill = FloodFill(self.tet_stamp, self.node_stamp, self.mark, self.stack, self.out, self.out_d2)
-        n = nodes_near_blade(positions, cm.orig_tets, cm.neighbors, np.ascontiguousarray(seeds, np.int64), blade,
+        n = nodes_near_blade(positions, store.orig_tets, store.neighbors, np.ascontiguousarray(seeds, np.int64), blade,
                              self.radius, fill)
         return self.out[:n], self.out_d2[:n]
 

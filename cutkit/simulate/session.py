@@ -1,8 +1,10 @@
 """A cutting session: the tissue and the tasks of the paper's Fig. 1 as small objects.
 
-:class:`Session` owns the one mesh store of a run (the tissue: cut mesh,
-positions, rest positions, fixed flags, materials, on one node numbering)
-and the tasks that work on it:
+:class:`Session` owns the one tissue store of a run
+(:class:`~cutkit.tissue.store.TissueStore`: nodes and tets on one
+numbering), the cut state that writes it (:class:`~cutkit.cutting.CutMesh`),
+the physics that reads it (a :class:`~cutkit.tissue.TissuePhysics`) and the
+tasks that work on them:
 
 * :class:`~cutkit.simulate.tasks.ContactTask` (surface collision, section 4.1): the blade entering
   the tissue (the whole blade against the boundary hierarchy) and leaving it;
@@ -61,8 +63,12 @@ class Session:
 
     Attributes
     ----------
-    tis : TissueBase
-        The one mesh store.
+    store : TissueStore
+        The one tissue store.
+    cut_mesh : CutMesh
+        The cut state over it (the store's writer).
+    tis : TissuePhysics
+        The physics (reads the store).
     lock : HandoverLock
         Held for each relaxation step and each topology change.
     counts, task_s : dict
@@ -76,7 +82,9 @@ class Session:
 
     def __init__(self, model, opt, blade_length: float, blade_breadth: float, scalpel=None):
         from cutkit.simulate.blade import InProcessScalpel, scalpel_blade
+        from cutkit.cutting import CutMesh
         from cutkit.simulate.tissues import make_tissue
+        from cutkit.tissue.store import TissueStore
 
         wall0 = time.perf_counter()
         self.model, self.opt = model, opt
@@ -94,13 +102,15 @@ class Session:
         # a live loop sets a callable that starts it off its thread (cutkit.simulate.live_rebase)
         self.rebase_runner = None
         self.material_model = opt.material_model or model.materials.material_model
-        self.tis = make_tissue(model, self.material_model, opt, blade_length)
+        self.store = TissueStore.from_model(model)
+        self.cut_mesh = CutMesh.over(self.store, blade_length=self.blade_length, centre_nodes=opt.centre_nodes)
+        self.tis = make_tissue(model, self.store, self.material_model, opt)
         if not self.tis.fixed.any():
             self.warnings.append("the model has no fixed node: nothing holds it, it may drift (add [boundary] "
                                  "fixed_labels or fixed_regions to its recipe and run `cutkit assign`)")
         self.lock = HandoverLock()
-        self.contact = ContactTask(self.tis, model, blade_length)
-        self.cut = CutTask(self.tis, self.lock, self.counts)
+        self.contact = ContactTask(self.tis, self.store, model, blade_length)
+        self.cut = CutTask(self.tis, self.cut_mesh, self.lock, self.counts)
         self.relax = RelaxTask(self.tis, self.lock, self.counts)
         self.scalpel = scalpel if scalpel is not None else InProcessScalpel(blade_breadth=self.blade_breadth,
                                                                                  **scalpel_blade(opt.scalpel))
@@ -110,7 +120,7 @@ class Session:
         t1 = time.perf_counter()
         self.settle_info = settle(self.tis, self.material_model, opt, self.warnings)
         self.contact.refit()
-        surface_bvh(self.tis.cm)  # built now, not in the first cut step
+        surface_bvh(self.cut_mesh)  # built now, not in the first cut step
         self.task_s["settle"] = time.perf_counter() - t1
 
     @property
@@ -185,7 +195,7 @@ class Session:
         """
         if not self.rebase_due or self.scalpel.code != FREE:
             return False
-        cm = self.tis.cm
+        cm = self.cut_mesh
         if not cm.subtets and cm.n_points == cm.n_orig_points:
             self.rebase_due = False  # the stroke cut nothing: nothing to rebase
             return False
@@ -201,7 +211,9 @@ class Session:
     def rebase(self) -> np.ndarray:
         """Make the live tets the original ones of a fresh cut state (:meth:`CutMesh.rebase`), between strokes.
 
-        The one place where every holder of data keyed by CutMesh tet ids or
+        The store renumbers its tets in place (:meth:`TissueStore.rebase
+        <cutkit.tissue.store.TissueStore.rebase>`, inside the cut mesh's);
+        this is the one place where every holder of data keyed by tet ids or
         built from the original tets follows: the tissue
         (``tis.rebase(old_of_new, old_orig)``), the surface collision
         (:meth:`ContactTask.rebase`), then each callable of
@@ -213,9 +225,9 @@ class Session:
         Returns
         -------
         old_of_new : (m,) int64
-            Old CutMesh tet id of each new (original) tet.
+            Old tet id of each new (original) tet.
         """
-        cm = self.tis.cm
+        cm = self.cut_mesh
         self.cut_before["cut_tets"] = self.tets_cut
         self.cut_before["new_tets"] = self.new_tets
         self.cut_before["rebases"] += 1
@@ -233,17 +245,17 @@ class Session:
 
     def opening(self) -> np.ndarray:
         """(p,) distances between the two copies of every duplicated cut node (all strokes), mm."""
-        return cut_opening(self.tis.cm, self.tis.positions, self.pairs_before)
+        return cut_opening(self.cut_mesh, self.tis.positions, self.pairs_before)
 
     @property
     def tets_cut(self) -> int:
         """Tets cut, summed over the strokes (each stroke counts the original tets of its cut state)."""
-        return self.cut_before["cut_tets"] + len(self.tis.cm.subtets)
+        return self.cut_before["cut_tets"] + len(self.cut_mesh.subtets)
 
     @property
     def new_tets(self) -> int:
         """Sub-tets made, summed over the strokes."""
-        return self.cut_before["new_tets"] + int(sum(len(v) for v in self.tis.cm.subtets.values()))
+        return self.cut_before["new_tets"] + int(sum(len(v) for v in self.cut_mesh.subtets.values()))
 
 
 def cut_pairs(cm, before=None) -> np.ndarray:

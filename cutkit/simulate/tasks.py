@@ -87,15 +87,19 @@ class ContactTask:
 
     Parameters
     ----------
-    tissue : TissueBase
+    tissue : TissuePhysics
+        Its positions place the surface.
+    store : TissueStore
+        Its boundary faces are the surface.
     model : TetModel
         For the materials of the entry face's tissue.
     blade_length : float
         mm.
     """
 
-    def __init__(self, tissue, model, blade_length: float):
+    def __init__(self, tissue, store, model, blade_length: float):
         self.tis = tissue
+        self.store = store
         self.materials = model.materials
         self.rows = model.materials.rows()
         self.rebase()
@@ -146,7 +150,7 @@ class ContactTask:
         self.bvh.update(self.tis.positions[:self.n0])
 
     def rebase(self) -> None:
-        """(Re)build the boundary and its hierarchy from the original tets of the cut mesh.
+        """(Re)build the boundary and its hierarchy from the original tets of the store.
 
         Called at the start and after every :meth:`Session.rebase`: then the
         original tets are the live ones, so the cut surface of the earlier
@@ -155,11 +159,11 @@ class ContactTask:
         """
         from cutkit.collision import SurfaceBVH
 
-        cm = self.tis.cm
-        self.n0 = cm.n_orig_points
-        self.faces, self.face_tet = cm.orig_boundary_faces, cm.orig_boundary_face_tet
+        store = self.store
+        self.n0 = store.n_orig_nodes
+        self.faces, self.face_tet = store.boundary_faces, store.boundary_face_tet
         self.bvh = SurfaceBVH.build(self.tis.positions[:self.n0].copy(), self.faces)
-        self.row_of_tet = self.materials.row_of(cm.labels)
+        self.row_of_tet = self.materials.row_of(store.labels)
 
 
 class CutTask:
@@ -171,8 +175,9 @@ class CutTask:
     relaxation ends its step after the sweep in flight and lets it in).
     """
 
-    def __init__(self, tissue, lock, counts: dict):
+    def __init__(self, tissue, cut_mesh, lock, counts: dict):
         self.tis = tissue
+        self.cm = cut_mesh
         self.lock = lock
         self.counts = counts
         self.pending = False
@@ -190,7 +195,7 @@ class CutTask:
         its boundary, not strictly inside, so they stayed uncut and the tissue
         stayed joined at the entry (measured on a side entry, docs/simulate.md).
         """
-        cm = self.tis.cm
+        cm = self.cm
         p0, q0 = cm.prev_pose
         motion = blade_tip - p0
         length = float(np.linalg.norm(motion))
@@ -207,7 +212,7 @@ class CutTask:
         """
         from cutkit.mesh.geometry import segment_meets_any_tet
 
-        cm = self.tis.cm
+        cm = self.cm
         corners = np.ascontiguousarray(cm.orig_tets[cm.active_tets])
         length = cm.blade_length
         return (segment_meets_any_tet(blade_tip - length * axis, blade_tip, cm.points, corners),
@@ -230,7 +235,7 @@ class CutTask:
         whether the blade went out through the far side (:attr:`through`)."""
         from cutkit.cutting import cut_step
 
-        cm = self.tis.cm
+        cm = self.cm
         if not self.inside and cm.prev_pose is not None:
             self._start_outside(blade_tip)
         before = cm.prev_pose
@@ -251,9 +256,9 @@ class CutTask:
 
     def step(self, proxy, out, code: int, contact: Contact) -> np.ndarray:
         """One geometry update; returns the (n, 3) forces on the tissue's nodes, N."""
-        cm = self.tis.cm
+        cm = self.cm
         axis = out[O_N:O_N + 3].copy()
-        blade_tip = self.tis.blade_to_rest(proxy, axis, cm.active_tets, contact.face_nodes)
+        blade_tip = self.tis.blade_to_rest(proxy, axis, cm.blade_length, cm.active_tets, contact.face_nodes)
         if self.pending:
             self._cut(blade_tip, axis, proxy)
         elif code != FREE:
@@ -271,7 +276,7 @@ class CutTask:
 
     def leave(self) -> None:
         """The blade left the tissue: the cut's sweep restarts at the next entry."""
-        cm = self.tis.cm
+        cm = self.cm
         cm.prev_pose = None
         cm.tip_tet = -1
         cm.active_tets = np.zeros(0, np.int64)

@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from cutkit.cutting import CutMesh
 from cutkit.mesh.geometry import TET_EDGES, tet_volumes
 from cutkit.relax import Control, NodeLists, build_spring_model, initial_state
 from cutkit.relax.materials import material_of_tets, prestress_of_tets
@@ -37,6 +36,7 @@ from cutkit.relax.topology import recolour
 from cutkit.simulate._kernels import lookup_springs
 from cutkit.simulate.rest_map import rest_map_radius
 from cutkit.simulate.tissue_base import TissueBase
+from cutkit.tissue.store import TissueStore
 
 
 #: Tets whose normalised volume 6 sqrt(2) V / l_rms^3 (1 for a regular tet)
@@ -65,8 +65,8 @@ class Tissue(TissueBase):
     ----------
     model : TetModel
         Needs a materials row for every label.
-    blade_length : float
-        mm.
+    store : TissueStore, optional
+        The nodes and tets it reads (default: the model's own, nothing cut).
     dt0 : float
         Finest relaxation step, s.
     n_lists : int
@@ -74,41 +74,39 @@ class Tissue(TissueBase):
     tolerance_fraction : float
         Displacement tolerance of the node-list assignment as a fraction of
         the mean spring rest length.
-    centre_nodes : bool
-        Fig. 2c centre nodes in split faces.
 
     Attributes
     ----------
-    cm : CutMesh
+    store : TissueStore
     springs : SpringModel
     state : SpringState
     lists : NodeLists
     n_orig_tets : int
     """
 
-    def __init__(self, model, *, blade_length: float, dt0: float, n_lists: int, tolerance_fraction: float,
-                 centre_nodes: bool = False, calibration: float = STIFFNESS_CALIBRATION, volume_stiffness: float = 0.0):
+    def __init__(self, model, store: TissueStore | None = None, *, dt0: float, n_lists: int,
+                 tolerance_fraction: float, calibration: float = STIFFNESS_CALIBRATION, volume_stiffness: float = 0.0):
         self.model = model
         self.calibration = float(calibration)
         self.volume_stiffness = float(volume_stiffness)
-        self.cm = cm = CutMesh.from_model(model, blade_length=blade_length, centre_nodes=centre_nodes)
+        self.store = store = TissueStore.from_model(model) if store is None else store
         self.rest_map_radius = rest_map_radius(model.points, model.tets)
         self.springs = sm = build_spring_model(model, calibration=calibration, volume_stiffness=volume_stiffness)
         self.state = initial_state(sm)
         tolerance = tolerance_fraction * float(np.mean(sm.rest_length))
         self.lists = NodeLists(sm, self.state, dt0, n_lists, displacement_tolerance=tolerance)
-        self.n_orig_tets = int(cm.orig_tets.shape[0])
+        self.n_orig_tets = int(store.orig_tets.shape[0])
         self.bc_fixed = sm.fixed.copy()
 
         # material of each original tet (a sub-tet has its original's)
         # (the springs have no Poisson ratio: the table's is not read)
-        mat = material_of_tets(model, cm.labels, poisson_ratio=0.0)
+        mat = material_of_tets(model, store.labels, poisson_ratio=0.0)
         self.E, self.rho = mat["E"], mat["density"]
-        self.prestrain, self.fibre = prestress_of_tets(model, cm.labels)
+        self.prestrain, self.fibre = prestress_of_tets(model, store.labels)
 
         # per-tet records (indexed by CutMesh tet id), per-spring sums
-        tets = cm.orig_tets
-        cap = cm.tet_capacity
+        tets = store.orig_tets
+        cap = store.tet_capacity
         self.rec_V = np.zeros(cap)
         self.rec_sv = np.zeros((cap, 6))
         V, sv = self._contributions(np.arange(self.n_orig_tets))
@@ -118,7 +116,7 @@ class Tissue(TissueBase):
         self.model_V = V.copy()
         # the cut mesh's edges of the original tets (one computation): the spring model numbers its
         # springs by the same unique_edges of the same tets, so spring k is edge k
-        edges, tet_edge = cm.edges, cm.tet_edges
+        edges, tet_edge = store.edges, store.tet_edges
         assert edges.shape == sm.springs.shape, "the springs are the mesh's edges"
         s = len(edges)
         flat = tet_edge.ravel()
@@ -129,16 +127,16 @@ class Tissue(TissueBase):
         # tets of each cut node (nodes >= n_orig_points), to re-record moved nodes
         self._node_tets: dict[int, set] = {}
         # number of live tets at each node: a node with none is an orphan and is held
-        self.node_tet_count = np.bincount(tets.ravel(), minlength=cm.n_points).astype(np.int64)
+        self.node_tet_count = np.bincount(tets.ravel(), minlength=store.n_nodes).astype(np.int64)
 
     # ------------------------------------------------------------------ records
     def _contributions(self, tet_ids: np.ndarray):
         """Rest volume (t,) and prestress terms V p cos^2 per edge (t, 6) of CutMesh tets."""
-        cm = self.cm
-        q = cm.tet_corners[tet_ids]
-        X = cm.rest_points
+        store = self.store
+        q = store.tet_corners[tet_ids]
+        X = store.rest_points
         V = tet_volumes(X, q)
-        orig = cm.tet_origins[tet_ids]
+        orig = store.tet_origins[tet_ids]
         d = X[q[:, TET_EDGES[:, 1]]] - X[q[:, TET_EDGES[:, 0]]]  # (t, 6, 3)
         length = np.linalg.norm(d, axis=2)
         cos = np.einsum("tkc,tc->tk", d, self.fibre[orig]) / np.where(length > 0, length, 1.0)
@@ -158,7 +156,7 @@ class Tissue(TissueBase):
         counts : dict
             ``nodes_added``, ``springs_added``, ``springs_removed``.
         """
-        cm, sm = self.cm, self.springs
+        store, sm = self.store, self.springs
         n_old = sm.n_nodes
         n_new = delta.n_nodes_after
         added = [int(t) for t in delta.added_tets]
@@ -166,8 +164,8 @@ class Tissue(TissueBase):
         moved = [int(k) for k in delta.moved_nodes]
         if not added and not removed and not moved and n_new == n_old:
             return {"nodes_added": 0, "springs_added": 0, "springs_removed": 0}
-        if self.rec_V.shape[0] < cm.tet_capacity:
-            grow = cm.tet_capacity - self.rec_V.shape[0]
+        if self.rec_V.shape[0] < store.tet_capacity:
+            grow = store.tet_capacity - self.rec_V.shape[0]
             self.rec_V = np.concatenate([self.rec_V, np.zeros(grow)])
             self.rec_sv = np.concatenate([self.rec_sv, np.zeros((grow, 6))])
 
@@ -192,7 +190,7 @@ class Tissue(TissueBase):
 
     def _cut_tet_sums(self, added: list, removed: list, moved: list):
         """Take back what removed (and reweighed) tets gave, record what added ones give: edge keys and sums."""
-        cm, sm = self.cm, self.springs
+        store, sm = self.store, self.springs
         # ---- tets to take back and to (re)record
         added_set = set(added)
         removed_set = set(removed)
@@ -205,7 +203,7 @@ class Tissue(TissueBase):
         record = np.array(sorted(added_set | reweigh), np.int64)
         masses = sm.masses
         keys, sums = [], []
-        key_base = np.int64(cm.n_points + 1)
+        key_base = np.int64(store.n_nodes + 1)
         for sign, ids in ((-1.0, take_back), (1.0, record)):
             if ids.size == 0:
                 continue
@@ -215,8 +213,8 @@ class Tissue(TissueBase):
                 self.rec_sv[ids] = sv
             else:
                 V, sv = self.rec_V[ids], self.rec_sv[ids]
-            orig = cm.tet_origins[ids]
-            q = cm.tet_corners[ids]
+            orig = store.tet_origins[ids]
+            q = store.tet_corners[ids]
             np.add.at(masses, q.ravel(), np.repeat(sign * self.rho[orig] * V / 4.0, 4))
             np.add.at(self.node_tet_count, q.ravel(), int(sign))
             ea, eb = q[:, TET_EDGES[:, 0]], q[:, TET_EDGES[:, 1]]  # (t, 6)
@@ -226,7 +224,7 @@ class Tissue(TissueBase):
                                  axis=-1).reshape(-1, 4))
             for r in range(ids.size):
                 for node in q[r]:
-                    if node >= cm.n_orig_points:
+                    if node >= store.n_orig_nodes:
                         owners = self._node_tets.setdefault(int(node), set())
                         if sign > 0:
                             owners.add(int(ids[r]))
@@ -236,8 +234,8 @@ class Tissue(TissueBase):
 
     def _cut_springs(self, keys: list, sums: list):
         """Apply the per-edge sums to the springs: update, create, drop; returns (new pairs, dropped count)."""
-        cm, sm = self.cm, self.springs
-        key_base = np.int64(cm.n_points + 1)
+        store, sm = self.store, self.springs
+        key_base = np.int64(store.n_nodes + 1)
         if keys:
             uk, inv = np.unique(np.concatenate(keys), return_inverse=True)
             allsums = np.concatenate(sums)
@@ -320,22 +318,21 @@ class Tissue(TissueBase):
         self.lists.topology_changed()
     def _rebuild_volume_term(self) -> None:
         """The volume term over the live tets: rest volumes from the per-tet records (the cut is made at rest)."""
-        from cutkit.cutting.rebase import made_by_cut
         from cutkit.relax.volume import VolumeTerm
 
-        cm = self.cm
-        ids = np.flatnonzero(cm.tet_alive)
+        store = self.store
+        ids = np.flatnonzero(store.tet_alive)
         # Flat sub-tets of a cut are left out: their volume stiffness
         # (bulk |dV/dx|^2 / V0) dwarfs their springs' and the semi-implicit
         # step, which treats it per node, overshoots on them.
-        sub = ids[made_by_cut(cm, ids)]  # in any stroke
-        small = self.rec_V[sub] < VOLUME_TERM_MIN_FRACTION * self.model_V[cm.tet_origins[sub]]
+        sub = ids[store.made_by_cut(ids)]  # in any stroke
+        small = self.rec_V[sub] < VOLUME_TERM_MIN_FRACTION * self.model_V[store.tet_origins[sub]]
         flat = sub[small | (self.rec_V[sub] <= 0.0)
-                   | (_shape_quality(cm.rest_points, cm.tet_corners[sub], self.rec_V[sub]) < VOLUME_TERM_MIN_QUALITY)]
+                   | (_shape_quality(store.rest_points, store.tet_corners[sub], self.rec_V[sub]) < VOLUME_TERM_MIN_QUALITY)]
         ids = np.setdiff1d(ids, flat, assume_unique=True)
         V0 = self.rec_V[ids]
-        self.springs.volume = VolumeTerm.build(self.springs.rest_positions, cm.tet_corners[ids], V0,
-                                               self.volume_stiffness * self.E[cm.tet_origins[ids]])
+        self.springs.volume = VolumeTerm.build(self.springs.rest_positions, store.tet_corners[ids], V0,
+                                               self.volume_stiffness * self.E[store.tet_origins[ids]])
 
     def _append_nodes(self, new: np.ndarray, delta) -> None:
         """Append the delta's new nodes ``new`` (p,) int64: rest from the delta, the rest interpolated."""
@@ -477,7 +474,7 @@ class Tissue(TissueBase):
         """
         old_of_new = np.asarray(old_of_new, np.int64)
         old_orig = np.asarray(old_orig, np.int64)
-        m, cap = old_of_new.shape[0], max(self.cm.tet_capacity, old_of_new.shape[0])
+        m, cap = old_of_new.shape[0], max(self.store.tet_capacity, old_of_new.shape[0])
         rec_V, rec_sv = np.zeros(cap), np.zeros((cap, 6))
         rec_V[:m], rec_sv[:m] = self.rec_V[old_of_new], self.rec_sv[old_of_new]
         self.rec_V, self.rec_sv = rec_V, rec_sv

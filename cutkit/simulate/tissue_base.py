@@ -1,40 +1,40 @@
-"""What both tissue models of a session share (:class:`TissueBase`): the cut mesh and its nodes.
+"""What both tissue models of a session share (:class:`TissueBase`): the store they read and its nodes.
 
 The springs (:class:`cutkit.simulate.tissue.Tissue`, the paper's) and the
 elements (:class:`cutkit.simulate.elastic_tissue.ElasticTissue`) keep their
-nodes on the cut mesh's numbering; this base class interpolates cut nodes
-over their defining nodes, carries the blade into the rest configuration
-and lists the live tetrahedra.
+nodes on the tissue store's numbering (:class:`cutkit.tissue.store.TissueStore`);
+this base class interpolates cut nodes over their defining nodes, carries
+the blade into the rest configuration and lists the live tetrahedra.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from cutkit.cutting import CutMesh
+from cutkit.tissue.store import TissueStore
 
 
 class TissueBase:
-    """What both tissue kinds share: the cut mesh, node interpolation, the live tets.
+    """What both tissue kinds share: the store, node interpolation, the live tets.
 
-    Subclasses set ``cm`` (:class:`~cutkit.cutting.CutMesh`) and provide
+    Subclasses set ``store`` (:class:`~cutkit.tissue.store.TissueStore`, which they only read) and provide
     ``positions``, ``rest_positions``, ``velocities``, ``fixed``, ``time``,
     :meth:`settle`, :meth:`advance` and :meth:`apply_cut`.
     """
 
-    cm: CutMesh
+    store: TissueStore
     #: Radius of the neighbourhood whose displacement carries the blade (:mod:`cutkit.simulate.rest_map`), mm.
     rest_map_radius: float
     #: Its flood fill's buffers (:class:`cutkit.simulate.rest_map.BladeNeighbourhood`), made on first use.
     _blade_hood = None
 
     def rebase(self, old_of_new: np.ndarray, old_orig: np.ndarray) -> None:
-        """Follow :meth:`CutMesh.rebase <cutkit.cutting.CutMesh.rebase>` (called after it, between strokes).
+        """Follow :meth:`TissueStore.rebase <cutkit.tissue.store.TissueStore.rebase>` (called after it, between strokes).
 
         Parameters
         ----------
         old_of_new : (m,) int64
-            Old CutMesh tet id of each new original tet.
+            Old tet id of each new original tet.
         old_orig : (m,) int64
             Old original tet of each (``old _tet_orig[old_of_new]``).
         """
@@ -46,21 +46,22 @@ class TissueBase:
         The cut mesh works in the rest configuration; a cut node's weights
         over its defining original nodes carry over to the deformed ones.
         """
-        cm = self.cm
-        par = cm.defining_nodes[nodes]
-        w = np.where(par >= 0, cm.defining_weights[nodes], 0.0)
+        store = self.store
+        par = store.defining_nodes[nodes]
+        w = np.where(par >= 0, store.defining_weights[nodes], 0.0)
         return np.einsum("pq,pqc->pc", w, self.positions[np.where(par >= 0, par, 0)])
 
     def _interpolation_weights(self, nodes: np.ndarray):
         """Defining nodes (p, q) and their normalised weights (p, q) of cut nodes (invalid slots weigh 0)."""
-        cm = self.cm
-        par = cm.defining_nodes[nodes]
+        store = self.store
+        par = store.defining_nodes[nodes]
         valid = par >= 0
-        wz = np.where(valid, cm.defining_weights[nodes], 0.0)
+        wz = np.where(valid, store.defining_weights[nodes], 0.0)
         wsum = wz.sum(axis=1, keepdims=True)
         return np.where(valid, par, 0), wz / np.where(wsum > 0, wsum, 1.0), valid
 
-    def blade_to_rest(self, point, axis, active_tets: np.ndarray, entry_nodes: np.ndarray) -> np.ndarray:
+    def blade_to_rest(self, point, axis, blade_length: float, active_tets: np.ndarray,
+                      entry_nodes: np.ndarray) -> np.ndarray:
         """Carry the blade's tip from the deformed tissue into the rest configuration, (3,) float64.
 
         The cut is made in the rest configuration, where no original
@@ -76,6 +77,7 @@ class TissueBase:
         ----------
         point : (3,) float64  the tip (the proxy), deformed configuration, mm
         axis : (3,) float64  unit vector along the blade, handle to tip
+        blade_length : float  mm
         active_tets : (k,) int64  the last cut step's active (original) tets
         entry_nodes : (q,) int64  the nodes of the face the blade entered through
         """
@@ -83,7 +85,7 @@ class TissueBase:
 
         point = np.asarray(point, np.float64)
         if len(active_tets):
-            nodes, w = self.blade_neighbourhood(point, axis, active_tets)
+            nodes, w = self.blade_neighbourhood(point, axis, blade_length, active_tets)
             u = rest_displacement(self.positions, self.rest_positions, nodes, w)
             if u is not None:
                 return point - u
@@ -91,7 +93,7 @@ class TissueBase:
             return point.copy()
         return point - (self.positions[entry_nodes] - self.rest_positions[entry_nodes]).mean(axis=0)
 
-    def blade_neighbourhood(self, point, axis, active_tets: np.ndarray):
+    def blade_neighbourhood(self, point, axis, blade_length: float, active_tets: np.ndarray):
         """The original nodes (k,) int64 within :attr:`rest_map_radius` of the blade (deformed positions) and
         their weights (k,) float64 (:func:`cutkit.simulate.rest_map.blade_weights`), found by a flood fill
         from ``active_tets`` (original tets).
@@ -100,15 +102,16 @@ class TissueBase:
         ----------
         point : (3,) float64  the blade's tip, deformed configuration, mm
         axis : (3,) float64  unit vector along the blade, handle to tip
+        blade_length : float  mm
         active_tets : (k,) int64
         """
         from cutkit.simulate.rest_map import BladeNeighbourhood, blade_weights
 
         point, axis = np.asarray(point, np.float64), np.asarray(axis, np.float64)
         hood = self._blade_hood
-        if hood is None or hood.n_rebases != self.cm.n_rebases:  # the first, or the mesh was rebased
-            hood = self._blade_hood = BladeNeighbourhood(self.cm, self.rest_map_radius)
-        nodes, d2 = hood.nodes(self.cm, self.positions, active_tets, point, axis)
+        if hood is None or hood.n_rebases != self.store.n_rebases:  # the first, or the mesh was rebased
+            hood = self._blade_hood = BladeNeighbourhood(self.store, self.rest_map_radius)
+        nodes, d2 = hood.nodes(self.store, self.positions, active_tets, point - blade_length * axis, point)
         return nodes, blade_weights(d2, self.rest_map_radius)
 
     def load_shares(self, nodes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -138,10 +141,10 @@ class TissueBase:
         return nodes
 
     def alive_tets(self) -> tuple[np.ndarray, np.ndarray]:
-        """(k, 4) int64 current tets and (k,) int64 their CutMesh ids."""
-        cm = self.cm
-        ids = np.flatnonzero(cm.tet_alive)
-        return cm.tet_corners[ids], ids
+        """(k, 4) int64 current tets and (k,) int64 their ids."""
+        store = self.store
+        ids = np.flatnonzero(store.tet_alive)
+        return store.tet_corners[ids], ids
 
     @property
     def displacement(self) -> np.ndarray:

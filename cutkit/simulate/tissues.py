@@ -16,27 +16,26 @@ from cutkit.tissue.physics import TissuePhysics
 SETTLE_MAX_SWEEPS = {"neohookean": 50, "springs": 100}
 
 
-def make_tissue(model, material_model: str, opt, blade_length: float) -> TissuePhysics:
-    """The tissue of a run: :class:`ElasticTissue` or the paper's springs (:class:`Tissue`), a
+def make_tissue(model, store, material_model: str, opt) -> TissuePhysics:
+    """The physics of a run over ``store`` (:class:`~cutkit.tissue.store.TissueStore`, or None: the
+    model's own): :class:`ElasticTissue` or the paper's springs (:class:`Tissue`), a
     :class:`~cutkit.tissue.TissuePhysics`."""
     if material_model == "springs":
         from cutkit.simulate.tissue import Tissue
 
-        return Tissue(model, blade_length=blade_length, dt0=opt.dt0, n_lists=opt.n_lists,
-                      tolerance_fraction=opt.tolerance_fraction, centre_nodes=opt.centre_nodes,
+        return Tissue(model, store, dt0=opt.dt0, n_lists=opt.n_lists, tolerance_fraction=opt.tolerance_fraction,
                       volume_stiffness=opt.volume_stiffness)
     from cutkit.simulate.elastic_tissue import DEFAULT_SOLVER, ElasticTissue
 
-    return ElasticTissue(model, blade_length=blade_length, step_s=1.0 / opt.geometry_rate_hz,
-                         centre_nodes=opt.centre_nodes,
+    return ElasticTissue(model, store, step_s=1.0 / opt.geometry_rate_hz,
                          solver=opt.solver or ("newton" if opt.element == "anp" else DEFAULT_SOLVER),
                          element=opt.element, deviatoric_smoothing=opt.deviatoric_smoothing)
 
 
 
 
-def cut_model(tis, model, summary: dict | None = None):
-    """The cut tissue as a model: rest configuration, cut topology, displacement as point data.
+def cut_model(cm, tis, model, summary: dict | None = None):
+    """The cut tissue (cut mesh ``cm``, physics ``tis``) as a model: rest configuration, cut topology, displacement as point data.
 
     A model is defined in its rest configuration (the springs' rest lengths
     follow from it), so ``points`` are the rest positions of the cut mesh,
@@ -49,7 +48,6 @@ def cut_model(tis, model, summary: dict | None = None):
 
     from cutkit.cutting import to_model
 
-    cm = tis.cm
     m = to_model(cm, model, points=cm.points, point_data={"displacement": tis.displacement})
     provenance = dict(m.provenance)
     stages = dict(provenance.get("stages", {}))
