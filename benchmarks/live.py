@@ -245,7 +245,7 @@ def run_session(model, trajectory_path: str, priority: str, window: bool, igtl_r
     from cutkit.haptics.client import spawned_server
     from cutkit.live import HapticsPoseSource
     from cutkit.simulate import SimulateOptions
-    from cutkit.simulate.elastic_tissue import ElasticTissue
+    from cutkit.relax.elastic_tissue import ElasticTissue
     from cutkit.simulate.live import run_live
 
     views, closers, clock = _session_views(window, igtl_rate)

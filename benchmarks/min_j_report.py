@@ -30,7 +30,7 @@ def measure(knee: str, hold_s: float) -> dict:
     from cutkit.io.model_h5 import read_model
     from cutkit.relax.vbd import volume_ratio_extremes
     from cutkit.simulate import SimulateOptions, simulate
-    from cutkit.simulate.elastic_tissue import KeptVolumeRatios
+    from cutkit.relax.elastic_tissue import KeptVolumeRatios
 
     kept = KeptVolumeRatios.extremes
     rows = []

@@ -105,7 +105,7 @@ def knee_linear(path: str, step_s: float, cholespy: bool) -> dict:
 
     from cutkit.io.model_h5 import read_model
     from cutkit.relax.newton import NewtonSolver, _free_terms, _Potential, node_block_inverse
-    from cutkit.simulate.elastic_tissue import ElasticTissue
+    from cutkit.relax.elastic_tissue import ElasticTissue
 
     tis = ElasticTissue(read_model(path), step_s=step_s, solver="newton")
     em, x0 = tis.em, tis.state.positions.copy()

@@ -27,7 +27,7 @@ def run(model, traj, rings, hold_s: float) -> dict:
 
     from cutkit.relax import newton
     from cutkit.simulate import SimulateOptions, simulate
-    from cutkit.simulate import elastic_tissue as et
+    from cutkit.relax import elastic_tissue as et
 
     solvers, walls = [], []
     original_solve, original_make = newton.NewtonSolver.solve, et.ElasticTissue._newton_solver

@@ -31,7 +31,7 @@ def measure(knee: str, repeat: int) -> dict:
     from cutkit.io.model_h5 import read_model
     from cutkit.relax.hessian_pattern import HessianPattern
     from cutkit.simulate import SimulateOptions, simulate
-    from cutkit.simulate.elastic_tissue import ElasticTissue
+    from cutkit.relax.elastic_tissue import ElasticTissue
 
     result = {}
     apply_delta, rebase = ElasticTissue.apply_delta, ElasticTissue.rebase

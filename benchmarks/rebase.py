@@ -52,7 +52,7 @@ def main() -> None:
     from cutkit.cutting.trajectory import read_trajectory
     from cutkit.io.model_h5 import read_model
     from cutkit.simulate import SimulateOptions, simulate
-    from cutkit.simulate.elastic_tissue import ElasticTissue
+    from cutkit.relax.elastic_tissue import ElasticTissue
     from cutkit.simulate.session import Session
 
     logs = {"total": [], "cut_mesh": [], "tissue": []}

@@ -2,7 +2,7 @@
 
 The cut is made in the rest configuration: every geometry update carries
 the blade there by the displacement of the tissue around it
-(``cutkit.simulate.rest_map``).  A rest pose that jumps from step to step
+(``cutkit.relax.rest_map``).  A rest pose that jumps from step to step
 folds the swept surface, and the cut leaves edges uncut.  For each run this
 records the blade's rest tip at every cut step and reports, over the steady
 part (the hand moving along the incision, three steps trimmed at each end):

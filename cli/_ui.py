@@ -51,7 +51,7 @@ def overwrite_option(command):
                              "non-empty output folder is refused.")(command)
 
 
-#: ``--solver``'s choices and default: :data:`cutkit.simulate.elastic_tissue.SOLVERS` and
+#: ``--solver``'s choices and default: :data:`cutkit.relax.elastic_tissue.SOLVERS` and
 #: ``DEFAULT_SOLVER`` (kept here so that the CLI's startup imports no kernels; a test holds them equal).
 SOLVER_CHOICES = ("newton", "vbd", "hybrid")
 SOLVER_DEFAULT = "hybrid"

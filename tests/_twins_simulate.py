@@ -1,4 +1,4 @@
-"""Slow, obviously correct twins of cutkit.simulate._kernels."""
+"""Slow, obviously correct twins of cutkit.relax._handover_kernels."""
 
 import numpy as np
 

@@ -247,7 +247,7 @@ def cut_slab(element, nu=0.45, smoothing=0.0):
     (``smoothing``: the ANP element's deviatoric smoothing)."""
     from cutkit.cutting import cut_step
     from cutkit.model.tetmodel import Materials, Prestress
-    from cutkit.simulate.elastic_tissue import ElasticTissue
+    from cutkit.relax.elastic_tissue import ElasticTissue
     from test_newton_tissue import ROW
 
     p, t = kuhn_box(np.array([6.0, 3.0, 3.0]), (6, 3, 3))
@@ -338,7 +338,7 @@ def test_simulate_takes_the_element():
 
     from cutkit.cli.main import cli
     from cutkit.simulate import SimulateOptions
-    from cutkit.simulate.elastic_tissue import ElasticTissue
+    from cutkit.relax.elastic_tissue import ElasticTissue
 
     out = CliRunner().invoke(cli, ["simulate", "--help"])
     assert out.exit_code == 0 and "--element" in out.output

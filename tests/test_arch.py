@@ -42,6 +42,10 @@ def _write(root: Path, files: dict[str, str]) -> None:
 LONG_BODY = "".join(f"    v{i} = {i}\n" for i in range(85))
 
 
+#: The synthetic package's cutting (``cut``) and physics (``phys``), which meet in ``meet``.
+APART = {"cut": {"phys"}, "phys": {"cut"}, "meet": {"cut", "phys"}}
+
+
 @pytest.fixture
 def synthetic(tmp_path):
     """A small package with one violation of each kind (and allowed look-alikes)."""
@@ -82,6 +86,12 @@ def synthetic(tmp_path):
                 return c2
         """,
         "pkg/run/c2.py": "from pkg.run import c1\n",
+        "pkg/cut/__init__.py": "",
+        "pkg/cut/step.py": "from pkg.meet import delta  # the meeting place: allowed\nfrom pkg.phys import model\n",
+        "pkg/phys/__init__.py": "",
+        "pkg/phys/model.py": "from pkg.meet import delta\n",
+        "pkg/meet/__init__.py": "",
+        "pkg/meet/delta.py": "VALUE = 1\n",
         "pkg/run/long.py": "def long_one():\n" + LONG_BODY + "    return 0\n",
         "pkg/build/long.py": "def long_but_build_side():\n" + LONG_BODY + "    return 0\n",
         "pkg/build/kern.py": """
@@ -117,7 +127,7 @@ def synthetic(tmp_path):
 
 
 def test_each_kind_of_violation_is_reported(synthetic):
-    found = arch.check(synthetic, packages={"pkg": "pkg"}, run_side={"run"}, build_side={"build"})
+    found = arch.check(synthetic, packages={"pkg": "pkg"}, run_side={"run"}, build_side={"build"}, apart=APART)
     entries = {v.entry for v in found}
     assert entries == {
         "private-import pkg/run/user.py -> pkg.a._priv.x",
@@ -127,6 +137,7 @@ def test_each_kind_of_violation_is_reported(synthetic):
         "private-write pkg/run/user.py::Holder.set::obj._arr",
         "cycle pkg.run.c1 | pkg.run.c2",
         "run-imports-build pkg/run/user.py -> pkg.build.thing",
+        "cutting-meets-physics pkg/cut/step.py -> pkg.phys.model",
         "long-function pkg/run/long.py::long_one",
         "kernel-arguments pkg/build/kern.py::wide",
         "kernel-arguments pkg/build/kern.py::also_wide",
@@ -135,11 +146,12 @@ def test_each_kind_of_violation_is_reported(synthetic):
     assert by_entry["private-import pkg/run/user.py -> pkg.a._priv.x"].line == 3  # file:line of the import
     assert by_entry["long-function pkg/run/long.py::long_one"].line == 1
     assert arch.counts(found) == {"private-import": 2, "private-read": 1, "private-write": 2, "cycle": 1,
-                                  "run-imports-build": 1, "long-function": 1, "kernel-arguments": 2}
+                                  "run-imports-build": 1, "cutting-meets-physics": 1, "long-function": 1,
+                                  "kernel-arguments": 2}
 
 
 def test_a_new_violation_or_a_fixed_baseline_line_fails(synthetic):
-    found = arch.check(synthetic, packages={"pkg": "pkg"}, run_side={"run"}, build_side={"build"})
+    found = arch.check(synthetic, packages={"pkg": "pkg"}, run_side={"run"}, build_side={"build"}, apart=APART)
     baseline = sorted(v.entry for v in found)
     assert arch.compare(found, baseline) == ([], [])
     new, gone = arch.compare(found, baseline[1:])  # a violation the baseline does not know
@@ -149,7 +161,7 @@ def test_a_new_violation_or_a_fixed_baseline_line_fails(synthetic):
 
 
 def test_the_baseline_file_round_trips(synthetic, tmp_path):
-    found = arch.check(synthetic, packages={"pkg": "pkg"}, run_side={"run"}, build_side={"build"})
+    found = arch.check(synthetic, packages={"pkg": "pkg"}, run_side={"run"}, build_side={"build"}, apart=APART)
     path = tmp_path / "baseline.txt"
     arch.write_baseline(path, found)
     assert arch.read_baseline(path) == [v.entry for v in found]

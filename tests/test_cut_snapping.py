@@ -161,7 +161,7 @@ def _old_map(X_old, x_old, tets, point):
 def test_the_element_tissue_places_a_snapped_vertex_through_the_old_shape():
     from _fem_reference import kuhn_box
     from cutkit.model.tetmodel import Materials, Prestress, TetModel
-    from cutkit.simulate.elastic_tissue import ElasticTissue
+    from cutkit.relax.elastic_tissue import ElasticTissue
 
     row = dict(label=1, name="m", E=30e3, poisson_ratio=0.45, density=1090.0, damping=8.0, F_enter=0.8,
                mu_static=1e-6, mu_dynamic=1e-6, rho_dynamic=1e-8, alpha_static=0.1, alpha_dynamic=0.1,

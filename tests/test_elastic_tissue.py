@@ -6,7 +6,7 @@ from _tissues import with_cut_mesh
 from cutkit.mesh.generate import box_mesh
 from cutkit.mesh.quality import signed_volumes
 from cutkit.model.tetmodel import Materials, TetModel
-from cutkit.simulate.elastic_tissue import ElasticTissue
+from cutkit.relax.elastic_tissue import ElasticTissue
 
 
 def tissue(solver="hybrid"):
@@ -199,8 +199,8 @@ def test_the_kept_forces_are_the_whole_models_at_every_step_of_a_cut(monkeypatch
     from cutkit.cutting.trajectory import straight_incision
     from cutkit.relax.vbd import elastic_forces
     from cutkit.simulate import SimulateOptions, simulate
-    from cutkit.simulate import elastic_tissue
-    from cutkit.simulate.elastic_tissue import KeptForces
+    from cutkit.relax import elastic_tissue
+    from cutkit.relax.elastic_tissue import KeptForces
 
     # every change summed in part, however large (on this small slab a step often wakes a quarter)
     monkeypatch.setattr(elastic_tissue, "KEPT_FORCES_WHOLE_SHARE", 1.0)

@@ -15,7 +15,7 @@ from cutkit.relax import _newton_kernels as KN
 from cutkit.relax.elastic import ElementState, build_element_model
 from cutkit.relax.newton import PRECONDITIONERS, NewtonSolver, newton_static, newton_step, node_block_inverse
 from cutkit.relax.vbd import elastic_energy, elastic_forces
-from cutkit.simulate.elastic_tissue import ElasticTissue
+from cutkit.relax.elastic_tissue import ElasticTissue
 
 ROW = dict(label=1, name="m", E=30e3, poisson_ratio=0.45, density=1090.0, damping=8.0, F_enter=0.8,
            mu_static=1e-6, mu_dynamic=1e-6, rho_dynamic=1e-8, alpha_static=0.1, alpha_dynamic=0.1,

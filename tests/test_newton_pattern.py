@@ -12,7 +12,7 @@ from cutkit.relax.hessian_pattern import HessianPattern
 from cutkit.relax.newton import NewtonSolver
 from test_newton import model_of
 from cutkit.relax.elastic import build_element_model
-from cutkit.simulate.elastic_tissue import ElasticTissue
+from cutkit.relax.elastic_tissue import ElasticTissue
 
 
 def twin_pattern(tets, volume, n):

@@ -11,7 +11,7 @@ from cutkit.mesh.quality import signed_volumes
 from cutkit.model.tetmodel import Materials, Prestress, TetModel
 from cutkit.relax.vbd import elastic_forces
 from cutkit.simulate import SimulateOptions
-from cutkit.simulate.elastic_tissue import ElasticTissue
+from cutkit.relax.elastic_tissue import ElasticTissue
 from cutkit.simulate.run import relax_steps_line, relax_steps_warning
 
 ROW = dict(label=1, name="m", E=30e3, poisson_ratio=0.45, density=1090.0, damping=8.0, F_enter=0.8,

@@ -14,7 +14,7 @@ from cutkit.model.tetmodel import Materials, TetModel
 from cutkit.relax.hybrid import polish_step
 from cutkit.relax.vbd import elastic_forces, local_step
 from cutkit.simulate import SimulateOptions
-from cutkit.simulate.elastic_tissue import ElasticTissue
+from cutkit.relax.elastic_tissue import ElasticTissue
 
 ROW = dict(label=1, name="m", E=30e3, poisson_ratio=0.45, density=1090.0, damping=8.0, F_enter=0.8,
            mu_static=1e-6, mu_dynamic=1e-6, rho_dynamic=1e-8, alpha_static=0.1, alpha_dynamic=0.1,
@@ -213,7 +213,7 @@ def test_a_resting_step_is_the_backward_euler_step_of_a_reference_minimiser():
     assert np.abs(ref - x0).max() > 1e-3  # the first step left it out of balance: the resting one moved
     np.testing.assert_array_equal(hyb.velocities[~hyb.em.fixed], ((hyb.positions - x0) / H)[~hyb.em.fixed])
     rep = hyb.relax_report()
-    from cutkit.simulate.elastic_tissue import REST_SWEEPS
+    from cutkit.relax.elastic_tissue import REST_SWEEPS
 
     assert rep["resting"] == [False, True] and rep["resting_steps"] == 1
     assert rep["iterations"][1] == REST_SWEEPS  # the sweeps could not reach 1e-9: Newton finished
@@ -225,7 +225,7 @@ def test_resting_steps_end_within_the_rest_tolerance_and_a_balanced_one_costs_no
     """The default rest tolerance (tighter than a cutting step's): each resting step's true
     residual, written out here, is within it; once in balance a step makes no Newton iteration and
     the tissue is at rest."""
-    from cutkit.simulate.elastic_tissue import REST_RTOL
+    from cutkit.relax.elastic_tissue import REST_RTOL
     from cutkit.relax.vbd import DEFAULT_ATOL_N
 
     hyb, f = pressed("hybrid", 0.3, rest_rtol=REST_RTOL)
@@ -297,7 +297,7 @@ def test_the_kept_volume_ratios_report_what_the_whole_pass_reports_at_every_step
     from cutkit.cutting.trajectory import straight_incision
     from cutkit.relax.vbd import volume_ratio_extremes
     from cutkit.simulate import simulate
-    from cutkit.simulate.elastic_tissue import KeptVolumeRatios
+    from cutkit.relax.elastic_tissue import KeptVolumeRatios
 
     kept = KeptVolumeRatios.extremes
     seen = []

@@ -1,4 +1,4 @@
-"""The blade carried from the deformed tissue into the rest configuration (cutkit.simulate.rest_map).
+"""The blade carried from the deformed tissue into the rest configuration (cutkit.relax.rest_map).
 
 The cut is made in the rest configuration, so the blade's rest pose must
 follow the hand's smoothly: a rest pose that jumps makes the swept surface
@@ -11,7 +11,7 @@ import pytest
 from _twins_simulate import nodes_near_blade_twin, rest_displacement_twin
 from cutkit.cutting import CutMesh, cut_step
 from cutkit.mesh.generate import box_mesh
-from cutkit.simulate.rest_map import (REST_MAP_RADIUS_EDGES, BladeNeighbourhood, blade_weights, rest_displacement,
+from cutkit.relax.rest_map import (REST_MAP_RADIUS_EDGES, BladeNeighbourhood, blade_weights, rest_displacement,
                                       rest_map_radius)
 
 BLADE = 5.0  # blade length, mm

@@ -8,7 +8,8 @@ from cutkit.assign.defaults import DEFAULT_MATERIALS
 from cutkit.cutting.trajectory import straight_incision
 from cutkit.mesh.generate import box_mesh
 from cutkit.model.tetmodel import BoundaryConditions, Materials, Prestress, TetModel
-from cutkit.simulate import SimulateOptions, settle_cache, simulate
+from cutkit.relax import settle_cache
+from cutkit.simulate import SimulateOptions, simulate
 
 
 def prestressed_block(prestrain=0.15, E=None):
@@ -69,7 +70,7 @@ def test_a_cached_settle_simulates_exactly_what_a_solved_one_does(tmp_path, cach
 
 def settled(model):
     """A fresh element tissue of ``model`` settled as ``simulate`` settles it: (report, positions)."""
-    from cutkit.simulate.elastic_tissue import ElasticTissue
+    from cutkit.relax.elastic_tissue import ElasticTissue
 
     tis = with_cut_mesh(ElasticTissue(model, step_s=0.004), 10.0)
     report = tis.settle(8, 1e-3)

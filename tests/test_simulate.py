@@ -182,7 +182,7 @@ def test_lookup_springs_matches_twin():
     from _twins_simulate import lookup_springs_twin
 
     from cutkit.relax import build_spring_model
-    from cutkit.simulate._kernels import lookup_springs
+    from cutkit.relax._handover_kernels import lookup_springs
 
     sm = build_spring_model(slab())
     rng = np.random.default_rng(0)
@@ -198,7 +198,7 @@ def test_spring_bookkeeping_matches_a_fresh_build_after_cuts():
     """After a few cut steps, springs, stiffness, rest lengths and masses equal a rebuild from the cut mesh."""
     from cutkit.cutting import cut_step
     from cutkit.relax import build_spring_model
-    from cutkit.simulate.tissue import Tissue
+    from cutkit.relax.spring_tissue import Tissue
 
     tis = with_cut_mesh(Tissue(slab(), dt0=1e-3, n_lists=3, tolerance_fraction=1e-3), 20.0)
     for x in np.linspace(5.0, 20.0, 16):
@@ -366,7 +366,7 @@ def test_place_through_old_shape_matches_twin():
     map) and far outside (the fallback position stays)."""
     from _twins_simulate import place_through_old_shape_twin
 
-    from cutkit.simulate._kernels import place_through_old_shape
+    from cutkit.relax._handover_kernels import place_through_old_shape
 
     rng = np.random.default_rng(3)
     Xc = np.array([[[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]],
@@ -393,7 +393,7 @@ def test_old_shape_corners_match_twin():
     node the tissue does not have yet and flat tets left out, against NumPy."""
     from _twins_simulate import old_shape_corners_twin
 
-    from cutkit.simulate._kernels import old_shape_corners
+    from cutkit.relax._handover_kernels import old_shape_corners
 
     rng = np.random.default_rng(9)
     X = rng.uniform(0, 5, (32, 3))
@@ -416,7 +416,7 @@ def test_step_tet_sets_match_twin():
     random overlaps, repeats, empty inputs."""
     from _twins_simulate import step_tet_sets_twin
 
-    from cutkit.simulate._kernels import step_tet_sets
+    from cutkit.relax._handover_kernels import step_tet_sets
 
     rng = np.random.default_rng(12)
     cases = [(rng.integers(0, 60, rng.integers(0, 30)), rng.integers(0, 60, rng.integers(0, 30)),

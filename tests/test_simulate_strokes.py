@@ -97,7 +97,7 @@ def test_both_strokes_cut_and_are_counted(run):
     assert json.loads((out / "summary.json").read_text())["cut_tets"] == s["cut_tets"]
     if s["material_model"] == "neohookean":
         # a steady hand cuts every edge it meets: the blade's rest pose follows the hand smoothly
-        # (cutkit.simulate.rest_map; the mean over the active tets' corners left 9 edges uncut here)
+        # (cutkit.relax.rest_map; the mean over the active tets' corners left 9 edges uncut here)
         assert s["edges_left_uncut"] == 0
 
 

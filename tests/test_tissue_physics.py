@@ -12,8 +12,8 @@ def _members():
     return [n for n in dir(TissuePhysics) if not n.startswith("_") and n not in dir(object)]
 
 
-@pytest.mark.parametrize("module, name", [("cutkit.simulate.tissue", "Tissue"),
-                                          ("cutkit.simulate.elastic_tissue", "ElasticTissue")])
+@pytest.mark.parametrize("module, name", [("cutkit.relax.spring_tissue", "Tissue"),
+                                          ("cutkit.relax.elastic_tissue", "ElasticTissue")])
 def test_tissue_models_implement_the_protocol(module, name):
     import importlib
 
@@ -70,11 +70,11 @@ def test_the_blade_load_goes_by_mass_over_two_rings_and_never_across_a_cut(mater
 
     model, n_first = _two_touching_boxes()
     if material == "springs":
-        from cutkit.simulate.tissue import Tissue
+        from cutkit.relax.spring_tissue import Tissue
 
         tis = with_cut_mesh(Tissue(model, dt0=1e-3, n_lists=1, tolerance_fraction=1e-3), 10.0)
     else:
-        from cutkit.simulate.elastic_tissue import ElasticTissue
+        from cutkit.relax.elastic_tissue import ElasticTissue
 
         tis = with_cut_mesh(ElasticTissue(model, step_s=0.004), 10.0)
     x = model.points
@@ -94,7 +94,7 @@ def test_node_rings_kernel_equals_a_breadth_first_search():
     import numpy as np
 
     from cutkit.relax.kernels import node_rings
-    from cutkit.simulate.elastic_tissue import ElasticTissue
+    from cutkit.relax.elastic_tissue import ElasticTissue
 
     model, _ = _two_touching_boxes()
     tis = with_cut_mesh(ElasticTissue(model, step_s=0.004), 10.0)

@@ -21,6 +21,10 @@ Kinds of violation (each reported with file:line and a stable key):
 ``run-imports-build``
     A run-side module (:data:`RUN_SIDE`) imports a build-side one
     (:data:`BUILD_SIDE`).
+``cutting-meets-physics``
+    A module imports a subpackage it must stay apart from (:data:`APART`):
+    the cutting and the physics never import each other, and the tissue
+    store and change message through which they meet import neither.
 ``long-function``
     A function or method of the run side over :data:`MAX_FUNCTION_LINES`
     lines (``def`` line to last line, decorators not counted).
@@ -62,8 +66,12 @@ MAX_FUNCTION_LINES = 80
 #: Most parameters a numba kernel may take.
 MAX_KERNEL_ARGUMENTS = 9
 BASELINE = ROOT / "tools" / "arch_baseline.txt"
-KINDS = ("private-import", "private-read", "private-write", "cycle", "run-imports-build", "long-function",
-         "kernel-arguments")
+#: Subpackage -> the subpackages it must not import: the cutting writes the tissue store, the physics
+#: (``relax``) reads it, and they meet only through ``cutkit.tissue`` (store, change message, protocol).
+APART = {"cutting": frozenset({"relax"}), "relax": frozenset({"cutting"}),
+         "tissue": frozenset({"cutting", "relax"})}
+KINDS = ("private-import", "private-read", "private-write", "cycle", "run-imports-build", "cutting-meets-physics",
+         "long-function", "kernel-arguments")
 
 
 @dataclass(frozen=True)
@@ -304,7 +312,7 @@ def _cycle_path(comp: list[str], graph: dict[str, set[str]]) -> list[str]:
 
 
 def check(root: Path = ROOT, packages: dict[str, str] | None = None, run_side=RUN_SIDE, build_side=BUILD_SIDE,
-          max_lines: int = MAX_FUNCTION_LINES) -> list[Violation]:
+          max_lines: int = MAX_FUNCTION_LINES, apart: dict | None = None) -> list[Violation]:
     """Every violation in the packages under ``root``.
 
     Parameters
@@ -318,6 +326,8 @@ def check(root: Path = ROOT, packages: dict[str, str] | None = None, run_side=RU
         Top-level subpackage (or module) names of the run and build sides.
     max_lines : int
         Longest run-side function allowed.
+    apart : dict, optional
+        Subpackage -> subpackages it must not import (default :data:`APART`).
 
     Returns
     -------
@@ -325,6 +335,7 @@ def check(root: Path = ROOT, packages: dict[str, str] | None = None, run_side=RU
         Sorted by kind and key; one per key.
     """
     packages = PACKAGES if packages is None else packages
+    apart = APART if apart is None else apart
     root = Path(root)
     top = next(iter(packages))
     modules = find_modules(root, packages)
@@ -349,6 +360,9 @@ def check(root: Path = ROOT, packages: dict[str, str] | None = None, run_side=RU
                         f"imports {'.'.join(imp.path)}, private to {top}.{other}")
                 if imp.alias:
                     module_aliases[imp.alias] = other
+                if other in apart.get(sub, ()):
+                    add("cutting-meets-physics", f"{mod.rel} -> {imp.target}", mod, imp.line,
+                        f"{top}.{sub} imports {imp.target}: they meet only through {top}.tissue")
                 if sub in run_side and other in build_side:
                     add("run-imports-build", f"{mod.rel} -> {imp.target}", mod, imp.line,
                         f"run side ({top}.{sub}) imports the build side ({imp.target})")
@@ -438,9 +452,9 @@ def main(argv=None) -> int:
         print(f"{baseline_path.name}: no longer occurs, remove the line: {entry}")
     per_kind = counts(found)
     new_kind = counts(new)
-    print("kind                found  new")
+    print("kind                    found  new")
     for k in KINDS:
-        print(f"{k:<18} {per_kind[k]:>6} {new_kind[k]:>4}")
+        print(f"{k:<22} {per_kind[k]:>6} {new_kind[k]:>4}")
     print(f"{len(found)} violations, {len(new)} not in the baseline, {len(gone)} baseline entries gone")
     return 1 if new or gone else 0
 

@@ -10,7 +10,7 @@ The tasks of the paper's Fig. 1, on one simulated clock:
 * **collision and geometry update** (``geometry_rate_hz``, sections 3-4):
   while the scalpel cuts, the blade at the proxy cuts the mesh
   (``cut_step``) and the topology change goes over to the springs
-  (:class:`~cutkit.simulate.tissue.Tissue`).  The reaction of the cut
+  (:class:`~cutkit.relax.spring_tissue.Tissue`).  The reaction of the cut
   force acts on the nodes around the blade tip.
 * **relaxation** (section 5): the node lists advance to the same time, so
   the tissue opens under its prestress.
@@ -101,7 +101,7 @@ class SimulateOptions:
         (projected Newton), ``"vbd"`` (vertex block descent) or ``"hybrid"``
         (vertex block descent, a step left unconverged at its sweep cap
         finished by a local Newton polish, :mod:`cutkit.relax.hybrid`); None:
-        :data:`cutkit.simulate.elastic_tissue.DEFAULT_SOLVER`.  Ignored by the springs.
+        :data:`cutkit.relax.elastic_tissue.DEFAULT_SOLVER`.  Ignored by the springs.
     scalpel : str
         Scalpel force model: ``"paper"`` (section 6, F_enter and cut
         friction) or ``"fracture"`` (the crack advances when the blade pays
@@ -163,7 +163,7 @@ class SimulateOptions:
             raise InputError(f"blade-length must be a positive number, got {self.blade_length}")
         if not (np.isfinite(self.volume_stiffness) and self.volume_stiffness >= 0):
             raise InputError(f"volume-stiffness must be a number >= 0, got {self.volume_stiffness}")
-        from cutkit.simulate.elastic_tissue import SOLVERS
+        from cutkit.relax.elastic_tissue import SOLVERS
 
         if self.solver is not None and self.solver not in SOLVERS:
             raise InputError(f"solver must be {', '.join(SOLVERS[:-1])} or {SOLVERS[-1]}, not {self.solver!r}")

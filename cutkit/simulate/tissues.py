@@ -21,11 +21,11 @@ def make_tissue(model, store, material_model: str, opt) -> TissuePhysics:
     model's own): :class:`ElasticTissue` or the paper's springs (:class:`Tissue`), a
     :class:`~cutkit.tissue.TissuePhysics`."""
     if material_model == "springs":
-        from cutkit.simulate.tissue import Tissue
+        from cutkit.relax.spring_tissue import Tissue
 
         return Tissue(model, store, dt0=opt.dt0, n_lists=opt.n_lists, tolerance_fraction=opt.tolerance_fraction,
                       volume_stiffness=opt.volume_stiffness)
-    from cutkit.simulate.elastic_tissue import DEFAULT_SOLVER, ElasticTissue
+    from cutkit.relax.elastic_tissue import DEFAULT_SOLVER, ElasticTissue
 
     return ElasticTissue(model, store, step_s=1.0 / opt.geometry_rate_hz,
                          solver=opt.solver or ("newton" if opt.element == "anp" else DEFAULT_SOLVER),

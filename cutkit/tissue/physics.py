@@ -1,8 +1,8 @@
 """What a session asks of a tissue's physics: the :class:`TissuePhysics` protocol.
 
 Two implementations: the paper's springs (Bielser & Gross 2000, section 5:
-:class:`cutkit.simulate.tissue.Tissue`) and the element model
-(:class:`cutkit.simulate.elastic_tissue.ElasticTissue`).  The session
+:class:`cutkit.relax.spring_tissue.Tissue`) and the element model
+(:class:`cutkit.relax.elastic_tissue.ElasticTissue`).  The session
 (:mod:`cutkit.simulate.session`) uses a tissue only through these names; a
 cut step reaches the physics only as a :class:`~cutkit.tissue.TopologyDelta`.
 """

@@ -38,9 +38,9 @@ from cutkit.relax.growable import append_rows
 from cutkit.relax.hessian_pattern import HessianPattern
 from cutkit.relax.vbd import DEFAULT_ATOL_N, kept_volume_ratios, local_step, refresh_forces
 from cutkit.relax.materials import material_of_tets, prestress_of_tets
-from cutkit.simulate._kernels import old_shape_corners, place_through_old_shape, step_tet_sets
-from cutkit.simulate.rest_map import rest_map_radius
-from cutkit.simulate.tissue_base import TissueBase
+from cutkit.relax._handover_kernels import old_shape_corners, place_through_old_shape, step_tet_sets
+from cutkit.relax.rest_map import rest_map_radius
+from cutkit.relax.tissue_base import TissueBase
 from cutkit.tissue.store import TissueStore
 
 #: Each implicit step of a simulation is solved until its residual is below
@@ -365,12 +365,12 @@ class ElasticTissue(TissueBase):
         solver, modified Newton with the linear stiffness
         (:func:`cutkit.relax.settle.settle_static`) with ``"vbd"``: ``max_iterations``
         bounds its Newton steps.  The result is kept in the settle cache
-        (:mod:`cutkit.simulate.settle_cache`): a model and materials settled before are not
+        (:mod:`cutkit.relax.settle_cache`): a model and materials settled before are not
         solved again, and the positions are the very ones the solve gives.  The report says
         ``cached``.
         """
         from cutkit.relax.settle import settle_static
-        from cutkit.simulate import settle_cache
+        from cutkit.relax import settle_cache
 
         params = {"rtol": float(rtol), "atol": float(DEFAULT_ATOL_N), "max_iterations": max(int(max_iterations), 1)}
         if self.solver == "newton":
@@ -867,7 +867,7 @@ class ElasticTissue(TissueBase):
         masses summed again from them).  Node data stay: damping, fixed
         flags, colours, positions, velocities (node ids do not change).
 
-        Parameters as :meth:`TissueBase.rebase <cutkit.simulate.tissue_base.TissueBase.rebase>`.
+        Parameters as :meth:`TissueBase.rebase <cutkit.relax.tissue_base.TissueBase.rebase>`.
         """
         store, old = self.store, self.em
         old_orig = np.asarray(old_orig, np.int64)

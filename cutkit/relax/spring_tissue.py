@@ -33,9 +33,9 @@ from cutkit.relax import Control, NodeLists, build_spring_model, initial_state
 from cutkit.relax.materials import material_of_tets, prestress_of_tets
 from cutkit.relax.model import STIFFNESS_CALIBRATION
 from cutkit.relax.topology import recolour
-from cutkit.simulate._kernels import lookup_springs
-from cutkit.simulate.rest_map import rest_map_radius
-from cutkit.simulate.tissue_base import TissueBase
+from cutkit.relax._handover_kernels import lookup_springs
+from cutkit.relax.rest_map import rest_map_radius
+from cutkit.relax.tissue_base import TissueBase
 from cutkit.tissue.store import TissueStore
 
 

@@ -1,4 +1,4 @@
-"""Numba kernel of :mod:`cutkit.simulate.rest_map`: the nodes near the blade (twin in
+"""Numba kernel of :mod:`cutkit.relax.rest_map`: the nodes near the blade (twin in
 ``tests/_twins_simulate.py``)."""
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """What both tissue models of a session share (:class:`TissueBase`): the store they read and its nodes.
 
-The springs (:class:`cutkit.simulate.tissue.Tissue`, the paper's) and the
-elements (:class:`cutkit.simulate.elastic_tissue.ElasticTissue`) keep their
+The springs (:class:`cutkit.relax.spring_tissue.Tissue`, the paper's) and the
+elements (:class:`cutkit.relax.elastic_tissue.ElasticTissue`) keep their
 nodes on the tissue store's numbering (:class:`cutkit.tissue.store.TissueStore`);
 this base class interpolates cut nodes over their defining nodes, carries
 the blade into the rest configuration and lists the live tetrahedra.
@@ -23,9 +23,9 @@ class TissueBase:
     """
 
     store: TissueStore
-    #: Radius of the neighbourhood whose displacement carries the blade (:mod:`cutkit.simulate.rest_map`), mm.
+    #: Radius of the neighbourhood whose displacement carries the blade (:mod:`cutkit.relax.rest_map`), mm.
     rest_map_radius: float
-    #: Its flood fill's buffers (:class:`cutkit.simulate.rest_map.BladeNeighbourhood`), made on first use.
+    #: Its flood fill's buffers (:class:`cutkit.relax.rest_map.BladeNeighbourhood`), made on first use.
     _blade_hood = None
 
     def rebase(self, old_of_new: np.ndarray, old_orig: np.ndarray) -> None:
@@ -67,7 +67,7 @@ class TissueBase:
         The cut is made in the rest configuration, where no original
         tetrahedron is ever inverted, so the cut's topology does not depend
         on how far the tissue has moved.  The blade is moved back by the
-        displacement of the tissue around it (:mod:`cutkit.simulate.rest_map`:
+        displacement of the tissue around it (:mod:`cutkit.relax.rest_map`:
         the smooth weighted mean over the nodes near the blade; first order,
         the local rotation and stretch are neglected), or before the blade
         has met a tetrahedron, by the mean displacement of the entry face's
@@ -81,7 +81,7 @@ class TissueBase:
         active_tets : (k,) int64  the last cut step's active (original) tets
         entry_nodes : (q,) int64  the nodes of the face the blade entered through
         """
-        from cutkit.simulate.rest_map import rest_displacement
+        from cutkit.relax.rest_map import rest_displacement
 
         point = np.asarray(point, np.float64)
         if len(active_tets):
@@ -95,7 +95,7 @@ class TissueBase:
 
     def blade_neighbourhood(self, point, axis, blade_length: float, active_tets: np.ndarray):
         """The original nodes (k,) int64 within :attr:`rest_map_radius` of the blade (deformed positions) and
-        their weights (k,) float64 (:func:`cutkit.simulate.rest_map.blade_weights`), found by a flood fill
+        their weights (k,) float64 (:func:`cutkit.relax.rest_map.blade_weights`), found by a flood fill
         from ``active_tets`` (original tets).
 
         Parameters
@@ -105,7 +105,7 @@ class TissueBase:
         blade_length : float  mm
         active_tets : (k,) int64
         """
-        from cutkit.simulate.rest_map import BladeNeighbourhood, blade_weights
+        from cutkit.relax.rest_map import BladeNeighbourhood, blade_weights
 
         point, axis = np.asarray(point, np.float64), np.asarray(axis, np.float64)
         hood = self._blade_hood

@@ -33,7 +33,7 @@ import numpy as np
 #: Bumped when the file layout or the key's contents change.
 CACHE_FORMAT = 1
 #: The modules whose source decides a settle's result (relative to the package).
-_SOURCES = ("relax", "simulate/elastic_tissue.py", "simulate/settle_cache.py", "threads.py")
+_SOURCES = ("relax", "tissue", "threads.py")
 
 
 def cache_dir() -> Path | None:

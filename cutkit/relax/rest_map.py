@@ -84,7 +84,7 @@ class BladeNeighbourhood:
         seeds : (s,) int64  original tets to start from (the last cut step's active tets)
         back, tip : (3,) float64  the blade's ends, mm
         """
-        from cutkit.simulate._rest_map_kernels import FloodFill, nodes_near_blade
+        from cutkit.relax._rest_map_kernels import FloodFill, nodes_near_blade
 
         self.mark += 1
         blade = np.array([back, tip], np.float64)
