@@ -42,10 +42,10 @@ def measure(knee: str, repeat: int) -> dict:
             result["uncut"].get()  # the uncut model's pattern, kept as a live session keeps it
         return apply_delta(self, delta)
 
-    def at_stroke_end(self, old_of_new, old_orig):
+    def at_stroke_end(self, old_of_new):
         if "update_ms" not in result:
             result.update(_both_ways(self.em, result["uncut"], repeat, HessianPattern))
-        return rebase(self, old_of_new, old_orig)
+        return rebase(self, old_of_new)
 
     ElasticTissue.apply_delta, ElasticTissue.rebase = first_delta, at_stroke_end
     try:

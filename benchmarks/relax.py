@@ -3,6 +3,7 @@
 Usage: python benchmarks/relax.py [--json] [--big N] [--small N] [--knee MODEL.h5] [--knee-simulate MODEL.h5]
        python benchmarks/relax.py --json --knee-simulate knee.h5 --solvers newton,vbd [--hold 1.0]
        python benchmarks/relax.py --json --knee-simulate knee.h5 --solvers vbd,hybrid --repeat 2 --no-to-residual
+       python benchmarks/relax.py --json --knee-simulate head.h5 --trajectory head_cut.csv --solvers vbd,hybrid --lift --static
 
 Prints one JSON object with ``--json``:
   spring_updates_per_s                  semi-implicit Jacobi sweep (numba, all threads), spring ends per s
@@ -375,6 +376,9 @@ def main(argv=None):
     ap.add_argument("--solvers", default=None,
                     help="with --knee-simulate: compare these element solvers (e.g. newton,vbd) instead")
     ap.add_argument("--hold", type=float, default=1.0, help="hold after the incision of --solvers, s")
+    ap.add_argument("--trajectory", metavar="CSV",
+                    help="with --knee-simulate and --solvers: this incision instead of the shipped one "
+                         "(another model, e.g. an MRI head; docs/relaxation.md)")
     ap.add_argument("--repeat", type=int, default=1, help="with --solvers: run them in turn this many times")
     ap.add_argument("--static", action="store_true",
                     help="with --solvers: a static Newton solve from each run's final state (its opening)")
@@ -403,8 +407,11 @@ def main(argv=None):
         from cutkit.io.model_h5 import read_model
 
         if args.solvers:
+            from cutkit.cutting.trajectory import read_trajectory
+
+            traj = read_trajectory(args.trajectory) if args.trajectory else None
             out["knee"] = {"solvers": knee_solvers(read_model(args.knee_simulate), tuple(args.solvers.split(",")),
-                                                   hold_s=args.hold, repeat=args.repeat,
+                                                   hold_s=args.hold, repeat=args.repeat, trajectory=traj,
                                                    to_residual=not args.no_to_residual, static=args.static,
                                                    lift=args.lift, static_rtol=args.static_rtol)}
             return _print(out, args.json)

@@ -123,9 +123,8 @@ def test_a_rebase_keeps_the_element_of_the_tissue():
     tis.em.deviatoric_smoothing = 0.7
     for xb in np.linspace(-0.5, 3.0, 4):
         tis.apply_cut(cut_step(tis.cm, [xb, 1.37, 3.5], [0.0, 0.0, 1.0]))
-    old_orig = tis.cm.tet_origins.copy()
     old_of_new = tis.cm.rebase()
-    tis.rebase(old_of_new, old_orig[old_of_new])
+    tis.rebase(old_of_new)
     assert tis.em.element == "anp" and tis.em.deviatoric_smoothing == 0.7
 
 

@@ -1,9 +1,10 @@
 """Kinematic cutting of a tetrahedral model: cut state and topology update.
 
-``CutMesh`` holds what never changes (the original tetrahedra, their
-edges, faces and adjacency, rest positions) and the cut state that grows
-step by step (current tetrahedra, node positions, per-edge intersection
-parameters, per-face nodes, per-original-tet tip node).  ``cut_step``
+``CutMesh`` holds the cut state that grows step by step (per-edge
+intersection parameters, per-face nodes, per-original-tet tip nodes,
+deferred edges) over a tissue store (:class:`cutkit.tissue.store.TissueStore`:
+the original tetrahedra, their edges, faces and adjacency, the node and
+tet arrays), which it changes only through the store's writers.  ``cut_step``
 (in :mod:`cutkit.cutting.step`) moves the blade and calls
 :meth:`CutMesh.resubdivide` on every original tetrahedron whose state
 changed.
@@ -22,6 +23,8 @@ freezes after; it has one copy per piece of the tet.
 """
 
 from __future__ import annotations
+
+from operator import attrgetter
 
 import numpy as np
 
@@ -49,8 +52,22 @@ def _vol(x, t):
 _clamp_bary = clamp_bary
 
 
+def _from_store(name: str, doc: str) -> property:
+    """A read-only attribute of :class:`CutMesh` that is its store's ``name`` (looked up in C: the cut
+    step reads these hundreds of times)."""
+    return property(attrgetter(f"store.{name}"), doc=doc)
+
+
+def _store_buffer(group: str, name: str) -> property:
+    """A read-only attribute of :class:`CutMesh` that is one of its store's buffers (spare rows included)."""
+    return property(attrgetter(f"store.{group}.{name}"), doc=f"the store's ``{group}.{name}``")
+
+
 class CutMesh:
-    """A tetrahedral model being cut.
+    """A tetrahedral model being cut: the cut state over a :class:`~cutkit.tissue.store.TissueStore`.
+
+    ``CutMesh(points, tets, ...)`` makes a store of its own;
+    :meth:`over` cuts a store a session shares with its physics.
 
     Parameters
     ----------
@@ -64,6 +81,36 @@ class CutMesh:
     compact_splits : bool  cone complete splits to a vertex per side (see _compact_split)
     snap_vertices : bool  move an uncut vertex away from the cut before an edge is cut near it (:mod:`.snapping`)
     """
+
+    # What the cut reads of its tissue store that a step changes, under the cut's names (the store's
+    # arrays and counts: one truth; the original tets' topology is bound in _cut_over).
+    n_points = _from_store("n_nodes", "int nodes so far")
+    n_tets_total = _from_store("n_tets_total", "int tet ids so far")
+    points = _from_store("points", "(n, 3) float64 positions in the cut's configuration (a view)")
+    rest_points = _from_store("rest_points", "(n, 3) float64 rest positions (a view)")
+    texcoords = _from_store("texcoords", "(n, 3) float64 texture coordinates (a view) or None")
+    tets = _from_store("tets", "(k, 4) int64 alive tetrahedra (a copy)")
+    tet_origin = _from_store("tet_origin", "(k,) int64 original tet of each alive tet")
+    tet_capacity = _from_store("tet_capacity", "tet ids the arrays have room for before they grow")
+    tet_corners = _from_store("tet_corners", "(n_tets_total, 4) int64 (a view)")
+    tet_origins = _from_store("tet_origins", "(n_tets_total,) int64 (a view)")
+    tet_alive = _from_store("tet_alive", "(n_tets_total,) bool (a view)")
+    defining_nodes = _from_store("defining_nodes", "(n, 4) int64 (a view)")
+    defining_weights = _from_store("defining_weights", "(n, 4) float64 (a view)")
+    n_model_points = _from_store("n_model_nodes", "int nodes of the model as loaded")
+    n_model_tets = _from_store("n_model_tets", "int tets of the model as loaded")
+    model_tet = _from_store("model_tet", "(m0,) int64 model tet of each original tet")
+    orig_made_by_cut = _from_store("orig_made_by_cut", "(m0,) bool original tets made by earlier strokes")
+    model_node = _from_store("model_node", "(n0,) int64 model node each original node takes point data from")
+    n_rebases = _from_store("n_rebases", "int")
+    _x = _store_buffer("node_buffers", "x")
+    _X = _store_buffer("node_buffers", "X")
+    _uvw = _store_buffer("node_buffers", "uvw")
+    _def_nodes = _store_buffer("node_buffers", "parents")
+    _def_w = _store_buffer("node_buffers", "weights")
+    _tets = _store_buffer("tet_buffers", "corners")
+    _alive = _store_buffer("tet_buffers", "alive")
+    _tet_orig = _store_buffer("tet_buffers", "origin")
 
     def __init__(self, points, tets, rest_points=None, texcoords=None, labels=None,
                  blade_length=20.0, centre_nodes=False, compact_splits=True, snap_vertices=False):
@@ -82,6 +129,13 @@ class CutMesh:
         if not blade_length > 0:
             raise InputError(f"blade_length: {blade_length}, expected > 0")
         self.store = store
+        # the store's topology of its original tets: the same arrays, read here at every step; they change
+        # only at a rebase, which makes the cut state anew over the renumbered store
+        self.orig_tets, self.labels, self.n_orig_points = store.orig_tets, store.labels, store.n_orig_nodes
+        self.edges, self.tet_edges = store.edges, store.tet_edges
+        self.faces, self.tet_faces, self.face_tets, self.neighbors = (store.faces, store.tet_faces, store.face_tets,
+                                                                      store.neighbors)
+        self.orig_boundary_faces, self.orig_boundary_face_tet = store.boundary_faces, store.boundary_face_tet
         self.blade_length = float(blade_length)
         self.centre_nodes = bool(centre_nodes)
         self.compact_splits = bool(compact_splits)
@@ -396,41 +450,3 @@ class CutMesh:
                                "ev_id": np.empty((128, 2), np.int64), "ev_val": np.empty((128, 3)),
                                "counts": np.zeros(3, np.int64)}
         return self._sweep_buf
-
-
-def _read_from_store(name: str, doc: str) -> property:
-    """A read-only attribute of :class:`CutMesh` that is its store's ``name``."""
-    return property(lambda cm: getattr(cm.store, name), doc=doc)
-
-
-def _buffer_of_store(group: str, name: str, doc: str) -> property:
-    """A read-only attribute of :class:`CutMesh` that is one of its store's buffers (spare rows included)."""
-    return property(lambda cm: getattr(getattr(cm.store, group), name), doc=doc)
-
-
-# What the cutting reads of the tissue store under its own names (one truth: the store's arrays).
-for _name, _doc in (
-        ("orig_tets", "(m0, 4) int64 the original tets"), ("labels", "(m0,) int32 label of each original tet"),
-        ("n_orig_points", "int nodes an original tet may use"), ("n_points", "int nodes so far"),
-        ("n_tets_total", "int tet ids so far"), ("edges", "(e, 2) int64 edges of the original tets"),
-        ("tet_edges", "(m0, 6) int64"), ("faces", "(f, 3) int64 faces of the original tets"),
-        ("tet_faces", "(m0, 4) int64"), ("face_tets", "(f, 2) int64"), ("neighbors", "(m0, 4) int64"),
-        ("orig_boundary_faces", "(b, 3) int64 the original tets' outward boundary faces"),
-        ("orig_boundary_face_tet", "(b,) int64 their tets"), ("points", "(n, 3) float64 current positions (a view)"),
-        ("rest_points", "(n, 3) float64 rest positions (a view)"), ("texcoords", "(n, 3) float64 or None"),
-        ("tets", "(k, 4) int64 alive tetrahedra (a copy)"), ("tet_origin", "(k,) int64 original tet of each alive tet"),
-        ("tet_capacity", "tet ids the arrays have room for"), ("tet_corners", "(n_tets_total, 4) int64 (a view)"),
-        ("tet_origins", "(n_tets_total,) int64 (a view)"), ("tet_alive", "(n_tets_total,) bool (a view)"),
-        ("defining_nodes", "(n, 4) int64 (a view)"), ("defining_weights", "(n, 4) float64 (a view)"),
-        ("n_model_points", "int nodes of the model as loaded"), ("n_model_tets", "int tets of the model as loaded"),
-        ("model_tet", "(m0,) int64"), ("orig_made_by_cut", "(m0,) bool"), ("model_node", "(n0,) int64"),
-        ("n_rebases", "int")):
-    setattr(CutMesh, _name, _read_from_store({"n_orig_points": "n_orig_nodes", "n_points": "n_nodes",
-                                              "orig_boundary_faces": "boundary_faces",
-                                              "orig_boundary_face_tet": "boundary_face_tet",
-                                              "n_model_points": "n_model_nodes"}.get(_name, _name), _doc))
-for _name, _group, _field in (("_x", "node_buffers", "x"), ("_X", "node_buffers", "X"),
-                              ("_uvw", "node_buffers", "uvw"), ("_def_nodes", "node_buffers", "parents"),
-                              ("_def_w", "node_buffers", "weights"), ("_tets", "tet_buffers", "corners"),
-                              ("_alive", "tet_buffers", "alive"), ("_tet_orig", "tet_buffers", "origin")):
-    setattr(CutMesh, _name, _buffer_of_store(_group, _field, f"the store's {_group}.{_field}"))

@@ -1,12 +1,12 @@
 """The tissue being cut as stable neo-Hookean elements (the default material model).
 
-Node ``k`` of the :class:`~cutkit.cutting.CutMesh` is node ``k`` of the
-:class:`~cutkit.relax.elastic.ElementModel`, and element ``t`` is the cut
-mesh's tetrahedron ``t``, so a cut step carries over without any search:
+Node ``k`` of the :class:`~cutkit.tissue.store.TissueStore` is node ``k`` of the
+:class:`~cutkit.relax.elastic.ElementModel`, and element ``t`` is the
+store's tetrahedron ``t``, so a cut step carries over without any search:
 
 * a removed tetrahedron takes its energy and its mass share out;
 * an added one (a sub-tetrahedron of a cut) gets its own rest shape from
-  the cut mesh's rest positions, with the material, prestrain and fibre of
+  the store's rest positions, with the material, prestrain and fibre of
   the tetrahedron it was cut from;
 * the tetrahedra of a node the blade moved (tip and crack-front nodes) get
   their rest shape again;
@@ -40,7 +40,7 @@ from cutkit.relax.vbd import DEFAULT_ATOL_N, kept_volume_ratios, local_step, ref
 from cutkit.relax.materials import material_of_tets, prestress_of_tets
 from cutkit.relax._handover_kernels import old_shape_corners, place_through_old_shape, step_tet_sets
 from cutkit.relax.rest_map import rest_map_radius
-from cutkit.relax.tissue_base import TissueBase
+from cutkit.relax.tissue_base import TissueBase, uncut_store
 from cutkit.tissue.store import TissueStore
 
 #: Each implicit step of a simulation is solved until its residual is below
@@ -251,7 +251,7 @@ class ElasticTissue(TissueBase):
             raise InputError("element anp is solved by the newton solver only")
         self.solver = solver
         self.model = model
-        self.store = store = TissueStore.from_model(model) if store is None else store
+        self.store = store = uncut_store(model, store)
         self.rest_map_radius = rest_map_radius(model.points, model.tets)
         self.step_s = float(step_s)
         self.step_rtol = float(step_rtol)
@@ -262,13 +262,12 @@ class ElasticTissue(TissueBase):
         n, m = store.n_orig_nodes, store.orig_tets.shape[0]
         self.n_orig_tets = m
         # material of each original tet (a sub-tet has its original's)
-        mat = material_of_tets(model, store.labels, poisson_ratio=poisson_ratio)
-        self.mu, self.lam, self.density = mat["mu"], mat["lam"], mat["density"]
-        self.prestrain, self.fibre = prestress_of_tets(model, store.labels)
+        self.poisson_ratio = poisson_ratio
+        self._read_materials()
         self.em = em = ElementModel.empty(n, store.tet_capacity)
         em.add_elements(store.rest_points[:n], store.orig_tets, self.mu, self.lam, self.density, self.prestrain, self.fibre,
                         ids=np.arange(m))
-        em.damping[:] = node_damping(n, store.orig_tets, mat["damping"])
+        em.damping[:] = node_damping(n, store.orig_tets, self.damping)
         self.bc_fixed = fixed_nodes_mask(model)
         em.fixed[:] = self.bc_fixed[:, None]
         em.element = element
@@ -626,7 +625,7 @@ class ElasticTissue(TissueBase):
 
     # ------------------------------------------------------------ cut
     def apply_cut(self, res) -> dict:
-        """Carry a :class:`~cutkit.cutting.StepResult` over to the elements: :meth:`apply_delta` of its ``delta``."""
+        """Carry a cut step's result (its ``delta``) over to the elements: :meth:`apply_delta` of its ``delta``."""
         return self.apply_delta(res.delta)
 
     def apply_delta(self, delta) -> dict:
@@ -855,14 +854,21 @@ class ElasticTissue(TissueBase):
                 em.recolour(np.unique(q[clash]))
         em.forget_colour_classes()
 
+    def _read_materials(self) -> None:
+        """The material, prestrain and fibre of each original tet, from the store's labels (a sub-tet
+        has its original's; after a rebase each new original tet has the label of the one it was cut from)."""
+        mat = material_of_tets(self.model, self.store.labels, poisson_ratio=self.poisson_ratio)
+        self.mu, self.lam, self.density, self.damping = mat["mu"], mat["lam"], mat["density"], mat["damping"]
+        self.prestrain, self.fibre = prestress_of_tets(self.model, self.store.labels)
+
     # ------------------------------------------------------------ strokes
-    def rebase(self, old_of_new: np.ndarray, old_orig: np.ndarray) -> None:
-        """Follow :meth:`CutMesh.rebase <cutkit.cutting.CutMesh.rebase>` (called after it, between strokes).
+    def rebase(self, old_of_new: np.ndarray) -> None:
+        """Follow :meth:`TissueStore.rebase <cutkit.tissue.store.TissueStore.rebase>` (called after it, between strokes).
 
         The live tets became the original tets ``0 .. m-1`` of a fresh cut
-        state.  The per-original-tet materials follow (each new original tet
-        keeps the material, prestrain and fibre of the old original tet it
-        was cut from), and the elements are built again on the new
+        state.  The per-original-tet materials are read again from the
+        store's labels (each new original tet keeps the label of the old
+        original tet it was cut from), and the elements are built again on the new
         numbering from the cut mesh's rest positions (the same rest shapes;
         masses summed again from them).  Node data stay: damping, fixed
         flags, colours, positions, velocities (node ids do not change).
@@ -870,9 +876,7 @@ class ElasticTissue(TissueBase):
         Parameters as :meth:`TissueBase.rebase <cutkit.relax.tissue_base.TissueBase.rebase>`.
         """
         store, old = self.store, self.em
-        old_orig = np.asarray(old_orig, np.int64)
-        self.mu, self.lam, self.density = self.mu[old_orig], self.lam[old_orig], self.density[old_orig]
-        self.prestrain, self.fibre = self.prestrain[old_orig], self.fibre[old_orig]
+        self._read_materials()
         m = int(np.asarray(old_of_new).shape[0])
         self.n_orig_tets = m
         n = old.n_nodes

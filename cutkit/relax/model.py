@@ -262,6 +262,7 @@ def build_spring_model(
     calibration: float = STIFFNESS_CALIBRATION,
     prestress: bool = True,
     volume_stiffness: float = 0.0,
+    edges: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> SpringModel:
     """Mass-spring model of a :class:`~cutkit.model.tetmodel.TetModel`.
 
@@ -284,6 +285,8 @@ def build_spring_model(
         > 0 adds the volume term (:mod:`cutkit.relax.volume`) with
         ``bulk_t = volume_stiffness * E_t``; 0 (default) keeps the paper's
         springs only.
+    edges : ((e, 2) int64, (m, 6) int64), optional
+        :func:`cutkit.mesh.topology.unique_edges` of the tets where the caller has them (spring k: edge k).
 
     Returns
     -------
@@ -308,7 +311,7 @@ def build_spring_model(
     damping = np.bincount(tets.ravel(), np.repeat(tet_mass * damp_t / 4.0, 4), minlength=n)
     damping = np.divide(damping, masses, out=np.zeros(n), where=masses > 0)
 
-    edges, tet_edge = tet_edges(tets)
+    edges, tet_edge = tet_edges(tets) if edges is None else edges
     d = points[edges[:, 1]] - points[edges[:, 0]]
     length = np.sqrt(np.einsum("ij,ij->i", d, d))
     ev = np.bincount(tet_edge.ravel(), np.repeat(E * vol, 6), minlength=len(edges))

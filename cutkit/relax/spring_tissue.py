@@ -1,8 +1,8 @@
-"""The tissue being cut: a cut mesh and its mass-spring model on one node numbering.
+"""The tissue being cut as the paper's springs: a tissue store and its mass-spring model on one node numbering.
 
 The paper's Fig. 1 runs collision and geometry update beside the
 relaxation.  Both work on the same nodes: node ``k`` of the
-:class:`~cutkit.cutting.CutMesh` is node ``k`` of the
+:class:`~cutkit.tissue.store.TissueStore` is node ``k`` of the
 :class:`~cutkit.relax.SpringModel`.  After every cut step
 :meth:`Tissue.apply_cut` carries the topology change over to the springs
 in one batch:
@@ -35,7 +35,7 @@ from cutkit.relax.model import STIFFNESS_CALIBRATION
 from cutkit.relax.topology import recolour
 from cutkit.relax._handover_kernels import lookup_springs
 from cutkit.relax.rest_map import rest_map_radius
-from cutkit.relax.tissue_base import TissueBase
+from cutkit.relax.tissue_base import TissueBase, uncut_store
 from cutkit.tissue.store import TissueStore
 
 
@@ -89,22 +89,19 @@ class Tissue(TissueBase):
         self.model = model
         self.calibration = float(calibration)
         self.volume_stiffness = float(volume_stiffness)
-        self.store = store = TissueStore.from_model(model) if store is None else store
+        self.store = store = uncut_store(model, store)
         self.rest_map_radius = rest_map_radius(model.points, model.tets)
-        self.springs = sm = build_spring_model(model, calibration=calibration, volume_stiffness=volume_stiffness)
+        self.springs = sm = build_spring_model(model, calibration=calibration, volume_stiffness=volume_stiffness,
+                                               edges=(store.edges, store.tet_edges))
         self.state = initial_state(sm)
         tolerance = tolerance_fraction * float(np.mean(sm.rest_length))
         self.lists = NodeLists(sm, self.state, dt0, n_lists, displacement_tolerance=tolerance)
         self.n_orig_tets = int(store.orig_tets.shape[0])
         self.bc_fixed = sm.fixed.copy()
 
-        # material of each original tet (a sub-tet has its original's)
-        # (the springs have no Poisson ratio: the table's is not read)
-        mat = material_of_tets(model, store.labels, poisson_ratio=0.0)
-        self.E, self.rho = mat["E"], mat["density"]
-        self.prestrain, self.fibre = prestress_of_tets(model, store.labels)
+        self._read_materials()
 
-        # per-tet records (indexed by CutMesh tet id), per-spring sums
+        # per-tet records (indexed by tet id), per-spring sums
         tets = store.orig_tets
         cap = store.tet_capacity
         self.rec_V = np.zeros(cap)
@@ -112,12 +109,12 @@ class Tissue(TissueBase):
         V, sv = self._contributions(np.arange(self.n_orig_tets))
         self.rec_V[:self.n_orig_tets] = V
         self.rec_sv[:self.n_orig_tets] = sv
-        # rest volume of the model tet each original tet comes from (flat sub-tets: _rebuild_volume_term)
-        self.model_V = V.copy()
-        # the cut mesh's edges of the original tets (one computation): the spring model numbers its
-        # springs by the same unique_edges of the same tets, so spring k is edge k
+        # rest volume of each model tet (the store is not cut yet: its original tets are the model's);
+        # model_V: of the model tet each original tet comes from (flat sub-tets: _rebuild_volume_term)
+        self.model_tet_V = V.copy()
+        self.model_V = self.model_tet_V[store.model_tet]
+        # the store's edges of the original tets (one computation): spring k is edge k
         edges, tet_edge = store.edges, store.tet_edges
-        assert edges.shape == sm.springs.shape, "the springs are the mesh's edges"
         s = len(edges)
         flat = tet_edge.ravel()
         self.spring_count = np.bincount(flat, minlength=s).astype(np.int64)
@@ -131,7 +128,7 @@ class Tissue(TissueBase):
 
     # ------------------------------------------------------------------ records
     def _contributions(self, tet_ids: np.ndarray):
-        """Rest volume (t,) and prestress terms V p cos^2 per edge (t, 6) of CutMesh tets."""
+        """Rest volume (t,) and prestress terms V p cos^2 per edge (t, 6) of the store's tets."""
         store = self.store
         q = store.tet_corners[tet_ids]
         X = store.rest_points
@@ -145,7 +142,7 @@ class Tissue(TissueBase):
 
     # ------------------------------------------------------------------ cut
     def apply_cut(self, res) -> dict:
-        """Carry a :class:`~cutkit.cutting.StepResult` over to the springs: :meth:`apply_delta` of its ``delta``."""
+        """Carry a cut step's result (its ``delta``) over to the springs: :meth:`apply_delta` of its ``delta``."""
         return self.apply_delta(res.delta)
 
     def apply_delta(self, delta) -> dict:
@@ -459,26 +456,32 @@ class Tissue(TissueBase):
         """
         return self.lists.advance(Control(external_forces=f_ext), until, synchronise=True)
 
+    def _read_materials(self) -> None:
+        """Young's modulus, density, prestrain and fibre of each original tet, from the store's labels
+        (a sub-tet has its original's; the springs have no Poisson ratio: the table's is not read)."""
+        mat = material_of_tets(self.model, self.store.labels, poisson_ratio=0.0)
+        self.E, self.rho = mat["E"], mat["density"]
+        self.prestrain, self.fibre = prestress_of_tets(self.model, self.store.labels)
+
     # ------------------------------------------------------------------ strokes
-    def rebase(self, old_of_new: np.ndarray, old_orig: np.ndarray) -> None:
-        """Follow :meth:`CutMesh.rebase <cutkit.cutting.CutMesh.rebase>` (called after it, between strokes).
+    def rebase(self, old_of_new: np.ndarray) -> None:
+        """Follow :meth:`TissueStore.rebase <cutkit.tissue.store.TissueStore.rebase>` (called after it, between strokes).
 
         The live tets became the original tets ``0 .. m-1`` of a fresh cut
         state: the per-tet records (rest volume, prestress terms) move to
-        the new ids, the per-original-tet materials follow the old original
-        tet each came from.  Springs, their sums, masses and node lists are
+        the new ids, the per-original-tet materials are read again from the
+        store's labels and model tets.  Springs, their sums, masses and node lists are
         per node pair or node and stay; no node is a cut node any more, so
         the cut nodes' tet lists restart.
 
         Parameters as :meth:`TissueBase.rebase`.
         """
         old_of_new = np.asarray(old_of_new, np.int64)
-        old_orig = np.asarray(old_orig, np.int64)
         m, cap = old_of_new.shape[0], max(self.store.tet_capacity, old_of_new.shape[0])
         rec_V, rec_sv = np.zeros(cap), np.zeros((cap, 6))
         rec_V[:m], rec_sv[:m] = self.rec_V[old_of_new], self.rec_sv[old_of_new]
         self.rec_V, self.rec_sv = rec_V, rec_sv
-        for name in ("E", "rho", "prestrain", "fibre", "model_V"):
-            setattr(self, name, getattr(self, name)[old_orig])
+        self._read_materials()  # the store's labels and model tets follow its rebase
+        self.model_V = self.model_tet_V[self.store.model_tet]
         self.n_orig_tets = int(m)
         self._node_tets = {}

@@ -14,6 +14,18 @@ import numpy as np
 from cutkit.tissue.store import TissueStore
 
 
+def uncut_store(model, store: TissueStore | None) -> TissueStore:
+    """The store a physics of ``model`` is made over: ``store``, which must hold the model as loaded
+    (nothing cut, never rebased), or a new one of the model (None)."""
+    if store is None:
+        return TissueStore.from_model(model)
+    if store.n_rebases or store.n_tets_total != store.n_orig_tets or store.n_orig_tets != len(model.tets):
+        from cutkit.errors import InputError
+
+        raise InputError("a tissue physics is made over the store of its model before anything is cut")
+    return store
+
+
 class TissueBase:
     """What both tissue kinds share: the store, node interpolation, the live tets.
 
@@ -28,15 +40,13 @@ class TissueBase:
     #: Its flood fill's buffers (:class:`cutkit.relax.rest_map.BladeNeighbourhood`), made on first use.
     _blade_hood = None
 
-    def rebase(self, old_of_new: np.ndarray, old_orig: np.ndarray) -> None:
+    def rebase(self, old_of_new: np.ndarray) -> None:
         """Follow :meth:`TissueStore.rebase <cutkit.tissue.store.TissueStore.rebase>` (called after it, between strokes).
 
         Parameters
         ----------
         old_of_new : (m,) int64
             Old tet id of each new original tet.
-        old_orig : (m,) int64
-            Old original tet of each (``old _tet_orig[old_of_new]``).
         """
         raise NotImplementedError
 

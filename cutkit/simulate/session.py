@@ -215,7 +215,7 @@ class Session:
         <cutkit.tissue.store.TissueStore.rebase>`, inside the cut mesh's);
         this is the one place where every holder of data keyed by tet ids or
         built from the original tets follows: the tissue
-        (``tis.rebase(old_of_new, old_orig)``), the surface collision
+        (``tis.rebase(old_of_new)``), the surface collision
         (:meth:`ContactTask.rebase`), then each callable of
         :attr:`on_rebase` (``f(old_of_new)``, e.g. a live view's boundary).
         What the strokes so far cut is kept for the summary (:attr:`tets_cut`,
@@ -232,9 +232,8 @@ class Session:
         self.cut_before["new_tets"] = self.new_tets
         self.cut_before["rebases"] += 1
         self.pairs_before = cut_pairs(cm, self.pairs_before)
-        old_orig = cm.tet_origins.copy()
         old_of_new = cm.rebase()
-        self.tis.rebase(old_of_new, old_orig[old_of_new])
+        self.tis.rebase(old_of_new)
         self.contact.rebase()
         surface_bvh(cm)
         if cm.cut_faces_before:  # and the earlier strokes' cut surface's, which the next cut's first step walks

@@ -82,8 +82,9 @@ class TissuePhysics(Protocol):
         """Grow the model by one cut step's change; returns counts of what was added and removed."""
         ...
 
-    def rebase(self, old_of_new: np.ndarray, old_orig: np.ndarray) -> None:
-        """Renumber the tets after the cut mesh's rebase: (m,) int64 old tet id and old origin of each new one."""
+    def rebase(self, old_of_new: np.ndarray) -> None:
+        """Renumber the tets after the store's rebase: (m,) int64 old tet id of each new one (the store's
+        labels and records give the rest)."""
         ...
 
     def at_rest(self) -> bool:
