@@ -256,14 +256,9 @@ def _boundary_conditions(bc, n: int) -> tuple[np.ndarray, np.ndarray]:
     return fixed, presc
 
 
-def build_spring_model(
-    model,
-    *,
-    calibration: float = STIFFNESS_CALIBRATION,
-    prestress: bool = True,
-    volume_stiffness: float = 0.0,
-    edges: tuple[np.ndarray, np.ndarray] | None = None,
-) -> SpringModel:
+def build_spring_model(model, *, calibration: float = STIFFNESS_CALIBRATION, prestress: bool = True,
+                       volume_stiffness: float = 0.0, edges: tuple[np.ndarray, np.ndarray] | None = None
+                       ) -> SpringModel:
     """Mass-spring model of a :class:`~cutkit.model.tetmodel.TetModel`.
 
     Masses are lumped (a quarter of each tet's mass to each of its nodes);
