@@ -111,6 +111,29 @@ def test_a_polished_step_is_the_backward_euler_step_of_a_reference_minimiser():
     np.testing.assert_array_equal(st.velocities[~em.fixed], ((st.positions - x0) / H)[~em.fixed])
 
 
+def test_a_step_the_polish_cannot_take_is_finished_on_the_whole_model(monkeypatch):
+    """Where the out-of-balance region is more than a polish factorises (here: any region at all), the
+    step is finished by whole-model projected Newton: it ends within its tolerance (1e-3 of the force
+    scale), within 2 um of the minimiser of the step's potential that scipy finds from the same start
+    (the step moves the loaded node by 11 mm), and is counted."""
+    import cutkit.relax.hybrid as HY
+
+    monkeypatch.setattr(HY, "CHOLESKY_MAX_DOFS", 0)  # the polish gives up before its first iteration
+    hyb, f = pressed("hybrid", 0.1)
+    hyb.step_max_iterations = 2  # the sweeps stop far from the step's end
+    hyb.step_rtol = 1e-3
+    x0, v0 = hyb.positions.copy(), hyb.velocities.copy()
+    hyb.advance(f, H)
+    rep = hyb.relax_report()
+    assert rep["whole_model_finishes"] == 1 and rep["not_converged"] == 0
+    assert rep["polish_iterations"] == [hyb.counts["newton_iterations"]] and hyb.counts["newton_iterations"] > 0
+    assert true_residual(hyb.em, hyb.positions, x0, v0, f) <= 1e-3 * hyb.force_scale
+    ref = reference_step(hyb.em, x0, v0, f)
+    assert np.abs(hyb.positions - ref).max() <= 2e-3 and np.abs(ref - x0).max() > 10.0
+    np.testing.assert_array_equal(hyb.velocities[~hyb.em.fixed], ((hyb.positions - x0) / H)[~hyb.em.fixed])
+    assert signed_volumes(hyb.positions, hyb.cm.tets).min() > 0
+
+
 def test_a_step_the_sweeps_finish_is_the_same_to_the_bit_with_the_hybrid():
     """A light load: the sweeps converge within their cap, the polish is never called, and the
     hybrid's states equal vertex block descent's bit for bit."""

@@ -285,6 +285,7 @@ class ElasticTissue(TissueBase):
         if solver == "hybrid":
             self.counts["polish_calls"] = 0
             self.counts["resting_steps"] = 0
+            self.counts["whole_model_finishes"] = 0
             self.step_log["polish_iterations"] = []
             self.step_log["resting"] = []
         #: the element model's matrix pattern, kept across cuts and shared by its Newton solvers
@@ -462,7 +463,7 @@ class ElasticTissue(TissueBase):
         scale (:func:`~cutkit.relax.newton.newton_step`, its pattern kept until the mesh changes);
         a step already within it ends at once, at rest.  Returns (info, true residual N, Newton
         iterations)."""
-        from cutkit.relax.newton import NewtonSolver, rest_step
+        from cutkit.relax.newton import rest_step
         from cutkit.relax.vbd import SolveInfo
 
         atol = self._rest_atol()
@@ -478,11 +479,9 @@ class ElasticTissue(TissueBase):
                 # next stroke only updates it (the knee: 0.08-0.10 s of that step, not 0.21-0.28 s)
                 self.hessian_pattern.get(stop)
             return SolveInfo(0, res, res, True, 0), res, 0
-        if self._rest_newton is None:
-            self._rest_newton = NewtonSolver(self.em, hessian="projected", cg_rtol=REST_CG_RTOL,
-                                             pattern=self.hessian_pattern)
         info, swept = rest_step(self.em, self.state, self.step_s, f_ext, atol=atol, sweeps=REST_SWEEPS,
-                                max_iterations=NEWTON_STEP_MAX_ITERATIONS, solver=self._rest_newton, stop=stop)
+                                max_iterations=NEWTON_STEP_MAX_ITERATIONS, solver=self._whole_model_newton(),
+                                stop=stop)
         if not info.taken:
             return info, 0.0, 0
         r = self._residual(x0, v0, f_ext)
@@ -518,6 +517,9 @@ class ElasticTissue(TissueBase):
         polished = 0
         if not (stop is not None and stop[0]) and (true_residual > atol or not info.converged):
             info, true_residual, polished = self._polish(info, x0, v0, f_ext, r, atol)
+        if not (stop is not None and stop[0]) and not info.converged:
+            info, true_residual, finished = self._finish(info, x0, v0, f_ext, atol, stop)
+            polished += finished
         self.counts["newton_iterations"] += polished
         self.step_log["polish_iterations"].append(int(polished))
         self.step_log["resting"].append(False)
@@ -538,6 +540,33 @@ class ElasticTissue(TissueBase):
         self.r2[:] = np.einsum("ij,ij->i", r, r)
         done = SolveInfo(info.iterations, info.initial_residual, p.residual, p.converged, info.node_updates)
         return done, p.residual, p.iterations
+
+    def _finish(self, info, x0, v0, f_ext, atol: float, stop):
+        """A step the sweeps and the polish left out of balance (the out-of-balance mode spans more of
+        the model than a polish factorises, or the polish ran out of iterations) finished on the
+        whole model (:func:`~cutkit.relax.newton.finish_step`, the resting steps' solver), so every
+        step of the hybrid ends converged.  Returns (info, true residual N, Newton iterations)."""
+        from cutkit.relax.newton import finish_step
+        from cutkit.relax.vbd import SolveInfo
+
+        p = finish_step(self.em, self.state, x0, v0, self.step_s, f_ext, atol=atol,
+                        max_iterations=NEWTON_STEP_MAX_ITERATIONS, solver=self._whole_model_newton(), stop=stop)
+        if not p.taken:
+            return info, info.residual, 0
+        self.counts["whole_model_finishes"] += 1
+        r = self._residual(x0, v0, f_ext)
+        self.r2[:] = np.einsum("ij,ij->i", r, r)
+        res = self._free_norm(r)
+        return SolveInfo(info.iterations, info.initial_residual, res, res <= atol, info.node_updates), res, p.iterations
+
+    def _whole_model_newton(self):
+        """The hybrid's whole-model projected Newton (resting steps and finishes), built on first use."""
+        from cutkit.relax.newton import NewtonSolver
+
+        if self._rest_newton is None:
+            self._rest_newton = NewtonSolver(self.em, hessian="projected", cg_rtol=REST_CG_RTOL,
+                                             pattern=self.hessian_pattern)
+        return self._rest_newton
 
     def _true_residual(self, x0: np.ndarray, v0: np.ndarray, f_ext: np.ndarray) -> float:
         """N: the norm over all free dofs of the backward Euler residual of the step just made from
@@ -593,7 +622,8 @@ class ElasticTissue(TissueBase):
             ``min_J`` (None where not measured);
             ``"hybrid"`` adds ``polish_iterations_total``, ``polished_steps``
             (steps with a Newton iteration), ``polish_calls`` (steps that
-            called the polish), ``polish_s`` (wall seconds of the polishes:
+            called the polish), ``whole_model_finishes`` (steps the polish left out
+            of balance, finished by :meth:`_finish`), ``polish_s`` (wall seconds of the polishes:
             ``total`` and each part of :data:`cutkit.relax.hybrid.TIMED`),
             ``resting_steps`` and ``rest_rtol`` (:meth:`_rest_step`), and per
             step ``polish_iterations`` (a resting step's Newton iterations
@@ -619,6 +649,7 @@ class ElasticTissue(TissueBase):
         its = self.step_log["polish_iterations"]
         return {"polish_iterations_total": int(sum(its)), "polished_steps": int(sum(1 for k in its if k)),
                 "polish_calls": int(self.counts["polish_calls"]),
+                "whole_model_finishes": int(self.counts["whole_model_finishes"]),
                 "resting_steps": int(self.counts["resting_steps"]), "rest_rtol": self.rest_rtol,
                 "resting": list(self.step_log["resting"]),
                 "polish_s": {k: float(v) for k, v in self.polish_timings.items()}, "polish_iterations": list(its)}

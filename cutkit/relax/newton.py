@@ -825,6 +825,48 @@ def rest_step(em: ElementModel, state: ElementState, h: float, f_ext, *, atol: f
     return SolveInfo(info.iterations, info.initial_residual, info.residual, info.converged), swept
 
 
+def finish_step(em: ElementModel, state: ElementState, x0: np.ndarray, v0: np.ndarray, h: float, f_ext, *,
+                atol: float, max_iterations: int, solver: NewtonSolver, stop=None) -> SolveInfo:
+    """Finish on the whole model a backward Euler step from (x0, v0) that another method left out of balance.
+
+    Projected Newton (``solver``) from the iterate ``state.positions``
+    (where the sweeps and the local polish stopped; it must invert no tet)
+    until the step's true residual over all free dofs is at most ``atol``
+    (N): the potential is :func:`newton_step`'s from (x0, v0).  Velocities
+    are set to ``(x - x0) / h`` (0 at held dofs); time is not advanced (the
+    sweeps did).
+
+    Parameters
+    ----------
+    em : ElementModel
+    state : ElementState
+        Positions and velocities changed in place.
+    x0, v0 : (n, 3) float64
+        The step's start, mm and mm/s.
+    h : float
+        s, > 0.
+    f_ext : (n, 3) float64
+        N.
+    atol : float
+        N.
+    max_iterations : int
+    solver : NewtonSolver
+    stop : (1,) int64, optional
+        As :meth:`NewtonSolver.solve` reads it.
+
+    Returns
+    -------
+    SolveInfo
+        Newton iterations; ``residual`` the true one, N.
+    """
+    free = ~em.fixed
+    terms = _free_terms(em, x0, h, f_ext, None, np.where(free, x0 + h * v0, x0))
+    info = solver.solve(state.positions, terms, atol=float(atol), max_iterations=int(max_iterations), stop=stop)
+    if info.taken:
+        state.velocities[:] = np.where(free, (state.positions - x0) / h, 0.0)
+    return info
+
+
 def newton_static(em: ElementModel, positions, f_ext=None, gravity=None, *, rtol: float = 1e-6,
                   atol: float = DEFAULT_ATOL_N, max_iterations: int = DEFAULT_MAX_ITERATIONS,
                   solver: NewtonSolver | None = None) -> SolveInfo:
