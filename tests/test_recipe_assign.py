@@ -1,5 +1,7 @@
 """Recipes are validated with one-line errors; assign applies materials, boundaries, prestress."""
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -23,6 +25,20 @@ def test_knee_recipe_loads_and_resolves_paths():
     assert r["recipe"]["volume"] == str(ROOT / "sample_volumes" / "knee_labels.nrrd")
     assert [m["name"] for m in r["materials"]] == ["skin", "fat", "muscle", "tendon", "bone"]
     assert len(r["_sha256"]) == 64
+
+
+def test_mri_head_recipe_loads_and_its_image_ships_with_nibabel():
+    """pipelines/mri_head.toml names no volume (the command line gives nibabel's T1 head test image,
+    benchmarks/mri_head.py); one soft tissue, the base held, a lateral prestrain."""
+    import nibabel
+
+    from cutkit.volumes import read_volume
+
+    r = load_recipe(ROOT / "pipelines" / "mri_head.toml")
+    assert "volume" not in r["recipe"] and r["segment"]["otsu"] is True
+    assert [m["name"] for m in r["materials"]] == ["muscle"] and r["prestress"][0]["prestrain"] == 0.05
+    image = read_volume(Path(nibabel.__file__).parent / "tests" / "data" / "anatomical.nii")
+    assert image.data.shape == (33, 41, 25) and np.allclose(image.spacing, 2.0)
 
 
 @pytest.mark.parametrize(
