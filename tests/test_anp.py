@@ -246,18 +246,17 @@ def cut_slab(element, nu=0.45, smoothing=0.0):
     """A prestrained slab (10 % along y) cut along y = 1.37 by the newton steps of the tissue
     (``smoothing``: the ANP element's deviatoric smoothing)."""
     from cutkit.cutting import cut_step
-    from cutkit.model.tetmodel import Materials, Prestress
+    from cutkit.model.tetmodel import BoundaryConditions, Materials, Prestress
     from cutkit.relax.elastic_tissue import ElasticTissue
     from test_newton_tissue import ROW
 
     p, t = kuhn_box(np.array([6.0, 3.0, 3.0]), (6, 3, 3))
     ps = Prestress(label=np.array([1], np.int32), fibre_direction=np.array([[0.0, 1.0, 0.0]]),
                    prestrain=np.array([0.1]))
-    model = TetModel.from_arrays(p, t, materials=Materials.from_rows([dict(ROW, poisson_ratio=nu)]), prestress=ps)
+    model = TetModel.from_arrays(p, t, materials=Materials.from_rows([dict(ROW, poisson_ratio=nu)]), prestress=ps,
+                                 boundary=BoundaryConditions(fixed_nodes=np.flatnonzero(p[:, 2] == 0)))
     tis = with_cut_mesh(ElasticTissue(model, step_s=0.02, solver="newton", element=element), 1.6)
     tis.em.deviatoric_smoothing = smoothing
-    tis.em.fixed[p[:, 2] == 0] = True
-    tis.bc_fixed = p[:, 2] == 0
     tis.advance(np.zeros((tis.n_nodes, 3)), 0.1)
     for xb in np.linspace(-0.5, 6.5, 8):
         tis.apply_cut(cut_step(tis.cm, [xb, 1.37, 3.5], [0.0, 0.0, 1.0]))

@@ -8,7 +8,7 @@ from _fem_reference import kuhn_box
 from cutkit.cutting import cut_step
 from cutkit.errors import CutkitError
 from cutkit.mesh.quality import signed_volumes
-from cutkit.model.tetmodel import Materials, Prestress, TetModel
+from cutkit.model.tetmodel import BoundaryConditions, Materials, Prestress, TetModel
 from cutkit.relax.vbd import elastic_forces
 from cutkit.simulate import SimulateOptions
 from cutkit.relax.elastic_tissue import ElasticTissue
@@ -23,10 +23,9 @@ def slab(prestrain=0.1, solver="newton"):
     p, t = kuhn_box((6.0, 3.0, 3.0), (6, 3, 3))
     ps = Prestress(label=np.array([1], np.int32), fibre_direction=np.array([[0.0, 1.0, 0.0]]),
                    prestrain=np.array([prestrain]))
-    model = TetModel.from_arrays(p, t, materials=Materials.from_rows([ROW]), prestress=ps)
+    model = TetModel.from_arrays(p, t, materials=Materials.from_rows([ROW]), prestress=ps,
+                                 boundary=BoundaryConditions(fixed_nodes=np.flatnonzero(p[:, 2] == 0)))
     tis = with_cut_mesh(ElasticTissue(model, step_s=0.02, solver=solver), 1.6)
-    tis.em.fixed[p[:, 2] == 0] = True
-    tis.bc_fixed = p[:, 2] == 0
     return tis
 
 

@@ -10,7 +10,7 @@ from _fem_reference import kuhn_box, trust_region_minimum
 from _twins_elastic import deformation_gradients
 from cutkit.errors import CutkitError
 from cutkit.mesh.quality import signed_volumes
-from cutkit.model.tetmodel import Materials, TetModel
+from cutkit.model.tetmodel import BoundaryConditions, Materials, TetModel
 from cutkit.relax.hybrid import polish_step
 from cutkit.relax.vbd import elastic_forces, local_step
 from cutkit.simulate import SimulateOptions
@@ -26,10 +26,9 @@ def pressed(solver, load, rest_rtol=None):
     """A 3 x 3 x 2 mm block held at its base, one top node pressed down by ``load`` N (a load that
     stays the same, so the hybrid's steps after the first rest unless ``rest_rtol`` is None)."""
     p, t = kuhn_box((3.0, 3.0, 2.0), (3, 3, 2))
-    model = TetModel.from_arrays(p, t, materials=Materials.from_rows([ROW]))
+    model = TetModel.from_arrays(p, t, materials=Materials.from_rows([ROW]),
+                                 boundary=BoundaryConditions(fixed_nodes=np.flatnonzero(p[:, 2] == 0)))
     tis = with_cut_mesh(ElasticTissue(model, step_s=H, solver=solver, rest_rtol=rest_rtol), 1.0)
-    tis.em.fixed[p[:, 2] == 0] = True
-    tis.bc_fixed = p[:, 2] == 0
     tis.em.forget_colour_classes()
     f = np.zeros_like(p)
     f[int(np.flatnonzero(p[:, 2] == 2.0)[4])] = [0.0, 0.0, -load]

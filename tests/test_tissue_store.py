@@ -156,3 +156,24 @@ def test_a_physics_is_made_only_over_its_models_uncut_store():
     store.add_tets([tuple(t[0])], origin=0)
     with pytest.raises(InputError, match="before anything is cut"):
         Tissue(model, store, dt0=1e-3, n_lists=1, tolerance_fraction=1e-3)
+
+
+def test_held_nodes_come_from_the_boundary_conditions_and_a_cut_between_held_nodes_is_held():
+    from cutkit.model.tetmodel import BoundaryConditions, Materials, TetModel
+    from test_newton_tissue import ROW
+
+    p, t = kuhn_box((2.0, 1.0, 1.0), (2, 1, 1))
+    base = np.flatnonzero(p[:, 2] == 0)
+    model = TetModel.from_arrays(p, t, materials=Materials.from_rows([ROW]),
+                                 boundary=BoundaryConditions(fixed_nodes=base[:2], prescribed_nodes=base[2:],
+                                                             prescribed_displacement=np.zeros((len(base) - 2, 3))))
+    s = TissueStore.from_model(model)
+    np.testing.assert_array_equal(s.held, p[:, 2] == 0)  # fixed and prescribed alike
+    top = np.flatnonzero(p[:, 2] > 0)
+    between_held = s.add_node(base[:2], [0.5, 0.5])
+    across = s.add_node([base[0], top[0]], [0.5, 0.5])
+    assert s.held[between_held] and not s.held[across]
+    s.rebase()
+    assert s.held[between_held] and not s.held[across] and s.held.shape == (s.n_nodes,)
+    with pytest.raises(InputError, match=r"held: shape \(3,\)"):
+        TissueStore(p, t, held=np.zeros(3, bool))

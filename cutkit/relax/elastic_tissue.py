@@ -28,7 +28,6 @@ import numpy as np
 from cutkit.relax.elastic import (
     ElementModel,
     ElementState,
-    fixed_nodes_mask,
     initial_element_state,
     node_damping,
 )
@@ -268,8 +267,7 @@ class ElasticTissue(TissueBase):
         em.add_elements(store.rest_points[:n], store.orig_tets, self.mu, self.lam, self.density, self.prestrain, self.fibre,
                         ids=np.arange(m))
         em.damping[:] = node_damping(n, store.orig_tets, self.damping)
-        self.bc_fixed = fixed_nodes_mask(model)
-        em.fixed[:] = self.bc_fixed[:, None]
+        em.fixed[:] = store.held[:, None]
         em.element = element
         if element == "anp":  # ANP with the nodes' deviatoric share that meets the locking bound, unless told
             em.deviatoric_smoothing = ANP_SMOOTHING if deviatoric_smoothing is None else float(deviatoric_smoothing)
@@ -717,11 +715,10 @@ class ElasticTissue(TissueBase):
     def _append_nodes(self, new: np.ndarray, old_shape) -> None:
         em, st = self.em, self.state
         par, w, valid = self._interpolation_weights(new)
-        held = np.all(~valid | self.bc_fixed[par], axis=1)  # a node between held nodes only is held too
+        held = self.store.held[new]  # a node between held nodes only is held too (the store's rule)
         damping = (w * em.damping[par]).sum(axis=1)
         vel = np.einsum("pq,pqc->pc", w, st.velocities[par])
         x = self._through_old_shape(old_shape, new)
-        self.bc_fixed = append_rows(self.bc_fixed, held)
         em.add_nodes(new.size, damping=damping, fixed=held)
         st.positions = append_rows(st.positions, x)
         st.velocities = append_rows(st.velocities, np.where(held[:, None], 0.0, vel))
@@ -861,7 +858,7 @@ class ElasticTissue(TissueBase):
         """Of ``nodes`` (those whose tets a step changed), the ones no tet uses any more stay where
         they are; those with tets are free unless held by a condition."""
         em = self.em
-        fixed = self.bc_fixed[nodes] | (em.adj_degree[nodes] == 0)
+        fixed = self.store.held[nodes] | (em.adj_degree[nodes] == 0)
         changed = fixed != em.fixed[nodes].all(axis=1)
         if changed.any():
             em.fixed[nodes[changed]] = fixed[changed, None]

@@ -97,7 +97,6 @@ class Tissue(TissueBase):
         tolerance = tolerance_fraction * float(np.mean(sm.rest_length))
         self.lists = NodeLists(sm, self.state, dt0, n_lists, displacement_tolerance=tolerance)
         self.n_orig_tets = int(store.orig_tets.shape[0])
-        self.bc_fixed = sm.fixed.copy()
 
         self._read_materials()
 
@@ -293,7 +292,7 @@ class Tissue(TissueBase):
         # ---- nodes left without tets (orphans) are held; nodes with tets are free unless BC-fixed
         orphan = self.node_tet_count <= 0
         masses[orphan] = 0.0  # exactly: what is left is rounding
-        fixed = self.bc_fixed | orphan
+        fixed = self.store.held | orphan
         changed = np.flatnonzero(fixed != sm.fixed)
         sm.fixed = fixed
         if changed.size:
@@ -344,11 +343,9 @@ class Tissue(TissueBase):
         wz = wz / np.where(wsum > 0, wsum, 1.0)
         vel = np.einsum("pq,pqc->pc", wz, st.velocities[pz])
         damp = (wz * sm.damping[pz]).sum(axis=1)
-        # a node between held nodes only (e.g. a cut into bone) is held too
-        held = np.all(~valid | self.bc_fixed[pz], axis=1)
+        held = self.store.held[new]  # a node between held nodes only (a cut into bone) is held too
         X = delta.added_node_rest
         x = self.interpolate_positions(new)
-        self.bc_fixed = np.concatenate([self.bc_fixed, held])
         self.node_tet_count = np.concatenate([self.node_tet_count, np.zeros(p, np.int64)])
         sm.rest_positions = np.concatenate([sm.rest_positions, X])
         sm.masses = np.concatenate([sm.masses, np.zeros(p)])

@@ -57,6 +57,7 @@ class NodeBuffers(NamedTuple):
     uvw: np.ndarray | None  #: (c, 3) float64 texture coordinates, or None
     parents: np.ndarray  #: (c, 4) int64 original nodes a cut node interpolates, -1 padded
     weights: np.ndarray  #: (c, 4) float64 their weights
+    held: np.ndarray  #: (c,) bool held by the boundary conditions (fixed or prescribed)
 
 
 class TetBuffers(NamedTuple):
@@ -95,6 +96,9 @@ class TissueStore:
     texcoords : (n, 3) float64, optional
     labels : (m,) int32, optional
         Tissue label of each tet (default 0).
+    held : (n,) bool, optional
+        Nodes the boundary conditions hold, fixed or prescribed (default none).  A
+        cut node between held nodes only is held too.
 
     Attributes
     ----------
@@ -119,7 +123,7 @@ class TissueStore:
     step_log : StepLog
     """
 
-    def __init__(self, points, tets, rest_points=None, texcoords=None, labels=None):
+    def __init__(self, points, tets, rest_points=None, texcoords=None, labels=None, held=None):
         points = np.ascontiguousarray(points, np.float64)
         tets = np.ascontiguousarray(tets, np.int64)
         if points.ndim != 2 or points.shape[1] != 3:
@@ -127,7 +131,10 @@ class TissueStore:
         if tets.ndim != 2 or tets.shape[1] != 4:
             raise InputError(f"tets: shape {tets.shape}, expected (m, 4)")
         n0, m0 = points.shape[0], tets.shape[0]
-        self._set_original(points, rest_points, texcoords, tets, labels)
+        held = np.zeros(n0, bool) if held is None else np.asarray(held, bool)
+        if held.shape != (n0,):
+            raise InputError(f"held: shape {held.shape}, expected ({n0},)")
+        self._set_original(points, rest_points, texcoords, tets, labels, held)
         self.n_model_nodes, self.n_model_tets = n0, m0
         self.model_tet = np.arange(m0, dtype=np.int64)
         self.orig_made_by_cut = np.zeros(m0, bool)
@@ -136,10 +143,14 @@ class TissueStore:
 
     @classmethod
     def from_model(cls, model) -> TissueStore:
-        """The store of a :class:`~cutkit.model.tetmodel.TetModel` (rest = cut configuration)."""
-        return cls(model.points, model.tets, texcoords=model.texcoords, labels=model.labels)
+        """The store of a :class:`~cutkit.model.tetmodel.TetModel` (rest = cut configuration; held: the
+        nodes its boundary conditions fix or prescribe)."""
+        held = np.zeros(len(model.points), bool)
+        held[np.asarray(model.boundary.fixed_nodes, np.int64)] = True
+        held[np.asarray(model.boundary.prescribed_nodes, np.int64)] = True
+        return cls(model.points, model.tets, texcoords=model.texcoords, labels=model.labels, held=held)
 
-    def _set_original(self, points, rest_points, texcoords, tets, labels) -> None:
+    def _set_original(self, points, rest_points, texcoords, tets, labels, held) -> None:
         """Make ``tets`` the original tets over the nodes ``points`` (every node an original one)."""
         n0, m0 = points.shape[0], tets.shape[0]
         self.n_orig_nodes = self.n_nodes = n0
@@ -155,7 +166,7 @@ class TissueStore:
         uvw = None if texcoords is None else _with_room(np.asarray(texcoords, np.float64), cap)
         X = points if rest_points is None else np.asarray(rest_points, np.float64)
         self.node_buffers = NodeBuffers(_with_room(points, cap), _with_room(X, cap), uvw,
-                                        -np.ones((cap, 4), np.int64), np.zeros((cap, 4)))
+                                        -np.ones((cap, 4), np.int64), np.zeros((cap, 4)), _with_room(held, cap))
         tcap = m0 + max(TET_ROOM_MIN, int(TET_ROOM_FRACTION * m0))
         self.tet_buffers = TetBuffers(_with_room(tets, tcap), _with_room(np.ones(m0, bool), tcap),
                                       _with_room(np.arange(m0, dtype=np.int64), tcap))
@@ -182,6 +193,11 @@ class TissueStore:
         """(n_nodes, 3) float64 texture coordinates (a view), or None."""
         uvw = self.node_buffers.uvw
         return None if uvw is None else uvw[:self.n_nodes]
+
+    @property
+    def held(self) -> np.ndarray:
+        """(n_nodes,) bool nodes the boundary conditions hold (a view)."""
+        return self.node_buffers.held[:self.n_nodes]
 
     @property
     def defining_nodes(self) -> np.ndarray:
@@ -250,18 +266,22 @@ class TissueStore:
             b = self.node_buffers
             self.node_buffers = NodeBuffers(_with_room(b.x, cap), _with_room(b.X, cap),
                                             None if b.uvw is None else _with_room(b.uvw, cap),
-                                            _with_room(b.parents, cap, -1), _with_room(b.weights, cap))
+                                            _with_room(b.parents, cap, -1), _with_room(b.weights, cap),
+                                            _with_room(b.held, cap))
 
     def add_node(self, nodes, w, lo=None) -> int:
         """A new node defined by weights ``w`` (k,) on original ``nodes`` (k,); returns its id.
 
         With ``lo`` the weights are first clamped to at least ``lo``
-        (:func:`cutkit.mesh.geometry.clamp_bary`).  Logged as an added node.
+        (:func:`cutkit.mesh.geometry.clamp_bary`).  A node between held nodes
+        only (a cut into a held tissue) is held.  Logged as an added node.
         """
         self.reserve_nodes(1)
         i = self.n_nodes
         self.n_nodes += 1
         self._place(i, nodes, w, lo)
+        held = self.node_buffers.held
+        held[i] = bool(held[np.asarray(nodes, np.int64)].all())
         self.step_log.added_nodes.append(i)
         return i
 
@@ -347,7 +367,7 @@ class TissueStore:
         model_tet = self.model_tet[origin]
         b = self.node_buffers
         self._set_original(b.x[:n].copy(), b.X[:n].copy(), None if b.uvw is None else b.uvw[:n].copy(),
-                           self.tet_buffers.corners[ids], self.labels[origin])
+                           self.tet_buffers.corners[ids], self.labels[origin], b.held[:n].copy())
         self.model_tet, self.orig_made_by_cut, self.model_node = model_tet, made, model_node
         self.n_rebases += 1
         return ids
