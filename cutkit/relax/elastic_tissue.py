@@ -653,10 +653,6 @@ class ElasticTissue(TissueBase):
                 "polish_s": {k: float(v) for k, v in self.polish_timings.items()}, "polish_iterations": list(its)}
 
     # ------------------------------------------------------------ cut
-    def apply_cut(self, res) -> dict:
-        """Carry a cut step's result (its ``delta``) over to the elements: :meth:`apply_delta` of its ``delta``."""
-        return self.apply_delta(res.delta)
-
     def apply_delta(self, delta) -> dict:
         """Carry a cut step's :class:`~cutkit.tissue.TopologyDelta` over to the elements.
 

@@ -140,10 +140,6 @@ class Tissue(TissueBase):
         return V, sv
 
     # ------------------------------------------------------------------ cut
-    def apply_cut(self, res) -> dict:
-        """Carry a cut step's result (its ``delta``) over to the springs: :meth:`apply_delta` of its ``delta``."""
-        return self.apply_delta(res.delta)
-
     def apply_delta(self, delta) -> dict:
         """Carry a cut step's :class:`~cutkit.tissue.TopologyDelta` over to the springs.
 

@@ -31,7 +31,7 @@ class TissueBase:
 
     Subclasses set ``store`` (:class:`~cutkit.tissue.store.TissueStore`, which they only read) and provide
     ``positions``, ``rest_positions``, ``velocities``, ``fixed``, ``time``,
-    :meth:`settle`, :meth:`advance` and :meth:`apply_cut`.
+    :meth:`settle`, :meth:`advance` and :meth:`apply_delta`.
     """
 
     store: TissueStore
@@ -49,6 +49,14 @@ class TissueBase:
             Old tet id of each new original tet.
         """
         raise NotImplementedError
+
+    def apply_delta(self, delta) -> dict:
+        """Grow the physics by one cut step's :class:`~cutkit.tissue.TopologyDelta`; counts of what changed."""
+        raise NotImplementedError
+
+    def apply_cut(self, res) -> dict:
+        """Carry a cut step's result (its ``delta``) over: :meth:`apply_delta` of its ``delta``."""
+        return self.apply_delta(res.delta)
 
     def interpolate_positions(self, nodes: np.ndarray) -> np.ndarray:
         """Current positions of cut nodes from their defining nodes, (p, 3) float64.
