@@ -13,7 +13,7 @@ store's tetrahedron ``t``, so a cut step carries over without any search:
 * new nodes take position and velocity interpolated from their defining
   nodes and a colour no node of their tetrahedra has.
 
-The rest positions are the cut mesh's (one store); this module keeps only
+The rest positions are the tissue store's (one truth); this module keeps only
 the current positions and velocities.  Every step is local to the cut: no
 work proportional to the model except the O(n) counting sort of the
 colour classes.
@@ -893,7 +893,7 @@ class ElasticTissue(TissueBase):
         state.  The per-original-tet materials are read again from the
         store's labels (each new original tet keeps the label of the old
         original tet it was cut from), and the elements are built again on the new
-        numbering from the cut mesh's rest positions (the same rest shapes;
+        numbering from the store's rest positions (the same rest shapes;
         masses summed again from them).  Node data stay: damping, fixed
         flags, colours, positions, velocities (node ids do not change).
 

@@ -16,7 +16,7 @@ import numpy as np
 
 #: The view :func:`append_rows` last returned of each buffer it made, by the buffer's id: only that
 #: view grows in place (a view holds its buffer, so the id is the buffer's while the entry lives).
-#: Any other array, an older view of the same buffer or a view of someone else's (the cut mesh's
+#: Any other array, an older view of the same buffer or a view of someone else's (the tissue store's
 #: own node arrays), is copied first.
 _LATEST: "weakref.WeakValueDictionary[int, np.ndarray]" = weakref.WeakValueDictionary()
 #: Rows a new buffer holds at least.

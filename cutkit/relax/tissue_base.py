@@ -61,7 +61,7 @@ class TissueBase:
     def interpolate_positions(self, nodes: np.ndarray) -> np.ndarray:
         """Current positions of cut nodes from their defining nodes, (p, 3) float64.
 
-        The cut mesh works in the rest configuration; a cut node's weights
+        The cut works in the rest configuration; a cut node's weights
         over its defining original nodes carry over to the deformed ones.
         """
         store = self.store
