@@ -1,6 +1,7 @@
 """The element solvers on a real MRI: nibabel's T1 head image built, cut across the top and held.
 
-    python benchmarks/mri_head.py [--json] [--work DIR] [--solvers hybrid] [--hold S] [--static] [--to-residual]
+    python benchmarks/mri_head.py [--json] [--work DIR] [--solvers hybrid] [--hold S] [--rest-rtol R] [--static]
+                                  [--to-residual]
 
 Builds ``pipelines/mri_head.toml`` over the T1 head nibabel ships as test data
 (``nibabel/tests/data/anatomical.nii``), writes an incision across the top of
@@ -51,6 +52,7 @@ def main(argv=None) -> int:
     ap.add_argument("--work", default="mri-head", help="folder for the model and the incision")
     ap.add_argument("--solvers", default="hybrid")
     ap.add_argument("--hold", type=float, default=1.0, help="hold after the incision, s")
+    ap.add_argument("--rest-rtol", type=float, default=None, help="the resting steps' tolerance (simulate --rest-rtol)")
     ap.add_argument("--static", action="store_true", help="a static Newton solve of each run's final state")
     ap.add_argument("--to-residual", action="store_true", help="bring the first solver's cut model to 1e-3")
     args = ap.parse_args(argv)
@@ -66,6 +68,7 @@ def main(argv=None) -> int:
     out = {"model": str(model_path), "incision": str(incision),
            "solvers": knee_solvers(read_model(model_path), tuple(args.solvers.split(",")),
                                    trajectory=read_trajectory(incision), hold_s=args.hold, lift=True,
+                                   rest_rtol=args.rest_rtol,
                                    static=args.static,
                                    to_residual=args.to_residual)}
     print(json.dumps(out, indent=1 if args.json else None))

@@ -161,7 +161,8 @@ def knee_simulate(model, paths: int = KNEE_PATHS) -> dict:
 
 def knee_solvers(model, solvers=("newton", "vbd"), hold_s: float = 1.0, rtol: float = 1e-3,
                  cap_s: float = 600.0, trajectory=None, repeat: int = 1, to_residual: bool = True,
-                 static: bool = False, lift: bool = False, static_rtol: float = 1e-5) -> dict:
+                 static: bool = False, lift: bool = False, static_rtol: float = 1e-5,
+                 rest_rtol: float | None = None) -> dict:
     """The demo incision with each element solver (``SimulateOptions.solver``) and a ``hold_s`` hold:
     steps not converged, worst step residual, simulated/wall, the final out-of-balance force over
     the force scale, the opening; then, on the cut model the first solver left, the wall time each
@@ -193,7 +194,8 @@ def knee_solvers(model, solvers=("newton", "vbd"), hold_s: float = 1.0, rtol: fl
     for name, key in runs:
         with tempfile.TemporaryDirectory() as d:
             t0 = time.perf_counter()
-            s = simulate(model, traj, Path(d), SimulateOptions(fps=10, frames=False, hold_s=hold_s, solver=name))
+            s = simulate(model, traj, Path(d), SimulateOptions(fps=10, frames=False, hold_s=hold_s, solver=name,
+                                                               rest_rtol=rest_rtol))
             wall = time.perf_counter() - t0
             cm = read_model(Path(d) / "model.h5")
         rs = s["relax_steps"]

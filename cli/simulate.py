@@ -29,6 +29,9 @@ from cutkit.cli._ui import overwrite_option, solver_option
               help="Tissue model: stable neo-Hookean elements with the Poisson ratio of the materials table, "
                    "or the paper's springs [default: what the model file names, neohookean for most].")
 @solver_option
+@click.option("--rest-rtol", type=float, default=None,
+              help="The hybrid's resting steps' tolerance over the force scale [default: 3e-4]; 1e-4 brings a "
+                   "soft model's wound nearer its equilibrium (docs/relaxation.md).")
 @click.option("--element", type=click.Choice(["nh", "anp"]), default="nh", show_default=True,
               help="The element model's tetrahedron: stable neo-Hookean linear tets (nh) or the average nodal "
                    "pressure tetrahedron (anp), which does not lock near incompressibility; anp is solved by "
@@ -45,7 +48,8 @@ from cutkit.cli._ui import overwrite_option, solver_option
                    "advances when the blade pays the tissue's J_c per crack area; docs/scalpel-model.md). "
                    "With --haptics the service's own --scalpel decides.")
 def command(model, trajectory, out_dir, fps, overwrite, png, movie, realtime, haptics, hold_s, geometry_rate_hz,
-            blade_length, material_model, volume_stiffness, solver, scalpel, element, deviatoric_smoothing):
+            blade_length, material_model, volume_stiffness, solver, rest_rtol, scalpel, element,
+            deviatoric_smoothing):
     """Cut MODEL along TRAJECTORY with the scalpel force model and relax it; write frames and logs."""
     from cutkit.cli._ui import console, folder_guard
     from cutkit.cutting.trajectory import read_trajectory
@@ -59,7 +63,7 @@ def command(model, trajectory, out_dir, fps, overwrite, png, movie, realtime, ha
     opt = SimulateOptions(fps=fps, png=False, realtime=realtime, haptics=haptics, hold_s=hold_s,
                           geometry_rate_hz=geometry_rate_hz, blade_length=blade_length,
                           volume_stiffness=volume_stiffness, material_model=material_model, solver=solver,
-                          scalpel=scalpel, element=element, deviatoric_smoothing=deviatoric_smoothing)
+                          rest_rtol=rest_rtol, scalpel=scalpel, element=element, deviatoric_smoothing=deviatoric_smoothing)
     opt.check()
     earlier = check_output_folder(out_dir, "simulate", overwrite, inputs=(model, trajectory))
     tet_model = read_model(model)

@@ -150,6 +150,7 @@ def test_trajectory_that_never_touches_warns(tmp_path, capsys):
     ("trajectory", "t,x,y,z,ax,ay,az,nx,ny,nz\n0,0,0,0,0,1,0,1,0,0\n0,0,0,1,0,1,0,1,0,0\n", "cut.csv:3: t = 0 does not increase"),
     ("model", b"not an hdf5 file", "model"),
     ("option", ["--volume-stiffness", "-1"], "cutkit: error: --volume-stiffness must be a number >= 0, got -1"),
+    ("option", ["--rest-rtol", "0"], "cutkit: error: rest-rtol must lie in (0, 1), got 0.0"),
 ])
 def test_bad_input_is_one_line_error(tmp_path, capsys, what, content, message):
     write_model(tmp_path / "slab.h5", slab())
@@ -428,3 +429,14 @@ def test_step_tet_sets_match_twin():
         for g, w in zip(got, step_tet_sets_twin(added, removed, around)):
             np.testing.assert_array_equal(g, w)
     assert [g.tolist() for g in got] == [[5], [9], [1, 11], [1, 5, 9, 11]]
+
+
+def test_the_rest_tolerance_is_the_runs_to_choose():
+    """--rest-rtol reaches the element model's resting steps; without it they take REST_RTOL."""
+    from cutkit.relax.elastic_tissue import REST_RTOL
+    from cutkit.simulate import SimulateOptions
+    from cutkit.simulate.tissues import make_tissue
+
+    model = slab()
+    assert make_tissue(model, None, "neohookean", SimulateOptions()).rest_rtol == REST_RTOL == 3e-4
+    assert make_tissue(model, None, "neohookean", SimulateOptions(rest_rtol=1e-4)).rest_rtol == 1e-4

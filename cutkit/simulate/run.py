@@ -102,6 +102,11 @@ class SimulateOptions:
         (vertex block descent, a step left unconverged at its sweep cap
         finished by a local Newton polish, :mod:`cutkit.relax.hybrid`); None:
         :data:`cutkit.relax.elastic_tissue.DEFAULT_SOLVER`.  Ignored by the springs.
+    rest_rtol : float or None
+        The hybrid's resting steps' tolerance over the force scale (in (0, 1));
+        None: :data:`cutkit.relax.elastic_tissue.REST_RTOL` (3e-4).  Tighter
+        brings a soft model's wound nearer its equilibrium (docs/relaxation.md,
+        "Measured on an MRI head").
     scalpel : str
         Scalpel force model: ``"paper"`` (section 6, F_enter and cut
         friction) or ``"fracture"`` (the crack advances when the blade pays
@@ -137,6 +142,7 @@ class SimulateOptions:
     write_model: bool = True
     frames: bool = True
     solver: str | None = None
+    rest_rtol: float | None = None
     scalpel: str = "paper"
     element: str = "nh"
     deviatoric_smoothing: float | None = None
@@ -167,6 +173,8 @@ class SimulateOptions:
 
         if self.solver is not None and self.solver not in SOLVERS:
             raise InputError(f"solver must be {', '.join(SOLVERS[:-1])} or {SOLVERS[-1]}, not {self.solver!r}")
+        if self.rest_rtol is not None and not (np.isfinite(self.rest_rtol) and 0.0 < self.rest_rtol < 1.0):
+            raise InputError(f"rest-rtol must lie in (0, 1), got {self.rest_rtol}")
         from cutkit.scalpel import SCALPEL_MODELS
 
         if self.scalpel not in SCALPEL_MODELS:

@@ -27,7 +27,8 @@ def make_tissue(model, store, material_model: str, opt) -> TissuePhysics:
                       volume_stiffness=opt.volume_stiffness)
     from cutkit.relax.elastic_tissue import DEFAULT_SOLVER, ElasticTissue
 
-    return ElasticTissue(model, store, step_s=1.0 / opt.geometry_rate_hz,
+    rest = {} if opt.rest_rtol is None else {"rest_rtol": opt.rest_rtol}
+    return ElasticTissue(model, store, step_s=1.0 / opt.geometry_rate_hz, **rest,
                          solver=opt.solver or ("newton" if opt.element == "anp" else DEFAULT_SOLVER),
                          element=opt.element, deviatoric_smoothing=opt.deviatoric_smoothing)
 
