@@ -5,7 +5,6 @@ from __future__ import annotations
 import numpy as np
 
 from cutkit.cutting.cutmesh import CutMesh
-from cutkit.cutting.rebase import made_by_cut
 
 
 def compact_nodes(tets, n_points):
@@ -77,7 +76,7 @@ def to_model(cm: CutMesh, model=None, points=None, point_data=None):
     pts = (cm.points if points is None else np.asarray(points, np.float64)[:n])[kept]
     # cut-made nodes and tets of every stroke, also those before a rebase
     pd = {"new_node": (kept >= cm.n_model_points).astype(np.uint8)}
-    cd = {"new_tet": made_by_cut(cm, ids).astype(np.uint8)}
+    cd = {"new_tet": cm.store.made_by_cut(ids).astype(np.uint8)}
     labels = cm.labels[origin]
     texcoords = None if cm.texcoords is None else cm.texcoords[kept].copy()
     if model is not None:

@@ -40,11 +40,6 @@ def init_records(cm):
     cm.edge_twins, cm.face_twins = {}, {}  # see find_twins
 
 
-def made_by_cut(cm, ids):
-    """(k,) bool: whether each tet of ``ids`` (k,) int64 (CutMesh numbering) was made by a cut, in any stroke."""
-    return cm.store.made_by_cut(ids)
-
-
 def cut_surface_mask(cm, faces):
     """(k,) bool: which boundary triangles ``faces`` (k, 3) int64 of cut-made tets are cut surface.
 

@@ -140,6 +140,13 @@ class BoundaryConditions:
     prescribed_nodes: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     prescribed_displacement: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.float64))
 
+    def held_mask(self, n_points: int) -> np.ndarray:
+        """(n_points,) bool: the nodes these conditions hold, fixed or prescribed."""
+        mask = np.zeros(int(n_points), bool)
+        mask[np.asarray(self.fixed_nodes, np.int64)] = True
+        mask[np.asarray(self.prescribed_nodes, np.int64)] = True
+        return mask
+
 
 @dataclass
 class Prestress:

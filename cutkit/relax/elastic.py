@@ -461,7 +461,7 @@ def build_element_model(model, *, poisson_ratio=None, element: str = "nh",
     prestrain, fibre = prestress_of_tets(model, model.labels)
     em.add_elements(model.points, model.tets, mat["mu"], mat["lam"], mat["density"], prestrain, fibre)
     em.damping[:] = node_damping(n, model.tets, mat["damping"])
-    em.fixed[:] = fixed_nodes_mask(model)[:, None]
+    em.fixed[:] = model.boundary.held_mask(model.n_points)[:, None]
     em.element = element
     em.deviatoric_smoothing = alpha
     em.recolour()
@@ -475,14 +475,6 @@ def node_damping(n: int, tets, damping) -> np.ndarray:
     s = np.bincount(tets.ravel(), np.repeat(np.asarray(damping, np.float64), 4), minlength=n)
     c = np.bincount(tets.ravel(), minlength=n)
     return np.divide(s, c, out=np.zeros(n), where=c > 0)
-
-
-def fixed_nodes_mask(model) -> np.ndarray:
-    """(n,) bool: nodes the boundary conditions hold (fixed or prescribed)."""
-    mask = np.zeros(model.n_points, bool)
-    mask[np.asarray(model.boundary.fixed_nodes, np.int64)] = True
-    mask[np.asarray(model.boundary.prescribed_nodes, np.int64)] = True
-    return mask
 
 
 def initial_element_state(model) -> ElementState:

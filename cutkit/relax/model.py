@@ -243,15 +243,13 @@ def _prestressed_rest_lengths(model, d, length, vol, tet_edge) -> np.ndarray:
 def _boundary_conditions(bc, n: int) -> tuple[np.ndarray, np.ndarray]:
     """Fixed flags (n,) bool (fixed and prescribed nodes) and prescribed displacements (n, 3)
     float64 of a model's boundary conditions; InputError on a node index outside 0..n-1."""
-    fixed = np.zeros(n, bool)
     presc = np.zeros((n, 3))
     fn = np.asarray(bc.fixed_nodes, np.int64)
     pn = np.asarray(bc.prescribed_nodes, np.int64)
     for name, idx in (("fixed", fn), ("prescribed", pn)):
         if idx.size and (idx.min() < 0 or idx.max() >= n):
             raise InputError(f"{name} node index outside 0..{n - 1}")
-    fixed[fn] = True
-    fixed[pn] = True
+    fixed = bc.held_mask(n)
     presc[pn] = np.asarray(bc.prescribed_displacement, np.float64).reshape(-1, 3)
     return fixed, presc
 

@@ -36,7 +36,6 @@ class FrameRecorder:
     def show(self, t: float) -> None:
         """Write the tissue and its cut surface at time ``t``."""
         from cutkit.cutting import compact_nodes, cut_surface_faces
-        from cutkit.cutting.rebase import made_by_cut
 
         s = self.session
         t1 = time.perf_counter()
@@ -50,7 +49,7 @@ class FrameRecorder:
             positions = tis.positions.copy()
             labels = cm.labels[cm.tet_origins[ids]].astype(np.int32)
             surf_faces = cut_surface_faces(cm)
-            made = made_by_cut(cm, ids)  # in any stroke
+            made = cm.store.made_by_cut(ids)  # in any stroke
         if rgb is not None:
             pd["texture_rgb"] = rgb
         cd = {"label": labels, "new_tet": made.astype(np.uint8)}

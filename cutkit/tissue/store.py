@@ -145,10 +145,8 @@ class TissueStore:
     def from_model(cls, model) -> TissueStore:
         """The store of a :class:`~cutkit.model.tetmodel.TetModel` (rest = cut configuration; held: the
         nodes its boundary conditions fix or prescribe)."""
-        held = np.zeros(len(model.points), bool)
-        held[np.asarray(model.boundary.fixed_nodes, np.int64)] = True
-        held[np.asarray(model.boundary.prescribed_nodes, np.int64)] = True
-        return cls(model.points, model.tets, texcoords=model.texcoords, labels=model.labels, held=held)
+        return cls(model.points, model.tets, texcoords=model.texcoords, labels=model.labels,
+                   held=model.boundary.held_mask(len(model.points)))
 
     def _set_original(self, points, rest_points, texcoords, tets, labels, held) -> None:
         """Make ``tets`` the original tets over the nodes ``points`` (every node an original one)."""
