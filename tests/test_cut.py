@@ -2,7 +2,7 @@
 
 import numpy as np
 import pytest
-from hypothesis import given, settings, strategies as st, HealthCheck
+from hypothesis import example, given, settings, strategies as st, HealthCheck
 
 from _twins_cut import boundary_edges_ok, components, hanging_nodes, volumes
 from cutkit.cutting import CutMesh, cut_step, find_trajectory_tetra, to_model
@@ -223,6 +223,11 @@ def test_bad_pose_message():
 @given(st.booleans(), st.lists(st.tuples(st.floats(-0.5, 4.5), st.floats(0.2, 2.8), st.floats(-0.5, 3.5),
                           st.floats(-0.4, 0.4), st.floats(-0.4, 0.4), st.sampled_from([-1.0, 1.0])),
                 min_size=2, max_size=8))
+# a crumb cut loose, then a notch node it shares with live tets moved by the next step: the crumb's
+# volume must follow its nodes (measured when it was removed, 0.0089 mm^3 went missing)
+@example(False, [(0.0, 1.0, 0.0, 0.0, 0.0, -1.0)] * 3 + [(4.5, 1.0, 2.0, 0.0, 0.09375, 1.0),
+         (0.0, 2.5, 0.0, 0.0, 0.0, -1.0), (0.0, 0.5, 0.0, 0.0, 0.0, -1.0), (4.0, 1.0, 0.0, 0.0, 0.0, -1.0),
+         (4.0, 1.0, 1.0, 0.0, 0.0, -1.0)])
 def test_random_paths(centre, path):
     p, t = box_mesh((4, 3, 3))
     v0 = volumes(p, t).sum()

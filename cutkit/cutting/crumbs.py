@@ -34,7 +34,7 @@ def init_crumbs(cm):
     cm.sub_count = np.zeros(m0, np.int64)
     # a rebase overwrites it with the volume as loaded; one kernel pass (a stacked det took 85 ms on the knee)
     cm.model_volume = float(tet_volumes6(np.ascontiguousarray(cm._X[:n0]), cm.orig_tets).sum() / 6.0)
-    cm.crumb_tets = {}  # tet id -> rest volume, for crumb tets of this cut state
+    cm.crumb_tets = set()  # tet ids of the crumbs of this cut state (dead)
     cm.crumb_volume_before = 0.0  # crumbs removed before the last rebase, mm^3
     cm.crumb_mark = np.zeros(m0, np.int64)  # per-tet marks of the crumb search (see loose_small_pieces)
     cm.crumb_stamp = 0
@@ -42,8 +42,16 @@ def init_crumbs(cm):
 
 
 def crumb_volume(cm) -> float:
-    """Rest volume removed as crumbs so far, over every stroke, mm^3."""
-    return cm.crumb_volume_before + float(sum(cm.crumb_tets.values()))
+    """Rest volume removed as crumbs so far, over every stroke, mm^3.
+
+    The crumbs of this cut state are measured at their nodes' rest positions
+    now, not when they were removed: a crumb shares cut nodes (a notch node
+    F, a tip node T) with live tets, and those follow the blade in later
+    steps, moving volume between the crumb and the live tets around it.
+    """
+    ids = np.fromiter(cm.crumb_tets, np.int64, len(cm.crumb_tets))
+    now = float(_volumes(cm._X, cm._tets[ids]).sum()) if ids.size else 0.0
+    return cm.crumb_volume_before + now
 
 
 def remove_crumbs(cm, seeds) -> int:
@@ -74,9 +82,8 @@ def remove_crumbs(cm, seeds) -> int:
                                            cm.crumb_stamp)
     if not n_pieces:
         return 0
-    vols = _volumes(cm._X, cm._tets[dead])
     cm.remove_tets(dead)
-    cm.crumb_tets.update(zip(dead.tolist(), vols.tolist()))
+    cm.crumb_tets.update(dead.tolist())
     cm.crumb_count += int(n_pieces)
     return int(n_pieces)
 
@@ -90,7 +97,7 @@ def forget_crumb_tets(cm, ids) -> list:
     live = [t for t in ids if cm._alive[t]]
     if len(live) != len(ids):
         for t in ids:
-            cm.crumb_tets.pop(t, None)
+            cm.crumb_tets.discard(t)
     return live
 
 
