@@ -81,6 +81,17 @@ REST_CG_RTOL = 0.03
 #: core, where a Newton iteration costs 0.5-0.7 s; the wound a blade has left needs Newton and pays
 #: the sweeps for nothing (:func:`~cutkit.relax.newton.rest_step`).
 REST_SWEEPS = 5
+#: The Hessian of a resting step's Newton iterations (:data:`~cutkit.relax.newton.HESSIANS`): the exact
+#: one, and the projected one only where conjugate gradients meet negative curvature.  The wound's
+#: gaping bends the flaps, whose curvature the projection drops: on a live knee's first resting step
+#: after the stroke (replayed on one idle core) the exact Hessian took 2 Newton iterations (210 CG
+#: iterations, 0.72-0.93 s), the projected one 3 (249, 1.31-1.38 s) (docs/relaxation.md,
+#: "Resting steps").
+REST_HESSIAN = "auto"
+#: The Hessian of a whole-model finish (:meth:`ElasticTissue._finish`).  Finishes are rare (none on the
+#: demo knee, 10 of 176 steps of the MRI head of docs/relaxation.md), and there the exact Hessian first
+#: changed nothing measurable (the head's relaxation 25.5 s against 26.0 s, one run each).
+FINISH_HESSIAN = "projected"
 #: ``relax_steps`` counts the steps that ended with a tet below this volume ratio J (the issue's
 #: bound of a tet left crushed; the barrier acts below BARRIER_J = 0.1).
 CRUSHED_J = 1e-3
@@ -289,7 +300,7 @@ class ElasticTissue(TissueBase):
         #: the element model's matrix pattern, kept across cuts and shared by its Newton solvers
         self.hessian_pattern = HessianPattern(self.em)
         self._newton = self._newton_solver()
-        self._rest_newton = None  # the hybrid's resting steps' solver, built on first use
+        self._whole_newton: dict = {}  # the hybrid's whole-model solvers by Hessian, built on first use
         self._last_load: np.ndarray | None = None
         self._cut_since_step = False  # tets or nodes added or removed since the last step
         self.resting_in_balance = False  # the last step rested within the rest tolerance (at_rest)
@@ -478,7 +489,7 @@ class ElasticTissue(TissueBase):
                 self.hessian_pattern.get(stop)
             return SolveInfo(0, res, res, True, 0), res, 0
         info, swept = rest_step(self.em, self.state, self.step_s, f_ext, atol=atol, sweeps=REST_SWEEPS,
-                                max_iterations=NEWTON_STEP_MAX_ITERATIONS, solver=self._whole_model_newton(),
+                                max_iterations=NEWTON_STEP_MAX_ITERATIONS, solver=self._whole_model_newton(REST_HESSIAN),
                                 stop=stop)
         if not info.taken:
             return info, 0.0, 0
@@ -548,7 +559,8 @@ class ElasticTissue(TissueBase):
         from cutkit.relax.vbd import SolveInfo
 
         p = finish_step(self.em, self.state, x0, v0, self.step_s, f_ext, atol=atol,
-                        max_iterations=NEWTON_STEP_MAX_ITERATIONS, solver=self._whole_model_newton(), stop=stop)
+                        max_iterations=NEWTON_STEP_MAX_ITERATIONS, solver=self._whole_model_newton(FINISH_HESSIAN),
+                        stop=stop)
         if not p.taken:
             return info, info.residual, 0
         self.counts["whole_model_finishes"] += 1
@@ -557,14 +569,16 @@ class ElasticTissue(TissueBase):
         res = self._free_norm(r)
         return SolveInfo(info.iterations, info.initial_residual, res, res <= atol, info.node_updates), res, p.iterations
 
-    def _whole_model_newton(self):
-        """The hybrid's whole-model projected Newton (resting steps and finishes), built on first use."""
+    def _whole_model_newton(self, hessian: str):
+        """The hybrid's whole-model Newton with ``hessian`` (resting steps: :data:`REST_HESSIAN`,
+        finishes: :data:`FINISH_HESSIAN`), built on first use; both share the matrix pattern."""
         from cutkit.relax.newton import NewtonSolver
 
-        if self._rest_newton is None:
-            self._rest_newton = NewtonSolver(self.em, hessian="projected", cg_rtol=REST_CG_RTOL,
-                                             pattern=self.hessian_pattern)
-        return self._rest_newton
+        solver = self._whole_newton.get(hessian)
+        if solver is None:
+            solver = self._whole_newton[hessian] = NewtonSolver(self.em, hessian=hessian, cg_rtol=REST_CG_RTOL,
+                                                                pattern=self.hessian_pattern)
+        return solver
 
     def _true_residual(self, x0: np.ndarray, v0: np.ndarray, f_ext: np.ndarray) -> float:
         """N: the norm over all free dofs of the backward Euler residual of the step just made from
@@ -700,7 +714,7 @@ class ElasticTissue(TissueBase):
         if self._newton is not None:
             self._newton.reset()  # nodes and elements changed: the matrix pattern is updated
         self.hessian_pattern.changed()
-        self._rest_newton = None
+        self._whole_newton = {}
         # a step that only moved the nodes that follow the blade (a still blade re-places them
         # every step) cut nothing: the next step may rest
         self._cut_since_step |= bool(n_new > n_old or added.size or removed.size)
@@ -917,5 +931,5 @@ class ElasticTissue(TissueBase):
         self.em = em
         self.hessian_pattern = HessianPattern(em)  # the nodes are numbered afresh: built in full
         self._newton = self._newton_solver()
-        self._rest_newton = None
+        self._whole_newton = {}
         self._last_load = None  # numbered as before the rebase: the next step does not rest
