@@ -88,6 +88,42 @@ def _p2_problem(L, cells, E, nu):
     return mesh, basis, skfem.asm(linear_elasticity(*lame_parameters(E, nu)), basis)
 
 
+def p2_composite_block_sag(L, cells, E, nu, traction, split, factor):
+    """Quadratic-tet (P2) block of two materials bonded to z = 0, the part x > ``split`` ``factor``
+    times stiffer (both Lame constants), under a uniform traction (0, 0, traction) on the soft part's
+    top (z = L[2], x < split) (linear elasticity, scikit-fem): the load's work-conjugate deflection
+    there, (1 / A) int u_z dA, mm."""
+    import skfem
+    from skfem.helpers import ddot, eye, sym_grad, trace
+    from skfem.models.elasticity import lame_parameters
+
+    lam, mu = lame_parameters(E, nu)
+    axes = [np.linspace(0.0, L[c], int(cells[c]) + 1) for c in range(3)]
+    mesh = skfem.MeshTet.init_tensor(*axes)
+    basis = skfem.Basis(mesh, skfem.ElementVector(skfem.ElementTetP2()))
+
+    @skfem.BilinearForm
+    def stiffness(u, v, w):
+        scale = np.where(w.x[0] > split, factor, 1.0)  # quadrature points lie inside the elements
+        eu = sym_grad(u)
+        return scale * ddot(2.0 * mu * eu + lam * eye(trace(eu), 3), sym_grad(v))
+
+    @skfem.LinearForm
+    def load(v, w):
+        return traction * v[2]
+
+    @skfem.Functional
+    def uz(w):
+        return w["u"][2]
+
+    top = mesh.facets_satisfying(lambda x: np.isclose(x[2], L[2]) & (x[0] < split))
+    fb = skfem.FacetBasis(mesh, basis.elem, facets=top)
+    K = skfem.asm(stiffness, basis)
+    D = basis.get_dofs(lambda x: np.isclose(x[2], 0.0)).all()
+    u = skfem.solve(*skfem.condense(K, skfem.asm(load, fb), D=D), solver=_cholesky)
+    return float(uz.assemble(fb, u=fb.interpolate(u))) / (split * L[1])
+
+
 def _cholesky(A, b):
     """x with A x = b for the symmetric positive definite sparse A (cholespy): the condensed P2
     systems are too large for a general sparse LU on a few cores."""

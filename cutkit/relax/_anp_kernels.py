@@ -6,8 +6,8 @@ The stored energy is split into a part per element and a volumetric part per nod
     W = sum_e V_e (psi_dev(F_e) + b(J_e)) + sum_a kv_a / 2 (J_a - 1)^2
     psi_dev = mu/2 (tr F^T F - 3) - mu (J - 1) + mu/6 (J - 1)^2
 
-with J_a = v_a / V_a the nodal volume ratio (v_a, V_a: the shares w_ea of the current and
-natural volumes of the tets around node a summed; w_ea = 1/4, or 1/k over a tet's k corners
+with J_a = v_a / V_a the nodal volume ratio of patch a, a node's tets of one material (v_a,
+V_a: the shares w_ea of the current and natural volumes of the patch's tets summed; w_ea = 1/4, or 1/k over a tet's k corners
 not held and 0 on held ones, ``NodalTerms.share``), kv_a the sum over them of w_ea V_e K_e
 (K = lam + 2 mu / 3, the bulk modulus) and b the element barrier of
 :mod:`cutkit.relax._elastic_kernels` (modulus lam + mu, as there).  psi_dev is the stable
@@ -39,16 +39,18 @@ from cutkit.relax._elastic_kernels import barrier
 from cutkit.relax._eigen_kernels import _cofactor
 from cutkit.relax._newton_kernels import _deformation, add_det_hessian, project_hf
 
-#: Per node: natural volume V_a (n,), bulk weight kv_a (n,) (N mm: sum V_e K_e / 4),
-#: the tets around it ``node_ptr`` (n + 1,) int64 / ``node_tets`` (4m,) int64 with their corners
-#: ``node_corner`` (4m,) int64, the shear weight (n,) (N mm: sum V_e mu_e / 4) and the share
-#: alpha (float, 0..1) of the deviatoric energy carried by the nodes' smoothed deformation,
-#: ``share`` (m, 4): the share of each element's volume its corner's nodal volume takes in the
-#: volumetric term (1/4, or 1/k over its k free corners where some are held, 0 on held corners)
-#: and ``pressure_volume`` (n,) = sum share V_e, the V_a of the volumetric term (``bulk`` uses the
-#: same shares).  ``volume`` stays the quarter sums: the smoothed deformation's weights.
+#: Per patch (a node's tets of one material; P >= n patches, patch a < n is node a's first
+#: material's, ``cutkit.relax.anp.material_patches``): natural volume V_a (P,), bulk weight kv_a
+#: (P,) (N mm: sum V_e K_e / 4), the tets of the patch ``node_ptr`` (P + 1,) int64 / ``node_tets``
+#: (4m,) int64 with the patch's corner in each ``node_corner`` (4m,) int64, the shear weight (P,)
+#: (N mm: sum V_e mu_e / 4) and the share alpha (float, 0..1) of the deviatoric energy carried by
+#: the patches' smoothed deformation, ``share`` (m, 4): the share of each element's volume its
+#: corner's nodal volume takes in the volumetric term (1/4, or 1/k over its k free corners where
+#: some are held, 0 on held corners), ``pressure_volume`` (P,) = sum share V_e, the V_a of the
+#: volumetric term (``bulk`` uses the same shares), and ``patch`` (m, 4) int64, the patch of each
+#: element's corner.  ``volume`` stays the quarter sums: the smoothed deformation's weights.
 NodalTerms = namedtuple("NodalTerms", ["volume", "bulk", "node_ptr", "node_tets", "node_corner", "shear",
-                                       "smoothing", "share", "pressure_volume"])
+                                       "smoothing", "share", "pressure_volume", "patch"])
 
 
 @njit(cache=True, nogil=True)
@@ -74,7 +76,7 @@ def nodal_pressures(el, J, nodal, pi):
     for t in range(el.tets.shape[0]):
         q = el.volume[t] * J[t]
         for a in range(4):
-            v[el.tets[t, a]] += nodal.share[t, a] * q
+            v[nodal.patch[t, a]] += nodal.share[t, a] * q
     energy = 0.0
     for a in range(n):
         Va = nodal.pressure_volume[a]
@@ -123,7 +125,7 @@ def _element_pressure(el, nodal, t, pi):
     """p_e = sum_a share_ea pi_a: the mean of the four nodal pressures where no corner is held."""
     p = 0.0
     for a in range(4):
-        p += nodal.share[t, a] * pi[el.tets[t, a]]
+        p += nodal.share[t, a] * pi[nodal.patch[t, a]]
     return p
 
 

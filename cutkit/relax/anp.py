@@ -23,6 +23,8 @@ Liu, Nguyen-Thoi & Lam 2008; the selective node-based smoothed FEM of
 Nguyen-Thoi, Liu et al. 2009): node-based smoothing is as soft as linear tets
 are stiff, and :data:`ANP_SMOOTHING` is the measured blend.
 
+Where materials meet, each keeps its own nodal volume ratio and pressure
+(:func:`material_patches`).
 Everything the nodes need is derived from the element list each time it is
 asked for (:func:`nodal_terms`), so after a cut the duplicated nodes have
 the nodal volumes of the tets that hold them, and the natural (prestrained)
@@ -66,7 +68,11 @@ def active_elements(em) -> KE.Elements:
 
 
 def nodal_terms(em, el: KE.Elements | None = None) -> KP.NodalTerms:
-    """Nodal volumes, bulk weights and the tets around each node, from the active elements.
+    """Volumes, bulk and shear weights and tets of every node's patches, from the active elements.
+
+    A node's patch is the tets around it of one material (equal ``mu`` and ``lam``): where
+    materials meet a node has one patch, one nodal volume ratio and one pressure, per material
+    (:func:`material_patches`).
 
     Parameters
     ----------
@@ -77,28 +83,78 @@ def nodal_terms(em, el: KE.Elements | None = None) -> KP.NodalTerms:
     Returns
     -------
     NodalTerms
-        ``volume`` (n,) mm^3 = sum V_e / 4, ``bulk`` (n,) N mm = sum share V_e K_e with
-        K = lam + 2 mu / 3, the node-to-tet lists of the active tets, ``shear`` (n,) N mm =
-        sum V_e mu_e / 4, ``smoothing`` = ``em.deviatoric_smoothing``, ``share`` (m, 4)
-        (:func:`pressure_shares`) and ``pressure_volume`` (n,) mm^3 = sum share V_e.
+        Per patch (P,) with P >= n (patch a < n is node a's first material's): ``volume`` mm^3
+        = sum V_e / 4, ``bulk`` N mm = sum share V_e K_e with K = lam + 2 mu / 3, the patch-to-tet
+        lists of the active tets, ``shear`` N mm = sum V_e mu_e / 4, ``pressure_volume`` mm^3 =
+        sum share V_e; ``smoothing`` = ``em.deviatoric_smoothing``, ``share`` (m, 4)
+        (:func:`pressure_shares`) and ``patch`` (m, 4) int64, the patch of each corner.
     """
     el = active_elements(em) if el is None else el
     n = em.n_nodes
     live = np.flatnonzero(el.volume > 0.0)
-    corners = el.tets[live].ravel()
+    patch, count = material_patches(el.tets, el.volume, el.mu, el.lam, n)
+    corners = patch[live].ravel()
     quarter = np.repeat(0.25 * el.volume[live], 4)
     share = pressure_shares(el.tets, el.volume, np.asarray(em.fixed, bool).reshape(n, -1).all(axis=1))
     shared = share[live].ravel() * np.repeat(el.volume[live], 4)
     bulk = np.repeat(el.lam[live] + 2.0 * el.mu[live] / 3.0, 4)
     order = np.argsort(corners, kind="stable")
-    ptr = np.zeros(n + 1, np.int64)
-    ptr[1:] = np.cumsum(np.bincount(corners, minlength=n))
+    ptr = np.zeros(count + 1, np.int64)
+    ptr[1:] = np.cumsum(np.bincount(corners, minlength=count))
     shear = np.repeat(el.mu[live], 4)
-    return KP.NodalTerms(np.bincount(corners, quarter, minlength=n), np.bincount(corners, shared * bulk, minlength=n),
+    return KP.NodalTerms(np.bincount(corners, quarter, minlength=count),
+                         np.bincount(corners, shared * bulk, minlength=count),
                          ptr, np.ascontiguousarray(np.repeat(live, 4)[order]),
                          np.ascontiguousarray(np.tile(np.arange(4), live.size)[order]),
-                         np.bincount(corners, quarter * shear, minlength=n), float(em.deviatoric_smoothing),
-                         share, np.bincount(corners, shared, minlength=n))
+                         np.bincount(corners, quarter * shear, minlength=count), float(em.deviatoric_smoothing),
+                         share, np.bincount(corners, shared, minlength=count), patch)
+
+
+def material_patches(tets, volume, mu, lam, n: int) -> tuple[np.ndarray, int]:
+    """The patch of every element corner: its node and its element's material (``mu``, ``lam``).
+
+    Averaging the volume (and the smoothed deformation) over every tet around a node ties the
+    materials that meet there: on the demo knee, bone (E 17 GPa) and fat (3 kPa) share nodes,
+    and one nodal pressure for both gives the fat tets the bone's bulk weight; a static Newton
+    solve of the cut knee then did not converge in 100 iterations (residual 6,600 N against a
+    force scale of 28 N), where with the bone at 1 MPa it took 3 (benchmarks/anp_knee.py).  The
+    pressure is discontinuous across a material interface, so each material keeps its own patch.
+
+    Parameters
+    ----------
+    tets : (m, 4) int64
+    volume : (m,) float64
+        0: inactive (its corners get their node's patch; they count nowhere).
+    mu, lam : (m,) float64
+    n : int
+        Nodes.
+
+    Returns
+    -------
+    patch : (m, 4) int64
+        Node a's patch of its material with the smallest (mu, lam) is a; further materials at a
+        node get patches n, n + 1, ... in the order of (node, material).
+    count : int
+        Patches, >= n.
+    """
+    tets = np.asarray(tets, np.int64)
+    live = np.flatnonzero(np.asarray(volume) > 0.0)
+    patch = tets.copy()
+    if live.size == 0:
+        return patch, n
+    _, material = np.unique(np.stack([mu[live], lam[live]], axis=1), axis=0, return_inverse=True)
+    material = material.ravel()
+    kinds = int(material.max()) + 1
+    key = tets[live] * kinds + material[:, None]
+    pairs, inverse = np.unique(key.ravel(), return_inverse=True)
+    node = pairs // kinds
+    first = np.ones(pairs.size, bool)
+    first[1:] = node[1:] != node[:-1]
+    ids = np.empty(pairs.size, np.int64)
+    ids[first] = node[first]
+    ids[~first] = n + np.arange(np.count_nonzero(~first))
+    patch[live] = ids[inverse.ravel()].reshape(-1, 4)
+    return patch, n + int(np.count_nonzero(~first))
 
 
 def pressure_shares(tets, volume, held) -> np.ndarray:
