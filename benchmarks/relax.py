@@ -162,7 +162,7 @@ def knee_simulate(model, paths: int = KNEE_PATHS) -> dict:
 def knee_solvers(model, solvers=("newton", "vbd"), hold_s: float = 1.0, rtol: float = 1e-3,
                  cap_s: float = 600.0, trajectory=None, repeat: int = 1, to_residual: bool = True,
                  static: bool = False, lift: bool = False, static_rtol: float = 1e-5,
-                 rest_rtol: float | None = None) -> dict:
+                 rest_rtol: float | None = None, from_closed: bool = False) -> dict:
     """The demo incision with each element solver (``SimulateOptions.solver``) and a ``hold_s`` hold:
     steps not converged, worst step residual, simulated/wall, the final out-of-balance force over
     the force scale, the opening; then, on the cut model the first solver left, the wall time each
@@ -179,8 +179,7 @@ def knee_solvers(model, solvers=("newton", "vbd"), hold_s: float = 1.0, rtol: fl
     from cutkit.cutting.trajectory import read_trajectory
     from cutkit.io.model_h5 import read_model
     from cutkit.relax.elastic import build_element_model
-    from cutkit.relax.newton import NewtonSolver, newton_static
-    from cutkit.relax.vbd import elastic_forces, iterate, _node_terms
+    from cutkit.relax.vbd import elastic_forces
     from cutkit.simulate import SimulateOptions, simulate
     from cutkit.demo import demo_inputs
 
@@ -219,10 +218,57 @@ def knee_solvers(model, solvers=("newton", "vbd"), hold_s: float = 1.0, rtol: fl
         if static:
             out[key]["static"] = static_reference(em, cm.points, x, static_rtol * rs["force_scale_N"])
         if cut is None:
-            cut = (em, x, rs["force_scale_N"])
+            cut = (em, x, rs["force_scale_N"], cm)
     if not to_residual:
         return out
-    em, x0, scale = cut
+    em, x0, scale, cut_model = cut
+    out["to_residual"] = _to_residual(em, x0, scale, rtol, cap_s)
+    if from_closed:
+        out["to_residual_from_closed"] = _to_residual(em, closed_wound(model, cut_model), scale, rtol, cap_s)
+    return out
+
+
+def closed_wound(model, cut_model) -> np.ndarray:
+    """(n, 3) float64: the cut model's nodes where the settled, uncut ``model`` has their rest points
+    (its settle, as ``simulate`` makes it, cached): the wound closed, every cut-made tet the affine image
+    of its rest shape inside its original tet, so no tet is inverted and the whole opening is left to
+    solve.  Each node's rest point is found among the original tets (those of the 64 nearest centroids)."""
+    from scipy.spatial import cKDTree
+
+    from cutkit.simulate import SimulateOptions
+    from cutkit.simulate.session import settle
+    from cutkit.simulate.tissues import make_tissue
+
+    opt = SimulateOptions()
+    tis = make_tissue(model, None, "neohookean", opt)
+    settle(tis, "neohookean", opt, [])
+    settled, rest, tets = tis.positions[: model.n_points], model.points, model.tets
+    x = np.empty_like(cut_model.points)
+    dist, same = cKDTree(rest).query(cut_model.points)
+    exact = dist <= 1e-9 * float(np.ptp(rest))  # an original node (or a copy of one)
+    x[exact] = settled[same[exact]]
+    q = cut_model.points[~exact]
+    corners = rest[tets]
+    _, near = cKDTree(corners.mean(axis=1)).query(q, k=64)
+    c = corners[near]  # (m, 64, 4, 3)
+    T = np.einsum("nkij->nkji", c[:, :, 1:] - c[:, :, :1])  # (m, 64, 3, 3): edge vectors as columns
+    lam = np.linalg.solve(T, (q[:, None, :] - c[:, :, 0])[..., None])[..., 0]
+    bary = np.concatenate([1.0 - lam.sum(-1, keepdims=True), lam], axis=-1)  # (m, 64, 4)
+    best = np.argmax(bary.min(-1), axis=1)
+    rows = np.arange(q.shape[0])
+    b = bary[rows, best]
+    if b.size and b.min() < -1e-6:
+        raise RuntimeError(f"a node's rest point lies outside every original tet near it ({b.min():.2e})")
+    x[~exact] = np.einsum("nk,nkj->nj", b, settled[tets[near[rows, best]]])
+    return x
+
+
+def _to_residual(em, x0: np.ndarray, scale: float, rtol: float, cap_s: float) -> dict:
+    """Wall time of a static Newton solve and of Chebyshev-accelerated vertex block descent from x0 (n, 3)
+    to ``rtol`` of the force scale (N), the sweeps stopped after ``cap_s``."""
+    from cutkit.relax.newton import NewtonSolver, newton_static
+    from cutkit.relax.vbd import _node_terms, elastic_forces, iterate
+
     free = ~em.fixed & (em.adj_degree > 0)[:, None]
     atol = rtol * scale
     to = {"rtol": rtol, "start_relative": float(np.linalg.norm(elastic_forces(em, x0)[free]) / scale)}
@@ -242,8 +288,8 @@ def knee_solvers(model, solvers=("newton", "vbd"), hold_s: float = 1.0, rtol: fl
             break
     to["vbd_chebyshev"] = {"wall_s": time.perf_counter() - t0, "sweeps": sweeps, "converged": bool(info.converged),
                            "relative": float(np.linalg.norm(elastic_forces(em, x)[free]) / scale)}
-    out["to_residual"] = to
-    return out
+    to["vbd_over_newton"] = to["vbd_chebyshev"]["wall_s"] / to["newton"]["wall_s"]
+    return to
 
 
 def static_reference(em, X, x, atol: float) -> dict:
@@ -388,6 +434,13 @@ def main(argv=None):
                     help="with --solvers: draw the blade out before the hold (a hold without load)")
     ap.add_argument("--static-rtol", type=float, default=1e-5,
                     help="with --static: the static solve's residual over the force scale")
+    ap.add_argument("--vbd-cap", type=float, default=600.0,
+                    help="with --solvers: seconds the sweeps of to_residual may take (then not converged)")
+    ap.add_argument("--to-rtol", type=float, default=1e-3,
+                    help="with --solvers: the force-scale fraction of to_residual (default 1e-3)")
+    ap.add_argument("--from-closed", action="store_true",
+                    help="with --solvers: also bring the cut knee to 1e-3 from its wound closed "
+                         "(to_residual_from_closed: the settled uncut knee at the cut nodes' rest points)")
     ap.add_argument("--no-to-residual", action="store_true",
                     help="with --solvers: leave out the static solves of the cut knee to 1e-3 (to_residual)")
     ap.add_argument("--slab-solvers", action="store_true",
@@ -415,7 +468,9 @@ def main(argv=None):
             out["knee"] = {"solvers": knee_solvers(read_model(args.knee_simulate), tuple(args.solvers.split(",")),
                                                    hold_s=args.hold, repeat=args.repeat, trajectory=traj,
                                                    to_residual=not args.no_to_residual, static=args.static,
-                                                   lift=args.lift, static_rtol=args.static_rtol)}
+                                                   lift=args.lift, static_rtol=args.static_rtol,
+                                                   from_closed=args.from_closed, rtol=args.to_rtol,
+                                                   cap_s=args.vbd_cap)}
             return _print(out, args.json)
         out["knee"] = {"simulate": knee_simulate(read_model(args.knee_simulate), args.knee_paths)}
         return _print(out, args.json)
