@@ -286,7 +286,9 @@ def rest_to_balance(relax: dict, steps_of_tissues: list, stroke_end: float | Non
     """After the hand's last stroke ended (``stroke_end``, session seconds; ``perf_at_zero`` the
     perf_counter at session time 0), the wall seconds until a relaxation step begun after that
     moment (so made with the load the blade's leaving left) ends within ``within`` of the force
-    scale (the rest tolerance) and within 1e-3 (``wall_s_within_1e-3``), and the residual then;
+    scale (the first resting step's tolerance, ``rest_first_rtol``), within 1e-3
+    (``wall_s_within_1e-3``) and within the rest tolerance the resting steps after it go on to
+    (``wall_s_within_rest_rtol``), and the residual then;
     ``wall_s_tissue_time``: until a step that also simulates the tissue past the stroke's end does
     (the relaxation runs behind the clock while the blade cuts; its steps are then made with the
     newest load, so they bring the picture to rest before its clock has caught up).  None without
@@ -297,7 +299,7 @@ def rest_to_balance(relax: dict, steps_of_tissues: list, stroke_end: float | Non
     steps = next((w for w in steps_of_tissues if len(w) == len(rel)), None)
     if steps is None or not rel or stroke_end is None:
         return None
-    within = relax.get("rest_rtol") or 1e-3
+    within = relax.get("rest_first_rtol") or relax.get("rest_rtol") or 1e-3
     end_wall = perf_at_zero + stroke_end
 
     def first(bound, tissue_time=False):
@@ -313,6 +315,8 @@ def rest_to_balance(relax: dict, steps_of_tissues: list, stroke_end: float | Non
     done = first(within)
     return {"within": within, "stroke_end_s": stroke_end, "wall_s": wall(done),
             "wall_s_within_1e-3": wall(first(1e-3)), "wall_s_tissue_time": wall(first(within, True)),
+            "rest_rtol": relax.get("rest_rtol"),
+            "wall_s_within_rest_rtol": wall(first(relax.get("rest_rtol") or within)),
             "residual_then": None if done is None else rel[done], "final_residual": rel[-1]}
 
 

@@ -434,6 +434,8 @@ def main(argv=None):
                     help="with --solvers: draw the blade out before the hold (a hold without load)")
     ap.add_argument("--static-rtol", type=float, default=1e-5,
                     help="with --static: the static solve's residual over the force scale")
+    ap.add_argument("--rest-rtol", type=float, default=None,
+                    help="with --solvers: the resting steps' tolerance (simulate --rest-rtol; default the runtime's)")
     ap.add_argument("--vbd-cap", type=float, default=600.0,
                     help="with --solvers: seconds the sweeps of to_residual may take (then not converged)")
     ap.add_argument("--to-rtol", type=float, default=1e-3,
@@ -456,7 +458,8 @@ def main(argv=None):
         if asked:
             names = tuple(args.solvers.split(",")) if args.solvers else ("newton", "vbd")
             out[key] = {"solvers": solve(args.hold, names, repeat=args.repeat, to_residual=not args.no_to_residual,
-                                         static=args.static, lift=args.lift, static_rtol=args.static_rtol)}
+                                         static=args.static, lift=args.lift, static_rtol=args.static_rtol,
+                                         rest_rtol=args.rest_rtol)}
             return _print(out, args.json)
     if args.knee_simulate:
         from cutkit.io.model_h5 import read_model
@@ -470,6 +473,7 @@ def main(argv=None):
                                                    to_residual=not args.no_to_residual, static=args.static,
                                                    lift=args.lift, static_rtol=args.static_rtol,
                                                    from_closed=args.from_closed, rtol=args.to_rtol,
+                                                   rest_rtol=args.rest_rtol,
                                                    cap_s=args.vbd_cap)}
             return _print(out, args.json)
         out["knee"] = {"simulate": knee_simulate(read_model(args.knee_simulate), args.knee_paths)}

@@ -217,13 +217,45 @@ def test_the_polish_residual_kept_row_by_row_equals_the_whole_models():
     np.testing.assert_allclose(r, full, rtol=0, atol=1e-12 * np.abs(full).max())
 
 
-def test_a_resting_step_is_the_backward_euler_step_of_a_reference_minimiser():
+def test_resting_steps_go_on_to_the_rest_tolerance_once_the_blade_has_left(monkeypatch):
+    """Resting steps under a load (the blade's) and the first one after a step that did not rest are
+    solved to REST_FIRST_RTOL of the force scale; the resting steps of an unloaded tissue after that
+    go on to the rest tolerance."""
+    import cutkit.relax.newton as newton
+    from cutkit.relax.elastic_tissue import REST_FIRST_RTOL
+    from cutkit.relax.vbd import DEFAULT_ATOL_N
+
+    asked = []
+    solve = newton.rest_step
+
+    def recorded(*args, **kw):
+        asked.append(kw["atol"])
+        return solve(*args, **kw)
+
+    monkeypatch.setattr(newton, "rest_step", recorded)
+    hyb, f = pressed("hybrid", 0.1, rest_rtol=1e-9)
+    scale, none = hyb.force_scale, np.zeros_like(f)
+    for k, load in enumerate([f, f, f, none, none], start=1):  # the load taken off at the fourth step
+        hyb.advance(load, k * H)
+    x0, v0 = hyb.positions.copy(), hyb.velocities.copy()
+    hyb.advance(none, 6 * H)
+    loose, tight = REST_FIRST_RTOL * scale, max(1e-9 * scale, DEFAULT_ATOL_N)
+    assert asked == pytest.approx([loose, loose, loose, tight], rel=1e-15)
+    assert true_residual(hyb.em, hyb.positions, x0, v0, none) <= DEFAULT_ATOL_N
+    assert hyb.relax_report()["resting"] == [False, True, True, False, True, True]
+    assert hyb.relax_report()["rest_first_rtol"] == REST_FIRST_RTOL
+
+
+def test_a_resting_step_is_the_backward_euler_step_of_a_reference_minimiser(monkeypatch):
     """Under a load that stays, every step after the first rests: a few whole-model sweeps, then Newton
     on the whole model; to a tight rest tolerance it is the minimiser scipy finds, no tet inverts.  The step
     stops at the solvers' floor of 1e-7 N (DEFAULT_ATOL_N), which leaves 2.7e-6 mm on this block's
-    softest direction: hence 1e-5 mm (the reference's residual is 4e-13 N)."""
+    softest direction: hence 1e-5 mm (the reference's residual is 4e-13 N).  (The first resting step
+    is asked the rest tolerance itself here: REST_FIRST_RTOL 0.)"""
+    import cutkit.relax.elastic_tissue as ET
     from cutkit.relax.vbd import DEFAULT_ATOL_N
 
+    monkeypatch.setattr(ET, "REST_FIRST_RTOL", 0.0)
     hyb, f = pressed("hybrid", 0.1, rest_rtol=1e-9)
     hyb.advance(f, H)  # the first step: no last load to compare with
     x0, v0 = hyb.positions.copy(), hyb.velocities.copy()

@@ -438,5 +438,5 @@ def test_the_rest_tolerance_is_the_runs_to_choose():
     from cutkit.simulate.tissues import make_tissue
 
     model = slab()
-    assert make_tissue(model, None, "neohookean", SimulateOptions()).rest_rtol == REST_RTOL == 3e-4
-    assert make_tissue(model, None, "neohookean", SimulateOptions(rest_rtol=1e-4)).rest_rtol == 1e-4
+    assert make_tissue(model, None, "neohookean", SimulateOptions()).rest_rtol == REST_RTOL == 1e-4
+    assert make_tissue(model, None, "neohookean", SimulateOptions(rest_rtol=3e-4)).rest_rtol == 3e-4

@@ -68,8 +68,15 @@ NEWTON_REGION_RINGS: int | None = None
 #: sweeps and projected Newton on the whole model (:meth:`ElasticTissue._rest_step`): the wound's
 #: gaping is a soft mode whose force is within the cutting steps' tolerance almost at once, so only
 #: a tighter solve brings it to its equilibrium; at 1e-3 the demo knee's wound ended 0.8 % short of
-#: a static solve's opening, at 3e-4 0.17 % (docs/relaxation.md, "Resting steps").
-REST_RTOL = 3e-4
+#: a static solve's opening, at 3e-4 0.17 %; on an MRI head 3e-4 left it 1.2 % short, 1e-4 0.06 %
+#: (docs/relaxation.md, "Resting steps").
+REST_RTOL = 1e-4
+#: A resting step ends at this fraction of the force scale (or at the rest tolerance, where that is
+#: looser) while the blade loads the tissue, and the first time after the tissue last moved on its
+#: own (a cut, a step that did not rest); the resting steps of an unloaded tissue after it go on to
+#: the rest tolerance.  Going on to 1e-4 while the blade pauses in the tissue cost a live session on
+#: the demo knee its latency (pose to picture p95 47-59 ms against 40-42 ms, docs/live.md).
+REST_FIRST_RTOL = 3e-4
 #: The relative tolerance of a resting step's conjugate gradients (inexact Newton; looser near the
 #: end of a solve, :data:`~cutkit.relax.newton.NO_OVERSOLVE`).  On the demo knee's hold with the
 #: blade drawn out (measured before the blade's load went by mass), 0.03 brought the first resting
@@ -235,8 +242,9 @@ class ElasticTissue(TissueBase):
     rest_rtol : float or None
         ``"hybrid"`` only: the tolerance of a resting step (nothing cut since
         the last step, the last step's load to within this tolerance) as a fraction of :attr:`force_scale`,
-        solved by projected Newton on the whole model; None: resting steps
-        are solved as the others.
+        solved by Newton on the whole model once the blade has left; under the blade's load, and
+        for the first resting step after a cut or a step that did not rest, they end at
+        ``max(rest_rtol, REST_FIRST_RTOL)``.  None: resting steps are solved as the others.
 
     Attributes
     ----------
@@ -304,6 +312,8 @@ class ElasticTissue(TissueBase):
         self._last_load: np.ndarray | None = None
         self._cut_since_step = False  # tets or nodes added or removed since the last step
         self.resting_in_balance = False  # the last step rested within the rest tolerance (at_rest)
+        self._rested_once = False  # a resting step ended within REST_FIRST_RTOL since the tissue last moved
+        self._unloaded = False  # the last step's load (the blade's) was zero
         self.force_scale = self._force_scale()
         # last squared residual of every node and the nodes a cut or a load wakes (vbd.local_step)
         self.r2 = np.zeros(em.n_nodes)
@@ -456,6 +466,7 @@ class ElasticTissue(TissueBase):
         constant to the bit).  The load is kept for the next call."""
         if self.solver != "hybrid" or self.rest_rtol is None:
             return False
+        self._unloaded = not np.any(f_ext)
         last, self._last_load = self._last_load, f_ext.copy()
         if last is None or last.shape != f_ext.shape:
             return False
@@ -464,8 +475,12 @@ class ElasticTissue(TissueBase):
         return float(np.linalg.norm(f_ext - last)) <= self._rest_atol()
 
     def _rest_atol(self) -> float:
-        """N: a resting step's tolerance."""
-        return max(self.rest_rtol * self.force_scale, DEFAULT_ATOL_N)
+        """N: a resting step's tolerance: :data:`REST_FIRST_RTOL` (or the rest tolerance, where
+        looser) of the force scale while loaded or until a resting step has ended there, then the
+        rest tolerance."""
+        tight = self._rested_once and self._unloaded
+        rtol = self.rest_rtol if tight else max(self.rest_rtol, REST_FIRST_RTOL)
+        return max(rtol * self.force_scale, DEFAULT_ATOL_N)
 
     def _rest_step(self, f_ext: np.ndarray, stop):
         """One resting step: projected Newton on the whole model to :attr:`rest_rtol` of the force
@@ -507,12 +522,14 @@ class ElasticTissue(TissueBase):
         if self._resting(f_ext):
             info, true_residual, newton = self._rest_step(f_ext, stop)
             self.resting_in_balance = bool(info.taken and info.converged)
+            self._rested_once |= self.resting_in_balance
             if info.taken:
                 self.counts["newton_iterations"] += newton
                 self.counts["resting_steps"] += 1
                 self.step_log["polish_iterations"].append(int(newton))
                 self.step_log["resting"].append(True)
             return info, true_residual
+        self._rested_once = False
         seeds = np.concatenate([loaded, *self._seeds]) if self._seeds else loaded
         x0, v0 = self.state.positions.copy(), self.state.velocities.copy()
         info = local_step(self.em, self.state, self.step_s, f_ext, self.r2, seeds, atol=atol,
@@ -663,6 +680,7 @@ class ElasticTissue(TissueBase):
                 "polish_calls": int(self.counts["polish_calls"]),
                 "whole_model_finishes": int(self.counts["whole_model_finishes"]),
                 "resting_steps": int(self.counts["resting_steps"]), "rest_rtol": self.rest_rtol,
+                "rest_first_rtol": None if self.rest_rtol is None else max(self.rest_rtol, REST_FIRST_RTOL),
                 "resting": list(self.step_log["resting"]),
                 "polish_s": {k: float(v) for k, v in self.polish_timings.items()}, "polish_iterations": list(its)}
 
@@ -719,6 +737,7 @@ class ElasticTissue(TissueBase):
         # every step) cut nothing: the next step may rest
         self._cut_since_step |= bool(n_new > n_old or added.size or removed.size)
         self.resting_in_balance &= not self._cut_since_step
+        self._rested_once &= not self._cut_since_step
         return {"nodes_added": int(n_new - n_old), "elements_added": int(added.size),
                 "elements_removed": int(removed.size)}
 

@@ -103,10 +103,13 @@ class SimulateOptions:
         finished by a local Newton polish, :mod:`cutkit.relax.hybrid`); None:
         :data:`cutkit.relax.elastic_tissue.DEFAULT_SOLVER`.  Ignored by the springs.
     rest_rtol : float or None
-        The hybrid's resting steps' tolerance over the force scale (in (0, 1));
-        None: :data:`cutkit.relax.elastic_tissue.REST_RTOL` (3e-4).  Tighter
-        brings a soft model's wound nearer its equilibrium (docs/relaxation.md,
-        "Measured on an MRI head").
+        The tolerance over the force scale (in (0, 1)) the hybrid's resting
+        steps bring a tissue at rest to once the blade has left it; under the
+        blade's load, and for the first resting step after a cut, they end at
+        ``max(rest_rtol, REST_FIRST_RTOL)`` (3e-4).  None:
+        :data:`cutkit.relax.elastic_tissue.REST_RTOL` (1e-4).  Tighter brings
+        a soft model's wound nearer its equilibrium (docs/relaxation.md,
+        "Resting steps", "Measured on an MRI head").
     scalpel : str
         Scalpel force model: ``"paper"`` (section 6, F_enter and cut
         friction) or ``"fracture"`` (the crack advances when the blade pays
