@@ -296,15 +296,10 @@ def static_reference(em, X, x, atol: float) -> dict:
     """A static projected Newton solve of the cut model from a run's final state x to ``atol`` N (the
     equilibrium the run's state relaxes to): the mean distance between node copies that coincide at
     rest (X; the cut's duplicated nodes) before and after, mm, and how far the nodes move to it."""
+    from anp_knee import coincident_pairs
     from cutkit.relax.newton import NewtonSolver, newton_static
 
-    _, group, counts = np.unique(X, axis=0, return_inverse=True, return_counts=True)
-    group = group.ravel()
-    pairs = []
-    for g in np.flatnonzero(counts >= 2):
-        nodes = np.flatnonzero(group == g)
-        pairs += [(a, b) for i, a in enumerate(nodes) for b in nodes[i + 1:]]
-    pairs = np.array(pairs, np.int64).reshape(-1, 2)
+    pairs = coincident_pairs(X)
     xs = x.copy()
     t0 = time.perf_counter()
     info = newton_static(em, xs, rtol=0.0, atol=atol, solver=NewtonSolver(em))

@@ -77,14 +77,21 @@ def linear_fem(points, tets, E, nu, fixed, prescribed, loads):
     return np.stack([u[dofs[c]] for c in range(3)], axis=1)
 
 
-def _p2_problem(L, cells, E, nu):
-    """P2 vector basis on a structured tet mesh of the box [0, L] and its linear stiffness (scikit-fem)."""
+def _p2_basis(L, cells):
+    """A structured tet mesh of the box [0, L] and its P2 vector basis (scikit-fem)."""
     import skfem
-    from skfem.models.elasticity import lame_parameters, linear_elasticity
 
     axes = [np.linspace(0.0, L[c], int(cells[c]) + 1) for c in range(3)]
     mesh = skfem.MeshTet.init_tensor(*axes)
-    basis = skfem.Basis(mesh, skfem.ElementVector(skfem.ElementTetP2()))
+    return mesh, skfem.Basis(mesh, skfem.ElementVector(skfem.ElementTetP2()))
+
+
+def _p2_problem(L, cells, E, nu):
+    """:func:`_p2_basis` and its linear stiffness (scikit-fem)."""
+    import skfem
+    from skfem.models.elasticity import lame_parameters, linear_elasticity
+
+    mesh, basis = _p2_basis(L, cells)
     return mesh, basis, skfem.asm(linear_elasticity(*lame_parameters(E, nu)), basis)
 
 
@@ -98,9 +105,7 @@ def p2_composite_block_sag(L, cells, E, nu, traction, split, factor):
     from skfem.models.elasticity import lame_parameters
 
     lam, mu = lame_parameters(E, nu)
-    axes = [np.linspace(0.0, L[c], int(cells[c]) + 1) for c in range(3)]
-    mesh = skfem.MeshTet.init_tensor(*axes)
-    basis = skfem.Basis(mesh, skfem.ElementVector(skfem.ElementTetP2()))
+    mesh, basis = _p2_basis(L, cells)
 
     @skfem.BilinearForm
     def stiffness(u, v, w):
@@ -108,20 +113,9 @@ def p2_composite_block_sag(L, cells, E, nu, traction, split, factor):
         eu = sym_grad(u)
         return scale * ddot(2.0 * mu * eu + lam * eye(trace(eu), 3), sym_grad(v))
 
-    @skfem.LinearForm
-    def load(v, w):
-        return traction * v[2]
-
-    @skfem.Functional
-    def uz(w):
-        return w["u"][2]
-
     top = mesh.facets_satisfying(lambda x: np.isclose(x[2], L[2]) & (x[0] < split))
-    fb = skfem.FacetBasis(mesh, basis.elem, facets=top)
-    K = skfem.asm(stiffness, basis)
-    D = basis.get_dofs(lambda x: np.isclose(x[2], 0.0)).all()
-    u = skfem.solve(*skfem.condense(K, skfem.asm(load, fb), D=D), solver=_cholesky)
-    return float(uz.assemble(fb, u=fb.interpolate(u))) / (split * L[1])
+    held = basis.get_dofs(lambda x: np.isclose(x[2], 0.0)).all()
+    return _traction_sag(basis, skfem.asm(stiffness, basis), top, traction, held, split * L[1])
 
 
 def _cholesky(A, b):
@@ -141,11 +135,19 @@ def p2_cantilever(L, cells, E, nu, traction):
     """Quadratic-tet (P2) cantilever clamped at x = 0 under a uniform traction (0, 0, traction) on
     x = L[0] (linear elasticity, scikit-fem): the load's work-conjugate deflection,
     (1 / A) int_tip u_z dA, mm."""
-    import skfem
 
     mesh, basis, K = _p2_problem(L, cells, E, nu)
     tip = mesh.facets_satisfying(lambda x: np.isclose(x[0], L[0]))
-    fb = skfem.FacetBasis(mesh, basis.elem, facets=tip)
+    held = basis.get_dofs(lambda x: np.isclose(x[0], 0.0)).all()
+    return _traction_sag(basis, K, tip, traction, held, L[1] * L[2])
+
+
+def _traction_sag(basis, K, facets, traction, held, area):
+    """Solve K u = f for a uniform traction (0, 0, traction) on ``facets``, the dofs ``held`` at 0
+    (scikit-fem): the load's work-conjugate deflection (1 / area) int u_z dA, mm."""
+    import skfem
+
+    fb = skfem.FacetBasis(basis.mesh, basis.elem, facets=facets)
 
     @skfem.LinearForm
     def load(v, w):
@@ -155,10 +157,8 @@ def p2_cantilever(L, cells, E, nu, traction):
     def uz(w):
         return w["u"][2]
 
-    f = skfem.asm(load, fb)
-    D = basis.get_dofs(lambda x: np.isclose(x[0], 0.0)).all()
-    u = skfem.solve(*skfem.condense(K, f, D=D), solver=_cholesky)
-    return float(uz.assemble(fb, u=fb.interpolate(u))) / (L[1] * L[2])
+    u = skfem.solve(*skfem.condense(K, skfem.asm(load, fb), D=held), solver=_cholesky)
+    return float(uz.assemble(fb, u=fb.interpolate(u))) / area
 
 
 def p2_block_reaction(L, cells, E, nu, strain):

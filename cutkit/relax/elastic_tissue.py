@@ -68,7 +68,7 @@ NEWTON_REGION_RINGS: int | None = None
 #: sweeps and projected Newton on the whole model (:meth:`ElasticTissue._rest_step`): the wound's
 #: gaping is a soft mode whose force is within the cutting steps' tolerance almost at once, so only
 #: a tighter solve brings it to its equilibrium; at 1e-3 the demo knee's wound ended 0.8 % short of
-#: a static solve's opening, at 3e-4 0.17 %; on an MRI head 3e-4 left it 1.2 % short, 1e-4 0.06 %
+#: a static solve's opening, at 3e-4 0.17 %; on an MRI head 3e-4 left it 1.2 % short, 1e-4 0.07 %
 #: (docs/relaxation.md, "Resting steps").
 REST_RTOL = 1e-4
 #: A resting step ends at this fraction of the force scale (or at the rest tolerance, where that is
@@ -483,10 +483,10 @@ class ElasticTissue(TissueBase):
         return max(rtol * self.force_scale, DEFAULT_ATOL_N)
 
     def _rest_step(self, f_ext: np.ndarray, stop):
-        """One resting step: projected Newton on the whole model to :attr:`rest_rtol` of the force
-        scale (:func:`~cutkit.relax.newton.newton_step`, its pattern kept until the mesh changes);
-        a step already within it ends at once, at rest.  Returns (info, true residual N, Newton
-        iterations)."""
+        """One resting step: a few sweeps and Newton on the whole model (:func:`~cutkit.relax.newton.rest_step`,
+        its pattern kept until the mesh changes) to :meth:`_rest_atol` (:data:`REST_FIRST_RTOL`, then
+        the rest tolerance); a step already within it ends at once, at rest.  Returns (info, true
+        residual N, Newton iterations)."""
         from cutkit.relax.newton import rest_step
         from cutkit.relax.vbd import SolveInfo
 
