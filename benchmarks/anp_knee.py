@@ -36,8 +36,10 @@ def coincident_pairs(X: np.ndarray) -> np.ndarray:
     return np.array(pairs, np.int64).reshape(-1, 2)
 
 
-def equilibrium(cut, element: str, smoothing: float, nu, x0: np.ndarray, atol: float) -> tuple[dict, np.ndarray]:
-    """Static equilibrium of ``cut`` with ``element`` from x0 (n, 3) to ``atol`` N; (report, positions)."""
+def equilibrium(cut, element: str, smoothing: float, nu, x0: np.ndarray, atol: float, pairs: np.ndarray,
+                rest_volume: np.ndarray) -> tuple[dict, np.ndarray]:
+    """Static equilibrium of ``cut`` with ``element`` from x0 (n, 3) to ``atol`` N; (report, positions).
+    ``pairs`` (p, 2) int64: :func:`coincident_pairs` of its rest points; ``rest_volume`` (m,): its tets'."""
     from cutkit.mesh.quality import signed_volumes
     from cutkit.relax.elastic import build_element_model
     from cutkit.relax.newton import NewtonSolver, newton_static
@@ -48,8 +50,7 @@ def equilibrium(cut, element: str, smoothing: float, nu, x0: np.ndarray, atol: f
     t0 = time.perf_counter()
     info = newton_static(em, x, rtol=0.0, atol=atol, max_iterations=100, solver=solver)
     wall = time.perf_counter() - t0
-    J = signed_volumes(x, cut.tets) / signed_volumes(cut.points, cut.tets)
-    pairs = coincident_pairs(cut.points)
+    J = signed_volumes(x, cut.tets) / rest_volume
     gap = np.linalg.norm(x[pairs[:, 0]] - x[pairs[:, 1]], axis=1)
     return {"element": element, "deviatoric_smoothing": em.deviatoric_smoothing, "converged": bool(info.converged),
             "iterations": int(info.iterations), "cg_iterations": int(solver.counts["cg_iterations"]),
@@ -69,6 +70,7 @@ def main(argv=None) -> int:
     a = ap.parse_args(argv)
 
     from cutkit.io.model_h5 import read_model
+    from cutkit.mesh.quality import signed_volumes
     from cutkit.relax.anp import ANP_SMOOTHING, element_forces
     from cutkit.relax.elastic import build_element_model
     from cutkit.threads import configure_threads
@@ -82,8 +84,9 @@ def main(argv=None) -> int:
     out = {"model": a.cut, "tets": int(cut.n_tets), "nodes": int(cut.n_points), "force_scale_N": scale,
            "rtol": a.rtol, "nu": a.nu, "elements": []}
     positions = []
+    pairs, rest_volume = coincident_pairs(cut.points), signed_volumes(cut.points, cut.tets)
     for element, alpha in (("nh", 0.0), ("anp", smoothing)):
-        report, x = equilibrium(cut, element, alpha, a.nu, x0, a.rtol * scale)
+        report, x = equilibrium(cut, element, alpha, a.nu, x0, a.rtol * scale, pairs, rest_volume)
         out["elements"].append(report)
         positions.append(x)
     out["largest_distance_between_equilibria_mm"] = float(np.linalg.norm(positions[0] - positions[1], axis=1).max())

@@ -313,7 +313,6 @@ class ElasticTissue(TissueBase):
         self._cut_since_step = False  # tets or nodes added or removed since the last step
         self.resting_in_balance = False  # the last step rested within the rest tolerance (at_rest)
         self._rested_once = False  # a resting step ended within REST_FIRST_RTOL since the tissue last moved
-        self._unloaded = False  # the last step's load (the blade's) was zero
         self.force_scale = self._force_scale()
         # last squared residual of every node and the nodes a cut or a load wakes (vbd.local_step)
         self.r2 = np.zeros(em.n_nodes)
@@ -466,7 +465,6 @@ class ElasticTissue(TissueBase):
         constant to the bit).  The load is kept for the next call."""
         if self.solver != "hybrid" or self.rest_rtol is None:
             return False
-        self._unloaded = not np.any(f_ext)
         last, self._last_load = self._last_load, f_ext.copy()
         if last is None or last.shape != f_ext.shape:
             return False
@@ -478,9 +476,14 @@ class ElasticTissue(TissueBase):
         """N: a resting step's tolerance: :data:`REST_FIRST_RTOL` (or the rest tolerance, where
         looser) of the force scale while loaded or until a resting step has ended there, then the
         rest tolerance."""
-        tight = self._rested_once and self._unloaded
-        rtol = self.rest_rtol if tight else max(self.rest_rtol, REST_FIRST_RTOL)
+        unloaded = self._last_load is not None and not self._last_load.any()  # the blade has left
+        rtol = self.rest_rtol if self._rested_once and unloaded else self._first_rtol()
         return max(rtol * self.force_scale, DEFAULT_ATOL_N)
+
+    def _first_rtol(self) -> float:
+        """A resting step's first-stage tolerance over the force scale (:data:`REST_FIRST_RTOL`, or the
+        rest tolerance where looser)."""
+        return max(self.rest_rtol, REST_FIRST_RTOL)
 
     def _rest_step(self, f_ext: np.ndarray, stop):
         """One resting step: a few sweeps and Newton on the whole model (:func:`~cutkit.relax.newton.rest_step`,
@@ -680,7 +683,7 @@ class ElasticTissue(TissueBase):
                 "polish_calls": int(self.counts["polish_calls"]),
                 "whole_model_finishes": int(self.counts["whole_model_finishes"]),
                 "resting_steps": int(self.counts["resting_steps"]), "rest_rtol": self.rest_rtol,
-                "rest_first_rtol": None if self.rest_rtol is None else max(self.rest_rtol, REST_FIRST_RTOL),
+                "rest_first_rtol": None if self.rest_rtol is None else self._first_rtol(),
                 "resting": list(self.step_log["resting"]),
                 "polish_s": {k: float(v) for k, v in self.polish_timings.items()}, "polish_iterations": list(its)}
 
