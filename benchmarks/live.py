@@ -286,7 +286,7 @@ def rest_to_balance(relax: dict, steps_of_tissues: list, stroke_end: float | Non
     """After the hand's last stroke ended (``stroke_end``, session seconds; ``perf_at_zero`` the
     perf_counter at session time 0), the wall seconds until a relaxation step begun after that
     moment (so made with the load the blade's leaving left) ends within ``within`` of the force
-    scale (the first resting step's tolerance, ``rest_first_rtol``), within 1e-3
+    scale (the first resting step's tolerance once the blade has left, ``rest_unloaded_first_rtol``), within 1e-3
     (``wall_s_within_1e-3``) and within the rest tolerance the resting steps after it go on to
     (``wall_s_within_rest_rtol``), and the residual then;
     ``wall_s_tissue_time``: until a step that also simulates the tissue past the stroke's end does
@@ -299,7 +299,7 @@ def rest_to_balance(relax: dict, steps_of_tissues: list, stroke_end: float | Non
     steps = next((w for w in steps_of_tissues if len(w) == len(rel)), None)
     if steps is None or not rel or stroke_end is None:
         return None
-    within = relax.get("rest_first_rtol") or relax.get("rest_rtol") or 1e-3
+    within = relax.get("rest_unloaded_first_rtol") or relax.get("rest_rtol") or 1e-3
     end_wall = perf_at_zero + stroke_end
 
     def first(bound, tissue_time=False):

@@ -62,8 +62,8 @@ def solver_option(command):
     return click.option("--solver", type=click.Choice(SOLVER_CHOICES), default=None,
                         help="How the element model's relaxation steps are solved: projected Newton, vertex "
                              "block descent, or vertex block descent with a local Newton polish of a step left "
-                             "unconverged and resting steps solved by Newton to 3e-4 of the force scale (1e-4 "
-                             "once the blade has left) "
+                             "unconverged and resting steps solved by Newton to 3e-4 of the force scale under the "
+                             "blade (1e-3, then 1e-4 once it has left) "
                              f"[default: {SOLVER_DEFAULT}].")(command)
 
 

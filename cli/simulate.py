@@ -31,8 +31,8 @@ from cutkit.cli._ui import overwrite_option, solver_option
 @solver_option
 @click.option("--rest-rtol", type=float, default=None,
               help="The tolerance over the force scale the hybrid's resting steps bring a tissue the blade has "
-                   "left to [default: 1e-4]; under the blade, and first after a cut, they end at 3e-4 (or this, "
-                   "where looser) (docs/relaxation.md, Resting steps).")
+                   "left to [default: 1e-4]; under the blade they end at 3e-4, the first one after the blade left "
+                   "at 1e-3 (each at least this) (docs/relaxation.md, Resting steps).")
 @click.option("--element", type=click.Choice(["nh", "anp"]), default="nh", show_default=True,
               help="The element model's tetrahedron: stable neo-Hookean linear tets (nh) or the average nodal "
                    "pressure tetrahedron (anp), which does not lock near incompressibility; anp is solved by "

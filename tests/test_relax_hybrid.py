@@ -218,11 +218,11 @@ def test_the_polish_residual_kept_row_by_row_equals_the_whole_models():
 
 
 def test_resting_steps_go_on_to_the_rest_tolerance_once_the_blade_has_left(monkeypatch):
-    """Resting steps under a load (the blade's) and the first one after a step that did not rest are
-    solved to REST_FIRST_RTOL of the force scale; the resting steps of an unloaded tissue after that
-    go on to the rest tolerance."""
+    """Resting steps under a load (the blade's) are solved to REST_FIRST_RTOL of the force scale, the
+    first one after the load was taken off (a step that did not rest) to REST_UNLOADED_FIRST_RTOL; the
+    resting steps of an unloaded tissue after that go on to the rest tolerance."""
     import cutkit.relax.newton as newton
-    from cutkit.relax.elastic_tissue import REST_FIRST_RTOL
+    from cutkit.relax.elastic_tissue import REST_FIRST_RTOL, REST_UNLOADED_FIRST_RTOL
     from cutkit.relax.vbd import DEFAULT_ATOL_N
 
     asked = []
@@ -239,11 +239,14 @@ def test_resting_steps_go_on_to_the_rest_tolerance_once_the_blade_has_left(monke
         hyb.advance(load, k * H)
     x0, v0 = hyb.positions.copy(), hyb.velocities.copy()
     hyb.advance(none, 6 * H)
-    loose, tight = REST_FIRST_RTOL * scale, max(1e-9 * scale, DEFAULT_ATOL_N)
-    assert asked == pytest.approx([loose, loose, loose, tight], rel=1e-15)
+    loaded, left = REST_FIRST_RTOL * scale, REST_UNLOADED_FIRST_RTOL * scale
+    tight = max(1e-9 * scale, DEFAULT_ATOL_N)
+    assert asked == pytest.approx([loaded, loaded, left, tight], rel=1e-15)
     assert true_residual(hyb.em, hyb.positions, x0, v0, none) <= DEFAULT_ATOL_N
-    assert hyb.relax_report()["resting"] == [False, True, True, False, True, True]
-    assert hyb.relax_report()["rest_first_rtol"] == REST_FIRST_RTOL
+    rep = hyb.relax_report()
+    assert rep["resting"] == [False, True, True, False, True, True]
+    assert rep["relative_residual"][4] <= REST_UNLOADED_FIRST_RTOL
+    assert (rep["rest_first_rtol"], rep["rest_unloaded_first_rtol"]) == (REST_FIRST_RTOL, REST_UNLOADED_FIRST_RTOL)
 
 
 def test_a_resting_step_is_the_backward_euler_step_of_a_reference_minimiser(monkeypatch):
@@ -369,3 +372,21 @@ def test_the_kept_volume_ratios_report_what_the_whole_pass_reports_at_every_step
     for out, whole, left in seen:
         assert out == whole and left == 0
     assert min(j for (j, _), _, _ in seen) < 1.0  # the cut deforms the tissue: the report is not trivial
+
+
+def test_prepare_resting_builds_the_pattern_the_resting_steps_then_keep():
+    """``prepare_resting`` (a live session calls it before its clock starts) builds the Newton
+    matrix's pattern once; the resting steps after it use that pattern without building it again,
+    and a tissue solved by sweeps alone builds none."""
+    hyb, f = pressed("hybrid", 0.1, rest_rtol=1e-9)
+    assert hyb.hessian_pattern.builds == 0
+    hyb.prepare_resting()
+    assert hyb.hessian_pattern.builds == 1
+    for k in range(1, 4):
+        hyb.advance(f, k * H)
+    assert hyb.relax_report()["resting"] == [False, True, True]
+    assert hyb.relax_report()["polish_iterations"][1] > 0  # a resting step solved by Newton
+    assert (hyb.hessian_pattern.builds, hyb.hessian_pattern.updates) == (1, 0)
+    vbd, _ = pressed("vbd", 0.1)
+    vbd.prepare_resting()
+    assert vbd.hessian_pattern.builds == 0

@@ -149,6 +149,9 @@ class TissueBase:
         """Whether the tissue has come to rest after the blade left (a model that cannot tell: False)."""
         return False
 
+    def prepare_resting(self) -> None:
+        """Nothing to build ahead (a model without resting steps)."""
+
     def node_rings(self, nodes: np.ndarray, rings: int) -> np.ndarray:
         """(j,) int64 ascending: ``nodes`` (k,) int64 grown by ``rings`` rings of live tets (each ring adds
         every node sharing a tet with one found so far)."""

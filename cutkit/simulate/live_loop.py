@@ -173,6 +173,7 @@ class LiveLoop:
         warm_up(outputs=False, material_model=s.material_model)
         if not self.stepped:  # a stepped session's tissue starts where cutkit simulate's does
             s.relax.advance(np.zeros((s.tis.n_nodes, 3)), s.tis.time + chunk)
+        s.tis.prepare_resting()  # the first stroke's wound then comes to rest without building it
         self.t0 = self.clock.now() - s.tis.time
         self._frame(None)  # views build their windows before the clock starts
         self.frame_s.clear()

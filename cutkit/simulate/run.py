@@ -105,8 +105,9 @@ class SimulateOptions:
     rest_rtol : float or None
         The tolerance over the force scale (in (0, 1)) the hybrid's resting
         steps bring a tissue at rest to once the blade has left it; under the
-        blade's load, and for the first resting step after a cut, they end at
-        ``max(rest_rtol, REST_FIRST_RTOL)`` (3e-4).  None:
+        blade's load they end at ``max(rest_rtol, REST_FIRST_RTOL)`` (3e-4),
+        the first one after the blade left at ``max(rest_rtol,
+        REST_UNLOADED_FIRST_RTOL)`` (1e-3).  None:
         :data:`cutkit.relax.elastic_tissue.REST_RTOL` (1e-4).  Tighter brings
         a soft model's wound nearer its equilibrium (docs/relaxation.md,
         "Resting steps", "Measured on an MRI head").

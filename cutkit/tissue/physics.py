@@ -92,6 +92,11 @@ class TissuePhysics(Protocol):
         has none): a live session starts a stroke's rebase then."""
         ...
 
+    def prepare_resting(self) -> None:
+        """Build now what the first resting step would otherwise build on its way (a live session
+        calls it before its clock starts); nothing where the model keeps nothing."""
+        ...
+
     @property
     def masses(self) -> np.ndarray:
         """(n,) float64: each node's lumped mass (0 for a node without tets)."""
