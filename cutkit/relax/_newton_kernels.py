@@ -41,8 +41,9 @@ from cutkit.relax._stop_flag import flag_up
 #: The sparsity pattern of the global matrix: node rows ``node_ptr`` (n + 1,) int64 and their
 #: sorted block columns ``node_idx`` (nb,) int64; each element's 16 blocks ``element_blocks``
 #: (m, 4, 4) int64 (index into node_idx, -1 for an inactive element); the scalar CSR
-#: ``indptr`` (3n + 1,) int64, ``indices`` (9 nb,) int64 and the diagonal's positions
-#: ``diagonal`` (3n,) int64.
+#: ``indptr`` (3n + 1,) and ``indices`` (9 nb,), int32 (scipy's and cholespy's own index type, so
+#: neither copies them; int64 past 2^31 - 1 entries), and the diagonal's positions ``diagonal``
+#: (3n,) int64.
 Pattern = namedtuple("Pattern", ["node_ptr", "node_idx", "element_blocks", "indptr", "indices", "diagonal"])
 
 
@@ -408,14 +409,23 @@ def element_blocks(tets, volume, ptr, idx, halt):
     return out, not flag_up(halt)
 
 
-@njit(cache=True, nogil=True)
 def scalar_pattern(ptr, idx):
-    """Scalar CSR ``indptr`` (3n + 1,), ``indices`` (9 nb,) and diagonal positions (3n,) of the
-    node pattern, columns sorted (see the module's layout)."""
+    """Scalar CSR ``indptr`` (3n + 1,), ``indices`` (9 nb,) (int32 where 9 nb fits, else int64: see
+    :data:`Pattern`) and diagonal positions (3n,) int64 of the node pattern, columns sorted (see
+    the module's layout)."""
     n = ptr.shape[0] - 1
-    indptr = np.zeros(3 * n + 1, np.int64)
-    indices = np.empty(9 * ptr[n], np.int64)
+    entries = 9 * int(ptr[n])
+    index = np.int32 if max(entries, 3 * n) <= np.iinfo(np.int32).max else np.int64
+    indptr, indices = np.zeros(3 * n + 1, index), np.empty(entries, index)
     diagonal = np.empty(3 * n, np.int64)
+    _fill_scalar_pattern(ptr, idx, indptr, indices, diagonal)
+    return indptr, indices, diagonal
+
+
+@njit(cache=True, nogil=True)
+def _fill_scalar_pattern(ptr, idx, indptr, indices, diagonal):
+    """The kernel of :func:`scalar_pattern`: fills ``indptr``, ``indices`` and ``diagonal``."""
+    n = ptr.shape[0] - 1
     for i in range(n):
         deg = ptr[i + 1] - ptr[i]
         for a in range(3):
@@ -428,7 +438,6 @@ def scalar_pattern(ptr, idx):
                     indices[base + 3 * k + b] = 3 * j + b
                 if j == i:
                     diagonal[row] = base + 3 * k + a
-    return indptr, indices, diagonal
 
 
 @njit(cache=True, nogil=True)

@@ -517,8 +517,8 @@ def cholesky_solve(A, b: np.ndarray):
 
     try:
         with _quiet_stderr():  # CHOLMOD reports an indefinite matrix on stderr as well
-            L = cholespy.CholeskySolverD(A.shape[0], A.indptr.astype(np.int32),
-                                         A.indices.astype(np.int32), A.data, cholespy.MatrixType.CSR)
+            L = cholespy.CholeskySolverD(A.shape[0], A.indptr.astype(np.int32, copy=False),
+                                         A.indices.astype(np.int32, copy=False), A.data, cholespy.MatrixType.CSR)
     except ValueError:
         return None
     d = np.zeros_like(b)
