@@ -222,14 +222,15 @@ def test_resting_steps_go_on_to_the_rest_tolerance_once_the_blade_has_left(monke
     step the load is taken off in rests too, solved to REST_UNLOADED_FIRST_RTOL; the resting steps of
     the unloaded tissue after it go on to the rest tolerance."""
     import cutkit.relax.newton as newton
-    from cutkit.relax.elastic_tissue import REST_FIRST_RTOL, REST_UNLOADED_FIRST_RTOL
+    from cutkit.relax.elastic_tissue import REST_FIRST_RTOL, REST_SWEEPS, REST_UNLOADED_FIRST_RTOL
     from cutkit.relax.vbd import DEFAULT_ATOL_N
 
-    asked = []
+    asked, swept = [], []
     solve = newton.rest_step
 
     def recorded(*args, **kw):
         asked.append(kw["atol"])
+        swept.append(kw["sweeps"])
         return solve(*args, **kw)
 
     monkeypatch.setattr(newton, "rest_step", recorded)
@@ -242,6 +243,7 @@ def test_resting_steps_go_on_to_the_rest_tolerance_once_the_blade_has_left(monke
     loaded, left = REST_FIRST_RTOL * scale, REST_UNLOADED_FIRST_RTOL * scale
     tight = max(1e-9 * scale, DEFAULT_ATOL_N)
     assert asked == pytest.approx([loaded, loaded, left, tight, tight], rel=1e-15)
+    assert swept == [REST_SWEEPS, REST_SWEEPS, 0, REST_SWEEPS, REST_SWEEPS]  # none where the blade just left
     assert true_residual(hyb.em, hyb.positions, x0, v0, none) <= DEFAULT_ATOL_N
     rep = hyb.relax_report()
     assert rep["resting"] == [False, True, True, True, True, True]

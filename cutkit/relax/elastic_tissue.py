@@ -80,9 +80,9 @@ REST_FIRST_RTOL = 3e-4
 #: The first resting step of a tissue the blade has left (no load) ends at this fraction of the
 #: force scale (or at the rest tolerance, where looser), the resting steps after it go on to the rest
 #: tolerance: the first one's Newton solve carries the wound's opening (two iterations on the demo
-#: knee whatever it is asked), and asked 1e-3 instead of 3e-4 its last conjugate gradients stop
-#: sooner, so a live wound is within 1e-3 0.1-0.2 s earlier and a live session's rebase, which waits
-#: for a step at rest, starts that much sooner (docs/live.md, "Between strokes").
+#: knee whatever it is asked), and asked 1e-3 instead of 3e-4 its conjugate gradients stop sooner
+#: (the first solve about 115 iterations instead of 195), so a live wound is within 1e-3 sooner and
+#: a live session's rebase, which waits for a step at rest, starts sooner (docs/live.md).
 REST_UNLOADED_FIRST_RTOL = 1e-3
 #: The relative tolerance of a resting step's conjugate gradients (inexact Newton; looser near the
 #: end of a solve, :data:`~cutkit.relax.newton.NO_OVERSOLVE`).  On the demo knee's hold with the
@@ -250,8 +250,8 @@ class ElasticTissue(TissueBase):
         ``"hybrid"`` only: the tolerance of a resting step (nothing cut since
         the last step, the last step's load to within this tolerance) as a fraction of :attr:`force_scale`,
         solved by Newton on the whole model once the blade has left; under the blade's load they
-        end at ``max(rest_rtol, REST_FIRST_RTOL)``, and the first resting step after the blade
-        left (after a cut or a step that did not rest) at ``max(rest_rtol, REST_UNLOADED_FIRST_RTOL)``.
+        end at ``max(rest_rtol, REST_FIRST_RTOL)``, and the first resting step once the blade has
+        left (a step without load rests) at ``max(rest_rtol, REST_UNLOADED_FIRST_RTOL)``.
         None: resting steps are solved as the others.
 
     Attributes
