@@ -114,6 +114,31 @@ def test_assembled_matrix_matches_the_twin(deformed, project):
     assert np.allclose(A.toarray(), At, rtol=1e-9, atol=1e-12 * np.abs(At).max())
 
 
+@pytest.mark.parametrize("project", [0, 1])
+def test_elements_with_every_dof_held_are_left_out_of_the_assembly_and_the_matrix_is_the_same(deformed, project):
+    """The elements none of whose dofs is free (the block's low layer held) write only rows and
+    columns the constraint clears: assembled without them, the matrix is the same to the bit."""
+    from cutkit.relax.newton import reaching_free_dofs
+
+    em, x = deformed
+    n = em.n_nodes
+    free = np.ones((n, 3), bool)
+    free[x[:, 2] < 1.2] = False  # the nodes at z = 0 and z = 1 (displaced by about 0.1 mm)
+    free[np.flatnonzero(~free.any(axis=1))[0], 2] = True  # one of them free along z: its elements stay
+    solver = NewtonSolver(em)
+    el = solver._elements()
+    left_out = (el.volume > 0) & (reaching_free_dofs(el, free).volume == 0)
+    assert 0 < np.count_nonzero(left_out) < np.count_nonzero(el.volume > 0)
+    assert np.all(~free[el.tets[left_out]].any(axis=(1, 2)))  # none of their dofs is free
+    add = np.linspace(1.0, 2.0, n)
+    A = solver.matrix(x, free, add, project)
+    pat = solver.pattern()
+    whole = np.empty(pat.indices.shape[0])
+    KN.assemble_hessian(x, el, pat, project, whole)
+    B = solver._constrained(whole, free, add)
+    assert np.array_equal(A.data, B.data)
+
+
 def test_step_bound_matches_the_twin(deformed):
     em, x = deformed
     rng = np.random.default_rng(5)
