@@ -392,6 +392,39 @@ def test_block_form_products_equal_the_scalar_matrix(deformed):
                                atol=1e-12 * np.abs(M @ p.ravel()).max())
 
 
+def test_the_row_parallel_product_and_cg_are_the_same_bits_as_the_scatter_on_any_thread_count(deformed):
+    """block_product_rows adds each row's terms in block_product's order: the same bits; block_pcg
+    with either product, on one thread or two, gives the same iterations and solution to the bit."""
+    import numba
+
+    from cutkit.relax import _block_cg_kernels as KB
+
+    em, x = deformed
+    A, blocks, inv, solver = _block_system(em, x)
+    n = em.n_nodes
+    rng = np.random.default_rng(11)
+    p = rng.normal(size=(n, 3))
+    y, z = np.empty_like(p), np.empty_like(p)
+    KB.block_product(blocks, p, y)
+    KB.block_product_rows(blocks, p, z)
+    assert np.array_equal(y, z) and np.abs(y).max() > 0
+    b = rng.normal(size=(n, 3))
+    runs = []
+    before = numba.get_num_threads()
+    try:
+        for threads in sorted({1, min(2, numba.config.NUMBA_NUM_THREADS)}):
+            numba.set_num_threads(threads)
+            for rows in (False, True):
+                d = np.empty((n, 3))
+                runs.append((KB.block_pcg(blocks, inv, b, 1e-10, 500, np.zeros(1, np.int64), d, rows), d))
+    finally:
+        numba.set_num_threads(before)
+    (status, its), d0 = runs[0]
+    assert status == KB.CG_DONE and 0 < its < 500
+    for out, d in runs[1:]:
+        assert out == (status, its) and np.array_equal(d, d0)
+
+
 def test_block_cg_equals_the_scalar_twin_and_reads_its_halt_flag(deformed):
     """block_pcg against pcg (NumPy, scipy's products, the same preconditioner): the same
     iterations and solution to rounding; with its flag set it makes no iteration and says so."""
@@ -405,8 +438,8 @@ def test_block_cg_equals_the_scalar_twin_and_reads_its_halt_flag(deformed):
     b[:2] = 0.0
     b[7, 1] = 0.0
     d = np.empty((n, 3))
-    assert KB.block_pcg(blocks, inv, b, 1e-8, 500, np.ones(1, np.int64), d) == (KB.CG_HALTED, 0)
-    status, its = KB.block_pcg(blocks, inv, b, 1e-8, 500, np.zeros(1, np.int64), d)
+    assert KB.block_pcg(blocks, inv, b, 1e-8, 500, np.ones(1, np.int64), d, False) == (KB.CG_HALTED, 0)
+    status, its = KB.block_pcg(blocks, inv, b, 1e-8, 500, np.zeros(1, np.int64), d, False)
     twin, twin_its = pcg(A, b.ravel(), node_block_inverse(A, solver.pattern()), 1e-8, 500)
     assert status == KB.CG_DONE and its == twin_its and 0 < its < 500
     np.testing.assert_allclose(d.ravel(), twin, rtol=1e-8, atol=1e-10 * np.abs(twin).max())

@@ -12,8 +12,16 @@ against scipy's 2.8 ms on one core, and a CG solve to 1e-2 0.14 s against
 0.32 s with the same iterations (``benchmarks/newton_linear.py --json
 --knee knee.h5``: ``block_spmv_ms``, ``spmv_ms``, ``cg``).
 
-Each kernel runs on one thread, its sums in a fixed order, so the iterates
-are the same on every machine.  The kernels check nothing
+On one thread a product scatters each block above the diagonal into both
+its rows (:func:`block_product`); on more it runs row by row in parallel
+(:func:`block_product_rows`), each row reading the blocks left of its
+diagonal through :func:`lower_blocks`' index, which reads those blocks a
+second time but writes no row of another thread.  Both add every row's
+terms in the same order (its diagonal block, the blocks left of it by
+column, then the sum of those right of it), so the two products are the
+same to the bit, and the dot products are summed in :data:`CG_CHUNKS`
+fixed chunks: the iterates are the same on any number of threads
+(``tests/test_newton.py``).  The kernels check nothing
 (:mod:`cutkit.relax.newton` does); their NumPy twin is
 :func:`cutkit.relax.newton.pcg` with scipy's products
 (``tests/test_newton_block_cg.py``).
@@ -24,14 +32,21 @@ from __future__ import annotations
 from collections import namedtuple
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 from cutkit.relax._stop_flag import flag_up
 
 #: The symmetric block form of a Newton matrix: ``diag`` (n, 3, 3) float64 the diagonal blocks;
 #: ``ptr`` (n + 1,) int64 and ``col`` (nu,) int64 the blocks above the diagonal of each node row
-#: (columns sorted), their values ``off`` (nu, 3, 3) float64 (row i's block of column col[q]).
-BlockMatrix = namedtuple("BlockMatrix", ["diag", "ptr", "col", "off"])
+#: (columns sorted), their values ``off`` (nu, 3, 3) float64 (row i's block of column col[q]);
+#: ``lower_ptr`` (n + 1,), ``lower_row`` (nu,) and ``lower_q`` (nu,) int64 the same blocks by
+#: column (:func:`lower_blocks`): row j's blocks left of its diagonal, ``off[lower_q]``
+#: transposed, of rows ``lower_row`` ascending.
+BlockMatrix = namedtuple("BlockMatrix", ["diag", "ptr", "col", "off", "lower_ptr", "lower_row", "lower_q"])
+
+#: The dot products of :func:`block_pcg` are summed in this many fixed chunks of rows, then the
+#: chunks in order: the same sums on any number of threads.
+CG_CHUNKS = 64
 
 #: What :func:`block_pcg` returns beside the iterations: the residual reached the tolerance or the
 #: iterations ran out; a search direction of non-positive curvature (the matrix is not positive
@@ -61,6 +76,28 @@ def upper_blocks(node_ptr, node_idx):
                 src[q] = k
                 q += 1
     return ptr, col, src
+
+
+@njit(cache=True, nogil=True)
+def lower_blocks(ptr, col, n):
+    """The blocks above the diagonal (row pointers ``ptr`` (n + 1,), columns ``col`` (nu,)) by
+    column: ``lower_ptr`` (n + 1,), and for each column j its rows ascending ``lower_row`` and the
+    blocks' positions ``lower_q`` (nu,) int64 (a counting sort)."""
+    lower_ptr = np.zeros(n + 1, np.int64)
+    for q in range(col.shape[0]):
+        lower_ptr[col[q] + 1] += 1
+    for j in range(n):
+        lower_ptr[j + 1] += lower_ptr[j]
+    fill = lower_ptr[:n].copy()
+    lower_row = np.empty(col.shape[0], np.int64)
+    lower_q = np.empty(col.shape[0], np.int64)
+    for i in range(n):
+        for q in range(ptr[i], ptr[i + 1]):
+            j = col[q]
+            lower_row[fill[j]] = i
+            lower_q[fill[j]] = q
+            fill[j] += 1
+    return lower_ptr, lower_row, lower_q
 
 
 @njit(cache=True, nogil=True)
@@ -145,32 +182,105 @@ def block_product(A, p, y):
         y[i, 2] += y2
 
 
-@njit(cache=True, nogil=True)
-def _precondition(inv, r, z):
-    """z = M r, M the block-Jacobi inverse (n, 3, 3); returns r . z."""
-    rz = 0.0
-    for i in range(inv.shape[0]):
-        B = inv[i]
-        for a in range(3):
-            z[i, a] = B[a, 0] * r[i, 0] + B[a, 1] * r[i, 1] + B[a, 2] * r[i, 2]
-            rz += r[i, a] * z[i, a]
-    return rz
+@njit(cache=True, nogil=True, parallel=True)
+def block_product_rows(A, p, y):
+    """y (n, 3) = A p, row by row in parallel: the same sums in the same order as
+    :func:`block_product` (the row's diagonal block, the blocks left of it by ascending row, then
+    the sum of the blocks right of it), so the same bits."""
+    n = A.diag.shape[0]
+    for i in prange(n):
+        D = A.diag[i]
+        p0, p1, p2 = p[i, 0], p[i, 1], p[i, 2]
+        y0 = D[0, 0] * p0 + D[0, 1] * p1 + D[0, 2] * p2
+        y1 = D[1, 0] * p0 + D[1, 1] * p1 + D[1, 2] * p2
+        y2 = D[2, 0] * p0 + D[2, 1] * p1 + D[2, 2] * p2
+        for t in range(A.lower_ptr[i], A.lower_ptr[i + 1]):
+            k = A.lower_row[t]
+            B = A.off[A.lower_q[t]]
+            k0, k1, k2 = p[k, 0], p[k, 1], p[k, 2]
+            y0 += B[0, 0] * k0 + B[1, 0] * k1 + B[2, 0] * k2
+            y1 += B[0, 1] * k0 + B[1, 1] * k1 + B[2, 1] * k2
+            y2 += B[0, 2] * k0 + B[1, 2] * k1 + B[2, 2] * k2
+        u0 = 0.0
+        u1 = 0.0
+        u2 = 0.0
+        for q in range(A.ptr[i], A.ptr[i + 1]):
+            j = A.col[q]
+            B = A.off[q]
+            q0, q1, q2 = p[j, 0], p[j, 1], p[j, 2]
+            u0 += B[0, 0] * q0 + B[0, 1] * q1 + B[0, 2] * q2
+            u1 += B[1, 0] * q0 + B[1, 1] * q1 + B[1, 2] * q2
+            u2 += B[2, 0] * q0 + B[2, 1] * q1 + B[2, 2] * q2
+        y[i, 0] = y0 + u0
+        y[i, 1] = y1 + u1
+        y[i, 2] = y2 + u2
 
 
-@njit(cache=True, nogil=True)
-def _dot(u, v):
+@njit(cache=True, nogil=True, parallel=True)
+def _precondition(inv, r, z, part):
+    """z = M r, M the block-Jacobi inverse (n, 3, 3); returns r . z (summed by chunks, ``part``
+    (CG_CHUNKS,) scratch)."""
+    n = inv.shape[0]
+    for c in prange(CG_CHUNKS):
+        acc = 0.0
+        for i in range(n * c // CG_CHUNKS, n * (c + 1) // CG_CHUNKS):
+            B = inv[i]
+            for a in range(3):
+                z[i, a] = B[a, 0] * r[i, 0] + B[a, 1] * r[i, 1] + B[a, 2] * r[i, 2]
+                acc += r[i, a] * z[i, a]
+        part[c] = acc
+    return _sum(part)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _sum(part):
     acc = 0.0
-    for i in range(u.shape[0]):
-        acc += u[i, 0] * v[i, 0] + u[i, 1] * v[i, 1] + u[i, 2] * v[i, 2]
+    for c in range(part.shape[0]):
+        acc += part[c]
     return acc
 
 
+@njit(cache=True, nogil=True, parallel=True)
+def _dot(u, v, part):
+    """u . v of (n, 3) arrays, summed by chunks (``part`` (CG_CHUNKS,) scratch)."""
+    n = u.shape[0]
+    for c in prange(CG_CHUNKS):
+        acc = 0.0
+        for i in range(n * c // CG_CHUNKS, n * (c + 1) // CG_CHUNKS):
+            acc += u[i, 0] * v[i, 0] + u[i, 1] * v[i, 1] + u[i, 2] * v[i, 2]
+        part[c] = acc
+    return _sum(part)
+
+
+@njit(cache=True, nogil=True, parallel=True)
+def _step(d, r, p, Ap, alpha, part):
+    """d += alpha p, r -= alpha Ap; returns r . r (summed by chunks)."""
+    n = d.shape[0]
+    for c in prange(CG_CHUNKS):
+        acc = 0.0
+        for i in range(n * c // CG_CHUNKS, n * (c + 1) // CG_CHUNKS):
+            for a in range(3):
+                d[i, a] += alpha * p[i, a]
+                r[i, a] -= alpha * Ap[i, a]
+                acc += r[i, a] * r[i, a]
+        part[c] = acc
+    return _sum(part)
+
+
+@njit(cache=True, nogil=True, parallel=True)
+def _direction(p, z, beta):
+    """p = z + beta p."""
+    for i in prange(p.shape[0]):
+        for a in range(3):
+            p[i, a] = z[i, a] + beta * p[i, a]
+
+
 @njit(cache=True, nogil=True)
-def block_pcg(A, inv, b, rtol, max_iterations, halt, d):
+def block_pcg(A, inv, b, rtol, max_iterations, halt, d, rows):
     """Block-Jacobi preconditioned conjugate gradients for A d = b (Hestenes & Stiefel 1952; the
     preconditioned form of Saad, *Iterative Methods for Sparse Linear Systems*, 2003, Alg. 9.1),
     stopped at ``||b - A d|| <= rtol ||b||`` (the recursively updated residual) or after
-    ``max_iterations``.
+    ``max_iterations``.  The same iterates on any number of threads (the module's docstring).
 
     Parameters
     ----------
@@ -184,6 +294,9 @@ def block_pcg(A, inv, b, rtol, max_iterations, halt, d):
         Read before every iteration: non-zero ends the solve (:data:`CG_HALTED`).
     d : (n, 3) float64
         The solution, written here (zero start).
+    rows : bool
+        Products row by row in parallel (:func:`block_product_rows`; more than one thread) or by
+        scattering (:func:`block_product`; one): the same bits either way.
 
     Returns
     -------
@@ -193,30 +306,26 @@ def block_pcg(A, inv, b, rtol, max_iterations, halt, d):
     r = b.copy()
     z = np.empty((n, 3))
     Ap = np.empty((n, 3))
+    part = np.empty(CG_CHUNKS)
     d[:] = 0.0
-    rz = _precondition(inv, r, z)
+    rz = _precondition(inv, r, z, part)
     p = z.copy()
-    stop2 = rtol * rtol * _dot(b, b)
+    stop2 = rtol * rtol * _dot(b, b, part)
     for k in range(max_iterations):
         if flag_up(halt):
             return CG_HALTED, k
-        block_product(A, p, Ap)
-        curvature = _dot(p, Ap)
+        if rows:
+            block_product_rows(A, p, Ap)
+        else:
+            block_product(A, p, Ap)
+        curvature = _dot(p, Ap, part)
         if not curvature > 0.0:
             return CG_NEGATIVE_CURVATURE, k
         alpha = rz / curvature
-        rr = 0.0
-        for i in range(n):
-            for a in range(3):
-                d[i, a] += alpha * p[i, a]
-                r[i, a] -= alpha * Ap[i, a]
-                rr += r[i, a] * r[i, a]
+        rr = _step(d, r, p, Ap, alpha, part)
         if rr <= stop2:
             return CG_DONE, k + 1
         rz_old = rz
-        rz = _precondition(inv, r, z)
-        beta = rz / rz_old
-        for i in range(n):
-            for a in range(3):
-                p[i, a] = z[i, a] + beta * p[i, a]
+        rz = _precondition(inv, r, z, part)
+        _direction(p, z, rz / rz_old)
     return CG_DONE, max_iterations

@@ -167,7 +167,7 @@ class NewtonSolver:
         self._amg = None  # (hierarchy, dofs it was built on)
         self._patterns = HessianPattern(em) if pattern is None else pattern
         self._pattern = None
-        self._upper = None  # the pattern's blocks above the diagonal (_block_cg_kernels.upper_blocks)
+        self._upper = None  # the pattern's block index (block_index)
         self.reset()
 
     def reset(self) -> None:
@@ -257,7 +257,7 @@ class NewtonSolver:
         shows A is not positive definite, or ``halt`` stopped it."""
         pat = self.pattern()
         if self._upper is None:
-            self._upper = KB.upper_blocks(pat.node_ptr, pat.node_idx)
+            self._upper = block_index(pat)
         blocks, inv = block_system(A, pat, self._upper)
         if inv is None:  # a diagonal block is not positive definite, so neither is A
             self.counts["indefinite"] += 1
@@ -266,7 +266,7 @@ class NewtonSolver:
         d = np.empty((n, 3))
         flag = halt if halt is not None else NEVER_STOP
         status, its = KB.block_pcg(blocks, inv, np.ascontiguousarray(r.reshape(n, 3)), rtol,
-                                   CG_MAX_ITERATIONS, flag, d)
+                                   CG_MAX_ITERATIONS, flag, d, _threads() > 1)
         self.counts["cg_iterations"] += its
         if status == KB.CG_HALTED:
             return None  # a waiting cut: the iteration is abandoned, x stays the last iterate
@@ -485,7 +485,7 @@ def block_system(A, pattern: KN.Pattern, upper=None):
         A matrix of :meth:`NewtonSolver.matrix` (its ``data`` laid out by ``pattern``).
     pattern : Pattern
     upper : tuple, optional
-        ``_block_cg_kernels.upper_blocks`` of the pattern (computed here if not given).
+        :func:`block_index` of the pattern (computed here if not given).
 
     Returns
     -------
@@ -493,8 +493,8 @@ def block_system(A, pattern: KN.Pattern, upper=None):
     inverse : (n, 3, 3) float64, or None where a diagonal block is not positive definite.
     """
     n = A.shape[0] // 3
-    ptr, col, src = upper if upper is not None else KB.upper_blocks(pattern.node_ptr, pattern.node_idx)
-    blocks = KB.BlockMatrix(np.empty((n, 3, 3)), ptr, col, np.empty((col.shape[0], 3, 3)))
+    ptr, col, src, *lower = upper if upper is not None else block_index(pattern)
+    blocks = KB.BlockMatrix(np.empty((n, 3, 3)), ptr, col, np.empty((col.shape[0], 3, 3)), *lower)
     KB.gather_blocks(pattern.node_ptr, pattern.diagonal, src, A.data, blocks.diag, ptr, blocks.off)
     inverse = np.empty((n, 3, 3))
     return blocks, (inverse if KB.block_jacobi(blocks.diag, inverse) else None)
@@ -519,6 +519,21 @@ def reaching_free_dofs(el: KE.Elements, free: np.ndarray) -> KE.Elements:
     if not out.any():
         return el
     return el._replace(volume=np.where(out, 0.0, el.volume))
+
+
+def _threads() -> int:
+    """numba's thread count on this thread (a live session's relaxation sets its own)."""
+    import numba
+
+    return int(numba.get_num_threads())
+
+
+def block_index(pattern: KN.Pattern) -> tuple:
+    """The symmetric block form's index of ``pattern``: the blocks above the diagonal
+    (``_block_cg_kernels.upper_blocks``: row pointers, columns, positions in ``node_idx``) and the
+    same by column (``lower_blocks``: pointers, rows, positions), six int64 arrays."""
+    ptr, col, src = KB.upper_blocks(pattern.node_ptr, pattern.node_idx)
+    return (ptr, col, src, *KB.lower_blocks(ptr, col, pattern.node_ptr.shape[0] - 1))
 
 
 def cholesky_solve(A, b: np.ndarray):
