@@ -154,32 +154,64 @@ def block_jacobi(diag, inv):
     return True
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _times(B, v0, v1, v2):
+    """B v for a 3 x 3 block B: its three components, each summed left to right (both products
+    add these same terms)."""
+    return (B[0, 0] * v0 + B[0, 1] * v1 + B[0, 2] * v2,
+            B[1, 0] * v0 + B[1, 1] * v1 + B[1, 2] * v2,
+            B[2, 0] * v0 + B[2, 1] * v1 + B[2, 2] * v2)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _times_transposed(B, v0, v1, v2):
+    """B^T v for a 3 x 3 block B (the block below the diagonal of a symmetric matrix)."""
+    return (B[0, 0] * v0 + B[1, 0] * v1 + B[2, 0] * v2,
+            B[0, 1] * v0 + B[1, 1] * v1 + B[2, 1] * v2,
+            B[0, 2] * v0 + B[1, 2] * v1 + B[2, 2] * v2)
+
+
 @njit(cache=True, nogil=True)
 def block_product(A, p, y):
-    """y (n, 3) = A p (p (n, 3)) for a :class:`BlockMatrix` A."""
+    """y (n, 3) = A p (p (n, 3)) for a :class:`BlockMatrix` A, each block above the diagonal read
+    once and scattered into both its rows."""
     n = A.diag.shape[0]
     for i in range(n):
-        D = A.diag[i]
-        for a in range(3):
-            y[i, a] = D[a, 0] * p[i, 0] + D[a, 1] * p[i, 1] + D[a, 2] * p[i, 2]
+        y[i, 0], y[i, 1], y[i, 2] = _times(A.diag[i], p[i, 0], p[i, 1], p[i, 2])
     for i in range(n):
         p0, p1, p2 = p[i, 0], p[i, 1], p[i, 2]
-        y0 = 0.0
-        y1 = 0.0
-        y2 = 0.0
+        u0 = 0.0
+        u1 = 0.0
+        u2 = 0.0
         for q in range(A.ptr[i], A.ptr[i + 1]):
             j = A.col[q]
-            B = A.off[q]
-            q0, q1, q2 = p[j, 0], p[j, 1], p[j, 2]
-            y0 += B[0, 0] * q0 + B[0, 1] * q1 + B[0, 2] * q2
-            y1 += B[1, 0] * q0 + B[1, 1] * q1 + B[1, 2] * q2
-            y2 += B[2, 0] * q0 + B[2, 1] * q1 + B[2, 2] * q2
-            y[j, 0] += B[0, 0] * p0 + B[1, 0] * p1 + B[2, 0] * p2  # the block below: A_ji = A_ij^T
-            y[j, 1] += B[0, 1] * p0 + B[1, 1] * p1 + B[2, 1] * p2
-            y[j, 2] += B[0, 2] * p0 + B[1, 2] * p1 + B[2, 2] * p2
-        y[i, 0] += y0
-        y[i, 1] += y1
-        y[i, 2] += y2
+            a0, a1, a2 = _times(A.off[q], p[j, 0], p[j, 1], p[j, 2])
+            u0 += a0
+            u1 += a1
+            u2 += a2
+            b0, b1, b2 = _times_transposed(A.off[q], p0, p1, p2)  # the block below: A_ji = A_ij^T
+            y[j, 0] += b0
+            y[j, 1] += b1
+            y[j, 2] += b2
+        y[i, 0] += u0
+        y[i, 1] += u1
+        y[i, 2] += u2
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _upper_sum(A, p, i):
+    """Row i's blocks right of its diagonal times p, summed from 0 by ascending column (what
+    :func:`block_product` adds to row i last)."""
+    s0 = 0.0
+    s1 = 0.0
+    s2 = 0.0
+    for q in range(A.ptr[i], A.ptr[i + 1]):
+        j = A.col[q]
+        a0, a1, a2 = _times(A.off[q], p[j, 0], p[j, 1], p[j, 2])
+        s0 += a0
+        s1 += a1
+        s2 += a2
+    return s0, s1, s2
 
 
 @njit(cache=True, nogil=True, parallel=True)
@@ -189,28 +221,14 @@ def block_product_rows(A, p, y):
     the sum of the blocks right of it), so the same bits."""
     n = A.diag.shape[0]
     for i in prange(n):
-        D = A.diag[i]
-        p0, p1, p2 = p[i, 0], p[i, 1], p[i, 2]
-        y0 = D[0, 0] * p0 + D[0, 1] * p1 + D[0, 2] * p2
-        y1 = D[1, 0] * p0 + D[1, 1] * p1 + D[1, 2] * p2
-        y2 = D[2, 0] * p0 + D[2, 1] * p1 + D[2, 2] * p2
+        y0, y1, y2 = _times(A.diag[i], p[i, 0], p[i, 1], p[i, 2])
         for t in range(A.lower_ptr[i], A.lower_ptr[i + 1]):
             k = A.lower_row[t]
-            B = A.off[A.lower_q[t]]
-            k0, k1, k2 = p[k, 0], p[k, 1], p[k, 2]
-            y0 += B[0, 0] * k0 + B[1, 0] * k1 + B[2, 0] * k2
-            y1 += B[0, 1] * k0 + B[1, 1] * k1 + B[2, 1] * k2
-            y2 += B[0, 2] * k0 + B[1, 2] * k1 + B[2, 2] * k2
-        u0 = 0.0
-        u1 = 0.0
-        u2 = 0.0
-        for q in range(A.ptr[i], A.ptr[i + 1]):
-            j = A.col[q]
-            B = A.off[q]
-            q0, q1, q2 = p[j, 0], p[j, 1], p[j, 2]
-            u0 += B[0, 0] * q0 + B[0, 1] * q1 + B[0, 2] * q2
-            u1 += B[1, 0] * q0 + B[1, 1] * q1 + B[1, 2] * q2
-            u2 += B[2, 0] * q0 + B[2, 1] * q1 + B[2, 2] * q2
+            b0, b1, b2 = _times_transposed(A.off[A.lower_q[t]], p[k, 0], p[k, 1], p[k, 2])
+            y0 += b0
+            y1 += b1
+            y2 += b2
+        u0, u1, u2 = _upper_sum(A, p, i)
         y[i, 0] = y0 + u0
         y[i, 1] = y1 + u1
         y[i, 2] = y2 + u2
