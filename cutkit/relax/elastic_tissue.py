@@ -500,22 +500,29 @@ class ElasticTissue(TissueBase):
         elif self._rested_once:
             rtol, sweeps = self.rest_rtol, REST_SWEEPS
         else:
-            rtol, sweeps = max(self.rest_rtol, REST_UNLOADED_FIRST_RTOL), 0
+            rtol, sweeps = self._unloaded_first_rtol(), 0
         return max(rtol * self.force_scale, DEFAULT_ATOL_N), sweeps
 
-    def prepare_resting(self) -> None:
+    def prepare_resting(self, halt=None) -> None:
         """The Newton matrix's pattern built now (:class:`~cutkit.relax.hessian_pattern.HessianPattern`),
         so that the first resting step after a stroke only updates it: a live session calls this
-        before its clock starts (on the demo knee a full build in that step cost 0.15-0.33 s of the
-        wound's coming to rest; an update 0.03-0.23 s).  Nothing for vertex block descent alone or
-        the ANP element (its Newton solver builds its own stencil)."""
+        before its clock starts, and its idle resting steps call it after a rebase (on the demo knee
+        a full build in that step cost 0.15-0.33 s of the wound's coming to rest; an update
+        0.03-0.23 s).  ``halt`` ((1,) int64, optional): a waiting cut stops the build (what was
+        built stays).  Nothing for vertex block descent alone or the ANP element (its Newton
+        solver builds its own stencil)."""
         if self.solver in ("hybrid", "newton") and self.em.element != "anp":
-            self.hessian_pattern.get()
+            self.hessian_pattern.get(halt)
 
     def _first_rtol(self) -> float:
-        """A resting step's first-stage tolerance over the force scale (:data:`REST_FIRST_RTOL`, or the
-        rest tolerance where looser)."""
+        """A resting step's first-stage tolerance over the force scale under the blade
+        (:data:`REST_FIRST_RTOL`, or the rest tolerance where looser)."""
         return max(self.rest_rtol, REST_FIRST_RTOL)
+
+    def _unloaded_first_rtol(self) -> float:
+        """The first-stage tolerance once the blade has left (:data:`REST_UNLOADED_FIRST_RTOL`, or the
+        rest tolerance where looser)."""
+        return max(self.rest_rtol, REST_UNLOADED_FIRST_RTOL)
 
     def _rest_step(self, f_ext: np.ndarray, stop):
         """One resting step: a few sweeps (:meth:`_rest_stage`) and Newton on the whole model
@@ -533,10 +540,8 @@ class ElasticTissue(TissueBase):
             self.state.velocities[:] = 0.0
             self.state.time += self.step_s
             self.r2[:] = np.einsum("ij,ij->i", r, r)
-            if stop is not None and self.em.element != "anp":  # the ANP stencil is the solver's own
-                # live and idle: the matrix pattern made now, so that the resting step after the
-                # next stroke only updates it (the knee: 0.08-0.10 s of that step, not 0.21-0.28 s)
-                self.hessian_pattern.get(stop)
+            if stop is not None:  # live and idle: the pattern kept current while nothing else runs
+                self.prepare_resting(stop)
             return SolveInfo(0, res, res, True, 0), res, 0
         info, swept = rest_step(self.em, self.state, self.step_s, f_ext, atol=atol, sweeps=sweeps,
                                 max_iterations=NEWTON_STEP_MAX_ITERATIONS, solver=self._whole_model_newton(REST_HESSIAN),
@@ -716,8 +721,7 @@ class ElasticTissue(TissueBase):
                 "whole_model_finishes": int(self.counts["whole_model_finishes"]),
                 "resting_steps": int(self.counts["resting_steps"]), "rest_rtol": self.rest_rtol,
                 "rest_first_rtol": None if self.rest_rtol is None else self._first_rtol(),
-                "rest_unloaded_first_rtol": (None if self.rest_rtol is None
-                                             else max(self.rest_rtol, REST_UNLOADED_FIRST_RTOL)),
+                "rest_unloaded_first_rtol": None if self.rest_rtol is None else self._unloaded_first_rtol(),
                 "resting": list(self.step_log["resting"]),
                 "polish_s": {k: float(v) for k, v in self.polish_timings.items()}, "polish_iterations": list(its)}
 
