@@ -30,13 +30,19 @@ tissue varies by a factor of several between studies, sites and subjects):
   ranges are those collected in the review of soft-tissue cutting in the
   Chinese Journal of Mechanical Engineering (2022),
   doi 10.1186/s10033-022-00767-4:
-  skin 20,000 (porcine skin 17,100-30,400); fat 4,100 (about 4,100);
+  skin 1,136 (porcine skin, measured with a sharp tool: needle insertion;
+  the same review lists 17,100-30,400 from trouser-tear and notched tests,
+  which measure tearing: the tearing arms' own deformation is paid too,
+  and at 20,000 the demo incision's blade would pull 90-160 N through
+  8 mm of skin and drag the knee along, docs/scalpel-model.md); fat 4,100
+  (about 4,100, trouser tear: no sharp-tool figure in these sources);
   muscle 2,000 (550-8,000; the value within the range used for every soft
   tissue a recipe does not describe).  Liver, for comparison: porcine
-  187-225, bovine 164 +- 6 (Chanthasopeephan et al. 2003).
+  187-225 cut with a blade, bovine 164 +- 6 (Chanthasopeephan et al. 2003).
   Tendon 20,000 and bone 50,000 have no published cutting toughness in
-  these sources: they are set at or above skin's so that the blade does
-  not cut through them easily (bone is normally held rigid anyway).
+  these sources: they are set at skin's tear toughness and above, so that
+  the blade does not cut through them easily (bone is normally held rigid
+  anyway).
 * damping: no published value for this model; 8/s is a numerical choice
   (the mass-proportional damping of eq. (1)).
 
@@ -61,7 +67,7 @@ from cutkit.model.tetmodel import MATERIAL_FIELDS
 #: Default material of each tissue name (without label).
 DEFAULT_MATERIALS: dict[str, dict[str, float]] = {
     "skin": dict(poisson_ratio=0.45, E=150e3, density=1109.0, damping=8.0, F_enter=1.5, mu_static=1.0e-6, mu_dynamic=4.0e-7,
-                 rho_dynamic=2.0e-8, alpha_static=0.3, alpha_dynamic=0.15, c_edge=1.0, c_shape=1.0, J_c=20000.0),
+                 rho_dynamic=2.0e-8, alpha_static=0.3, alpha_dynamic=0.15, c_edge=1.0, c_shape=1.0, J_c=1136.0),
     "fat": dict(poisson_ratio=0.45, E=3e3, density=911.0, damping=8.0, F_enter=0.3, mu_static=1.0e-5, mu_dynamic=4.0e-6,
                 rho_dynamic=2.0e-7, alpha_static=0.2, alpha_dynamic=0.1, c_edge=1.0, c_shape=1.0, J_c=4100.0),
     "muscle": dict(poisson_ratio=0.45, E=30e3, density=1090.0, damping=8.0, F_enter=0.8, mu_static=2.5e-6, mu_dynamic=1.0e-6,
@@ -91,15 +97,15 @@ DEFAULT_SOURCES: dict[str, dict[str, str]] = {
     }
     for name, e_source, j_source in (
         ("skin", "0.1-0.9 MPa in vivo (Agache et al. 1980; Pailler-Mattei et al. 2008)",
-         f"porcine skin 17,100-30,400 J/m^2, {_REVIEW}"),
+         f"porcine skin 1,136 J/m^2 by needle insertion (sharp tool; tear tests 17,100-30,400), {_REVIEW}"),
         ("fat", "normal fat 3.25 kPa (Samani, Zubovits & Plewes 2007, Phys. Med. Biol. 52:1565)",
          f"fat about 4,100 J/m^2, {_REVIEW}"),
         ("muscle", "shear modulus about 10 kPa, shear-wave elastography (Gennisson et al. 2010), times 3",
          f"muscle 550-8,000 J/m^2, {_REVIEW}"),
         ("tendon", "human tendon in vivo (Maganaris & Paul 1999, J. Physiol. 521:307)",
-         "no published cutting toughness: set to skin's"),
+         "no published cutting toughness: set to skin's tear toughness (20,000 J/m^2)"),
         ("bone", "cortical bone (Reilly & Burstein 1975, J. Biomech. 8:393)",
-         "no published cutting toughness: set above skin's (bone is held rigid)"),
+         "no published cutting toughness: set above skin's tear toughness (bone is held rigid)"),
     )
 }
 
