@@ -67,3 +67,38 @@ def test_knee_frame_rate_does_not_change_what_is_simulated(knee_run, demo_knee, 
     d1 = m1.points + m1.point_data["displacement"]
     d30 = m30.points + m30.point_data["displacement"]
     assert np.abs(d1 - d30).max() <= 1e-9
+
+
+def test_fracture_scalpel_on_the_knee_pays_J_c_times_depth_and_converges(demo_knee, tmp_path):
+    """``simulate --scalpel fracture`` on the demo knee: every relaxation step converged under the
+    blade's force, no tet inverted, a force row every 1 ms haptic tick, and the steady force while
+    the crack advances J_c of the skin it entered times the depth of cut (docs/scalpel-model.md)."""
+    import csv
+
+    import numpy as np
+
+    from cutkit.io.model_h5 import read_model
+
+    _, incision = demo_inputs()
+    out = tmp_path / "fracture"
+    assert main(["simulate", str(demo_knee[1]), "--trajectory", str(incision), "-o", str(out), "--fps", "1",
+                 "--scalpel", "fracture"]) == 0
+    s = json.loads((out / "summary.json").read_text())
+    assert s["options"]["scalpel"] == "fracture"
+    assert s["relax_steps"]["not_converged"] == 0 and s["inverted_tets_deformed"] == 0
+    assert s["cut_tets"] > 300 and s["edges_left_uncut"] == 0
+    with open(out / "forces.csv") as f:
+        rows = list(csv.DictReader(f))
+    t = np.array([float(r["t"]) for r in rows])
+    np.testing.assert_allclose(np.diff(t), 1e-3, atol=1e-9)  # the haptic rate, every tick written
+    assert t[-1] == pytest.approx(s["simulated_s"], abs=1e-9)
+    states = [r["state"] for r in rows]
+    force = np.array([[float(r[c]) for c in ("F_ext_x", "F_ext_y", "F_ext_z")] for r in rows])
+    tip_y = np.array([float(r["tip_y"]) for r in rows])  # the incision goes in along +y
+    depth = tip_y.max() - tip_y[states.index("static")]  # from where the blade met the skin
+    cutting = np.flatnonzero(np.array(states) == "cutting")
+    steady = slice(cutting[len(cutting) // 2], cutting[-1])
+    materials = read_model(demo_knee[1]).materials
+    J_c = float(materials["J_c"][materials.name.index("skin")])
+    mean = float(np.linalg.norm(force[steady], axis=1).mean())
+    assert mean == pytest.approx(J_c * 1e-3 * depth, rel=0.15)
