@@ -302,17 +302,17 @@ class ElasticTissue(TissueBase):
         em.lay_out_rows()
         self.state: ElementState = initial_element_state(model)
         self.counts = {"steps": 0, "sweeps": 0, "node_updates": 0, "steps_not_converged": 0}
+        self.step_log: dict[str, list] = {"iterations": [], "relative_residual": [], "min_J": [], "crushed_tets": []}
         if solver in ("newton", "hybrid"):
             self.counts["newton_iterations"] = 0
-        self.step_log: dict[str, list] = {"iterations": [], "relative_residual": [], "min_J": [], "crushed_tets": []}
+            self.counts["resting_steps"] = 0
+            self.step_log["resting"] = []
         #: seconds in each part of the hybrid's polishes (cutkit.relax.hybrid.TIMED)
         self.polish_timings: dict[str, float] = {}
         if solver == "hybrid":
             self.counts["polish_calls"] = 0
-            self.counts["resting_steps"] = 0
             self.counts["whole_model_finishes"] = 0
             self.step_log["polish_iterations"] = []
-            self.step_log["resting"] = []
         #: the element model's matrix pattern, kept across cuts and shared by its Newton solvers
         self.hessian_pattern = HessianPattern(self.em)
         self._newton = self._newton_solver()
@@ -444,11 +444,7 @@ class ElasticTissue(TissueBase):
             if stop is not None and stop[0]:
                 break
             if self.solver == "newton":
-                from cutkit.relax.newton import newton_step
-
-                info = newton_step(self.em, self.state, self.step_s, f_ext, atol=atol,
-                                   max_iterations=NEWTON_STEP_MAX_ITERATIONS, solver=self._newton, stop=stop)
-                true_residual = info.residual
+                info, true_residual = self._newton_step(f_ext, atol, stop)
             else:
                 info, true_residual = self._sweep_step(f_ext, loaded, atol, stop)
             if not info.taken:
@@ -465,13 +461,13 @@ class ElasticTissue(TissueBase):
         return self.resting_in_balance
 
     def _resting(self, f_ext: np.ndarray) -> bool:
-        """Whether the coming step rests: the hybrid, no tet or node added or removed since the last
+        """Whether the coming step rests: the hybrid or Newton, no tet or node added or removed since the last
         step (nodes that follow a still blade may have moved), and no load, or a load
         that differs from the last step's by at most the stage's tolerance (N, the norm of the
         difference: a change that small cannot move the equilibrium by more than the tolerance
         lets a step miss it; the blade's load on a still blade settles geometrically, it is not
         constant to the bit).  The load is kept for the next call."""
-        if self.solver != "hybrid" or self.rest_rtol is None:
+        if self.solver not in ("hybrid", "newton") or self.rest_rtol is None:
             return False
         last, self._last_load = self._last_load, f_ext.copy()
         if last is None or last.shape != f_ext.shape:
@@ -552,6 +548,27 @@ class ElasticTissue(TissueBase):
         self.r2[:] = np.einsum("ij,ij->i", r, r)
         res = self._free_norm(r)
         return SolveInfo(swept, start, res, res <= atol, 0), res, info.iterations
+
+    def _newton_step(self, f_ext: np.ndarray, atol: float, stop):
+        """One projected Newton step on the whole model (:func:`~cutkit.relax.newton.newton_step`) to
+        ``atol`` (N), or, where the step rests (:meth:`_resting`), to the resting stage's tolerance
+        (:meth:`_rest_stage`; no sweeps): the wound's gaping is a soft mode within the step
+        tolerance, and without the stages a cut opened by no iteration at all (the ANP knee's
+        incision: 0 Newton iterations in 120 steps, opening 0.00 mm; docs/relaxation.md).
+        Returns (info, true residual N)."""
+        from cutkit.relax.newton import newton_step
+
+        resting = self._resting(f_ext)
+        if resting:
+            atol = min(atol, self._rest_stage()[0])
+        info = newton_step(self.em, self.state, self.step_s, f_ext, atol=atol,
+                           max_iterations=NEWTON_STEP_MAX_ITERATIONS, solver=self._newton, stop=stop)
+        self.resting_in_balance = bool(resting and info.taken and info.converged)
+        self._rested_once = (self._rested_once or self.resting_in_balance) if resting else False
+        if info.taken:
+            self.counts["resting_steps"] += int(resting)
+            self.step_log["resting"].append(resting)
+        return info, info.residual
 
     def _sweep_step(self, f_ext: np.ndarray, loaded: np.ndarray, atol: float, stop):
         """One vertex block descent step (:func:`~cutkit.relax.vbd.local_step`); returns (info, true
@@ -689,14 +706,15 @@ class ElasticTissue(TissueBase):
             ended: :meth:`_count`), and per step ``iterations``,
             ``relative_residual`` (true final residual over the force scale) and
             ``min_J`` (None where not measured);
+            ``"newton"`` and ``"hybrid"`` add ``resting_steps``, ``rest_rtol``,
+            ``rest_first_rtol``, ``rest_unloaded_first_rtol`` and per step ``resting``;
             ``"hybrid"`` adds ``polish_iterations_total``, ``polished_steps``
             (steps with a Newton iteration), ``polish_calls`` (steps that
             called the polish), ``whole_model_finishes`` (steps the polish left out
             of balance, finished by :meth:`_finish`), ``polish_s`` (wall seconds of the polishes:
-            ``total`` and each part of :data:`cutkit.relax.hybrid.TIMED`),
-            ``resting_steps`` and ``rest_rtol`` (:meth:`_rest_step`), and per
+            ``total`` and each part of :data:`cutkit.relax.hybrid.TIMED`), and per
             step ``polish_iterations`` (a resting step's Newton iterations
-            included) and ``resting``.
+            included).
         """
         rel = self.step_log["relative_residual"]
         return {"solver": self.solver, "count": len(rel), "not_converged": int(self.counts["steps_not_converged"]),
@@ -712,18 +730,22 @@ class ElasticTissue(TissueBase):
                 **self._polish_report()}
 
     def _polish_report(self) -> dict:
-        """The hybrid's polish in :meth:`relax_report` (nothing for the other solvers)."""
-        if self.solver != "hybrid":
+        """The resting steps (Newton and the hybrid) and the hybrid's polish in :meth:`relax_report`
+        (nothing for vertex block descent alone)."""
+        if self.solver not in ("hybrid", "newton"):
             return {}
+        rest = {"resting_steps": int(self.counts["resting_steps"]), "rest_rtol": self.rest_rtol,
+                "rest_first_rtol": None if self.rest_rtol is None else self._first_rtol(),
+                "rest_unloaded_first_rtol": None if self.rest_rtol is None else self._unloaded_first_rtol(),
+                "resting": list(self.step_log["resting"])}
+        if self.solver == "newton":
+            return rest
         its = self.step_log["polish_iterations"]
         return {"polish_iterations_total": int(sum(its)), "polished_steps": int(sum(1 for k in its if k)),
                 "polish_calls": int(self.counts["polish_calls"]),
                 "whole_model_finishes": int(self.counts["whole_model_finishes"]),
-                "resting_steps": int(self.counts["resting_steps"]), "rest_rtol": self.rest_rtol,
-                "rest_first_rtol": None if self.rest_rtol is None else self._first_rtol(),
-                "rest_unloaded_first_rtol": None if self.rest_rtol is None else self._unloaded_first_rtol(),
-                "resting": list(self.step_log["resting"]),
-                "polish_s": {k: float(v) for k, v in self.polish_timings.items()}, "polish_iterations": list(its)}
+                **rest, "polish_s": {k: float(v) for k, v in self.polish_timings.items()},
+                "polish_iterations": list(its)}
 
     # ------------------------------------------------------------ cut
     def apply_delta(self, delta) -> dict:
