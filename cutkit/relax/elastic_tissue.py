@@ -553,9 +553,8 @@ class ElasticTissue(TissueBase):
         """One projected Newton step on the whole model (:func:`~cutkit.relax.newton.newton_step`) to
         ``atol`` (N), or, where the step rests (:meth:`_resting`), to the resting stage's tolerance
         (:meth:`_rest_stage`; no sweeps): the wound's gaping is a soft mode within the step
-        tolerance, and without the stages a cut opened by no iteration at all (the ANP knee's
-        incision: 0 Newton iterations in 120 steps, opening 0.00 mm; docs/relaxation.md).
-        Returns (info, true residual N)."""
+        tolerance, so a step asked that alone ends where the cut left the wound, closed
+        (docs/relaxation.md, "Resting steps").  Returns (info, true residual N)."""
         from cutkit.relax.newton import newton_step
 
         resting = self._resting(f_ext)
@@ -727,9 +726,9 @@ class ElasticTissue(TissueBase):
                 "steps_without_min_J": int(sum(1 for j in self.step_log["min_J"] if np.isnan(j))),
                 "crushed_J": CRUSHED_J,
                 "steps_with_crushed_tets": int(sum(1 for k in self.step_log["crushed_tets"] if k)),
-                **self._polish_report()}
+                **self._solver_report()}
 
-    def _polish_report(self) -> dict:
+    def _solver_report(self) -> dict:
         """The resting steps (Newton and the hybrid) and the hybrid's polish in :meth:`relax_report`
         (nothing for vertex block descent alone)."""
         if self.solver not in ("hybrid", "newton"):
