@@ -148,6 +148,12 @@ def configured_threads() -> int:
     """The threads :func:`configure_threads` chose, or numba's count on this thread if it was not called."""
     if _configured is not None:
         return _configured
+    return numba_threads_here()
+
+
+def numba_threads_here() -> int:
+    """numba's thread count on the calling thread now (thread-local: a live session's relaxation
+    sets its own, :func:`use_threads_in_this_thread`)."""
     import numba
 
     return int(numba.get_num_threads())

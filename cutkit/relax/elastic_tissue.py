@@ -562,11 +562,7 @@ class ElasticTissue(TissueBase):
             atol = min(atol, self._rest_stage()[0])
         info = newton_step(self.em, self.state, self.step_s, f_ext, atol=atol,
                            max_iterations=NEWTON_STEP_MAX_ITERATIONS, solver=self._newton, stop=stop)
-        self.resting_in_balance = bool(resting and info.taken and info.converged)
-        self._rested_once = (self._rested_once or self.resting_in_balance) if resting else False
-        if info.taken:
-            self.counts["resting_steps"] += int(resting)
-            self.step_log["resting"].append(resting)
+        self._book_rest(resting, info)
         return info, info.residual
 
     def _sweep_step(self, f_ext: np.ndarray, loaded: np.ndarray, atol: float, stop):
@@ -574,22 +570,18 @@ class ElasticTissue(TissueBase):
         residual N).  With the ``"hybrid"`` solver, a step not stopped that the sweeps leave out of
         balance (their own test failed at the cap, or the true residual is above ``atol``) is
         finished by :meth:`_polish`."""
-        self.resting_in_balance = False
         if self._resting(f_ext):
             info, true_residual, newton = self._rest_step(f_ext, stop)
-            self.resting_in_balance = bool(info.taken and info.converged)
-            self._rested_once |= self.resting_in_balance
+            self._book_rest(True, info)
             if info.taken:
                 self.counts["newton_iterations"] += newton
-                self.counts["resting_steps"] += 1
                 self.step_log["polish_iterations"].append(int(newton))
-                self.step_log["resting"].append(True)
             return info, true_residual
-        self._rested_once = False
         seeds = np.concatenate([loaded, *self._seeds]) if self._seeds else loaded
         x0, v0 = self.state.positions.copy(), self.state.velocities.copy()
         info = local_step(self.em, self.state, self.step_s, f_ext, self.r2, seeds, atol=atol,
                           max_iterations=self.step_max_iterations, stop=stop)
+        self._book_rest(False, info)
         if not info.taken:
             return info, 0.0
         r = self._residual(x0, v0, f_ext)
@@ -604,8 +596,17 @@ class ElasticTissue(TissueBase):
             polished += finished
         self.counts["newton_iterations"] += polished
         self.step_log["polish_iterations"].append(int(polished))
-        self.step_log["resting"].append(False)
         return info, true_residual
+
+    def _book_rest(self, resting: bool, info) -> None:
+        """Whether the step just made rested, for the next steps (:meth:`at_rest`, the rest stages) and
+        the report (``resting_steps``, per step ``resting``, where the solver has resting steps): a
+        step that did not rest starts the first stage again."""
+        self.resting_in_balance = bool(resting and info.taken and info.converged)
+        self._rested_once = (self._rested_once or self.resting_in_balance) if resting else False
+        if info.taken and "resting" in self.step_log:
+            self.counts["resting_steps"] += int(resting)
+            self.step_log["resting"].append(resting)
 
     def _polish(self, info, x0, v0, f_ext, r, atol: float):
         """:func:`~cutkit.relax.hybrid.polish_step` of the step the sweeps left (residual r); the

@@ -47,7 +47,7 @@ from cutkit.relax import _block_cg_kernels as KB
 from cutkit.relax import _newton_kernels as KN
 from cutkit.relax import anp
 from cutkit.relax.elastic import ElementModel, ElementState
-from cutkit.threads import one_blas_thread
+from cutkit.threads import numba_threads_here, one_blas_thread
 from cutkit.relax.settle import rigid_modes
 from cutkit.relax.hessian_pattern import HessianPattern
 from cutkit.relax.vbd import (DEFAULT_ATOL_N, NEVER_STOP, SolveInfo, _node_terms, elastic_energy, elastic_forces,
@@ -266,7 +266,7 @@ class NewtonSolver:
         d = np.empty((n, 3))
         flag = halt if halt is not None else NEVER_STOP
         status, its = KB.block_pcg(blocks, inv, np.ascontiguousarray(r.reshape(n, 3)), rtol,
-                                   CG_MAX_ITERATIONS, flag, d, _threads() > 1)
+                                   CG_MAX_ITERATIONS, flag, d, numba_threads_here() > 1)
         self.counts["cg_iterations"] += its
         if status == KB.CG_HALTED:
             return None  # a waiting cut: the iteration is abandoned, x stays the last iterate
@@ -519,13 +519,6 @@ def reaching_free_dofs(el: KE.Elements, free: np.ndarray) -> KE.Elements:
     if not out.any():
         return el
     return el._replace(volume=np.where(out, 0.0, el.volume))
-
-
-def _threads() -> int:
-    """numba's thread count on this thread (a live session's relaxation sets its own)."""
-    import numba
-
-    return int(numba.get_num_threads())
 
 
 def block_index(pattern: KN.Pattern) -> tuple:
