@@ -74,7 +74,7 @@ def test_crumb_kernel_matches_twin():
     inc = KC.Incidence(cm.node_tet_off, cm.node_tet_idx, cm._def_nodes, cm.n_orig_points, cm.sub_start,
                        cm.sub_count, cm.neighbors)
     mark = np.zeros(total, np.int64)
-    for i, limit in enumerate((1e-3, 0.05, 1.0, 5.0, 50.0)):
+    for i, limit in enumerate((1e-3, 0.05, 1.0, 5.0, 50.0, 1e3)):  # 1e3: the whole block is one crumb
         seeds = rng.choice(live, 12)
         got, k = KC.loose_small_pieces(cm._X, cm._tets[:total], alive, inc, seeds, limit, mark, 4 * (i + 1))
         ref, k_ref = loose_small_pieces_twin(cm._X, cm._tets[:total], alive, seeds, limit)

@@ -56,14 +56,82 @@ def _push(comp, n, c):
     return comp
 
 
-@njit(cache=True, nogil=True)
-def _visit_uncut(inc, alive, mark, base, t, q):
-    """Face neighbours of uncut original tet t that are uncut too, onto ``q`` (queues) as growing.
+# The queues of one growth: ``q`` (3, k) int64 and ``hk`` (k,) float64.  Row 0 lists the piece's
+# tets found so far; row 1 is a binary max-heap (1-based, keys ``hk``) of uncut original tets to grow
+# from across their faces, the largest first; row 2 a stack of tets whose nodes' tets are to be
+# scanned (cut tets, and uncut ones next to a cut, deferred until the heap is empty).  Column 0 of
+# each row holds its length.
 
-    Returns (q, state): state 1 if a cut tet is next to t (its nodes' tets must be scanned),
-    2 if a large piece was met, else 0.
+
+@njit(cache=True, nogil=True)
+def _room(q, hk):
+    """(q, hk) with room for one more entry in every row (doubled when full)."""
+    if max(q[0, 0], q[1, 0], q[2, 0]) + 1 < q.shape[1]:
+        return q, hk
+    bigger = np.zeros((3, 2 * q.shape[1]), np.int64)
+    bigger[:, :q.shape[1]] = q
+    bk = np.zeros(2 * hk.shape[0])
+    bk[:hk.shape[0]] = hk
+    return bigger, bk
+
+
+@njit(cache=True, nogil=True)
+def _push_nodes(q, hk, t):
+    """Tet t onto the node-scan stack (row 2)."""
+    q, hk = _room(q, hk)
+    q[2, 0] += 1
+    q[2, q[2, 0]] = t
+    return q, hk
+
+
+@njit(cache=True, nogil=True)
+def _enqueue(q, hk, c, cheap, vol):
+    """Tet c (rest volume ``vol``) joins the piece: onto row 0, and onto the heap (row 1, an uncut
+    original tet: ``cheap``) or the node-scan stack (row 2).  Returns (q, hk)."""
+    q, hk = _room(q, hk)
+    q[0, 0] += 1
+    q[0, q[0, 0]] = c
+    if not cheap:
+        return _push_nodes(q, hk, c)
+    i = q[1, 0] + 1  # sift up: the heap keeps its largest tet at position 1
+    q[1, 0] = i
+    while i > 1 and hk[i // 2] < vol:
+        q[1, i], hk[i] = q[1, i // 2], hk[i // 2]
+        i //= 2
+    q[1, i], hk[i] = c, vol
+    return q, hk
+
+
+@njit(cache=True, nogil=True)
+def _pop_largest(q, hk):
+    """The uncut tet of largest rest volume off the heap (row 1 of ``q``)."""
+    top = q[1, 1]
+    n = q[1, 0]
+    c, vol = q[1, n], hk[n]
+    n -= 1
+    q[1, 0] = n
+    i = 1
+    while 2 * i <= n:  # sift the last entry down from the root
+        j = 2 * i
+        if j + 1 <= n and hk[j + 1] > hk[j]:
+            j += 1
+        if hk[j] <= vol:
+            break
+        q[1, i], hk[i] = q[1, j], hk[j]
+        i = j
+    q[1, i], hk[i] = c, vol
+    return top
+
+
+@njit(cache=True, nogil=True)
+def _visit_uncut(X, tets, inc, alive, mark, base, t, q, hk):
+    """Face neighbours of uncut original tet t that are uncut too join the piece (``q``).
+
+    Returns (q, hk, state, added): state 1 if a cut tet is next to t (its
+    nodes' tets must be scanned), 2 if a large piece was met, else 0;
+    ``added`` the rest volume that joined.
     """
-    near_cut = 0
+    near_cut, added = 0, 0.0
     for f in range(4):
         nb = inc.neighbors[t, f]
         if nb < 0 or not alive[nb] and inc.sub_count[nb] == 0:
@@ -73,71 +141,73 @@ def _visit_uncut(inc, alive, mark, base, t, q):
             continue
         st = _state(mark, base, nb)
         if st == _LARGE:
-            return q, 2
+            return q, hk, 2, added
         if st == 0:
             mark[nb] = base + _GROWING
-            q = _enqueue(q, nb, True)
-    return q, near_cut
+            v = _rest_volume(X, tets[nb])
+            q, hk = _enqueue(q, hk, nb, True, v)
+            added += v
+    return q, hk, near_cut, added
 
 
 @njit(cache=True, nogil=True)
-def _enqueue(q, c, cheap):
-    """Put tet c on queue ``q`` (row 0 its members so far, row 1 uncut tets to visit, row 2 cut ones;
-    column 0 of each row holds its length)."""
-    for r in (0, 1 if cheap else 2):
-        k = q[r, 0] + 1
-        if k == q.shape[1]:
-            bigger = np.zeros((3, 2 * q.shape[1]), np.int64)
-            bigger[:, :q.shape[1]] = q
-            q = bigger
-        q[r, k] = c
-        q[r, 0] = k
-    return q
-
-
-@njit(cache=True, nogil=True)
-def _grow(X, tets, alive, inc, s, limit, mark, base, q):
-    """Grow the piece of live tet ``s``; returns (q, large): its members are ``q[0, 1:q[0, 0] + 1]``.
-
-    Uncut original tets are visited first, across faces (cheap): a large
-    piece is usually found large before the cut's sub-tets are scanned.
-    """
+def _scan_nodes(X, tets, alive, inc, t, mark, base, q, hk):
+    """Live tets sharing a node with tet t join the piece.  Returns (q, hk, large, added): ``large``
+    if a tet of a piece already found large shares one; ``added`` the rest volume that joined."""
     m0 = inc.sub_count.shape[0]
+    added = 0.0
+    for j in range(4):
+        v = tets[t, j]
+        sup = v if v < inc.n_orig else inc.def_nodes[v, 0]
+        for k in range(inc.node_tet_off[sup], inc.node_tet_off[sup + 1]):
+            o = inc.node_tet_idx[k]
+            lo, hi = o, o + 1
+            if inc.sub_count[o] > 0:
+                lo, hi = inc.sub_start[o], inc.sub_start[o] + inc.sub_count[o]
+            for c in range(lo, hi):
+                if not alive[c] or _state(mark, base, c) == _GROWING:
+                    continue
+                if tets[c, 0] != v and tets[c, 1] != v and tets[c, 2] != v and tets[c, 3] != v:
+                    continue
+                if _state(mark, base, c) == _LARGE:
+                    return q, hk, True, added
+                mark[c] = base + _GROWING
+                w = _rest_volume(X, tets[c])
+                q, hk = _enqueue(q, hk, c, c < m0, w)
+                added += w
+    return q, hk, False, added
+
+
+@njit(cache=True, nogil=True)
+def _grow(X, tets, alive, inc, s, limit, mark, base, q, hk):
+    """Grow the piece of live tet ``s``; returns (q, hk, large): its members are ``q[0, 1:q[0, 0] + 1]``.
+
+    A tet's volume counts when it joins.  Uncut original tets grow across
+    their faces (cheap), the largest first, and the scans of nodes' tets (a
+    cut tet's, or an uncut tet's next to a cut) wait until no uncut tet is
+    left to grow from: a large piece is usually found large after a few of
+    them (the cut runs through the skin's small tets; larger ones lie deeper).
+    A piece is a crumb only when both queues ran dry below the limit.
+    """
     q[:, 0] = 0
     mark[s] = base + _GROWING
-    q = _enqueue(q, s, s < m0)
-    vol = 0.0
-    while q[1, 0] > 0 or q[2, 0] > 0:
-        r = 1 if q[1, 0] > 0 else 2
-        t = q[r, q[r, 0]]
-        q[r, 0] -= 1
-        vol += _rest_volume(X, tets[t])
-        if vol > limit:
-            return q, True
-        if t < m0:
-            q, st = _visit_uncut(inc, alive, mark, base, t, q)
-            if st == 2:
-                return q, True
-            if st == 0:
-                continue
-        for j in range(4):
-            v = tets[t, j]
-            sup = v if v < inc.n_orig else inc.def_nodes[v, 0]
-            for k in range(inc.node_tet_off[sup], inc.node_tet_off[sup + 1]):
-                o = inc.node_tet_idx[k]
-                lo, hi = o, o + 1
-                if inc.sub_count[o] > 0:
-                    lo, hi = inc.sub_start[o], inc.sub_start[o] + inc.sub_count[o]
-                for c in range(lo, hi):
-                    if not alive[c] or _state(mark, base, c) == _GROWING:
-                        continue
-                    if tets[c, 0] != v and tets[c, 1] != v and tets[c, 2] != v and tets[c, 3] != v:
-                        continue
-                    if _state(mark, base, c) == _LARGE:
-                        return q, True
-                    mark[c] = base + _GROWING
-                    q = _enqueue(q, c, c < m0)
-    return q, False
+    vol = _rest_volume(X, tets[s])
+    q, hk = _enqueue(q, hk, s, s < inc.sub_count.shape[0], vol)
+    while vol <= limit and (q[1, 0] > 0 or q[2, 0] > 0):
+        if q[1, 0] > 0:
+            t = _pop_largest(q, hk)
+            q, hk, st, added = _visit_uncut(X, tets, inc, alive, mark, base, t, q, hk)
+            if st == 1:
+                q, hk = _push_nodes(q, hk, t)
+        else:
+            t = q[2, q[2, 0]]
+            q[2, 0] -= 1
+            q, hk, large, added = _scan_nodes(X, tets, alive, inc, t, mark, base, q, hk)
+            st = 2 if large else 0
+        if st == 2:
+            return q, hk, True
+        vol += added
+    return q, hk, vol > limit
 
 
 @njit(cache=True, nogil=True)
@@ -161,6 +231,7 @@ def loose_small_pieces(X, tets, alive, inc, seeds, limit, mark, base):
     n_pieces : int  crumbs found
     """
     q = np.zeros((3, 256), np.int64)
+    hk = np.zeros(256)
     out = np.empty(64, np.int64)
     n_out = 0
     n_pieces = 0
@@ -168,7 +239,7 @@ def loose_small_pieces(X, tets, alive, inc, seeds, limit, mark, base):
         s = seeds[i]
         if not alive[s] or _state(mark, base, s) != 0:
             continue
-        q, large = _grow(X, tets, alive, inc, s, limit, mark, base, q)
+        q, hk, large = _grow(X, tets, alive, inc, s, limit, mark, base, q, hk)
         flag = _LARGE if large else _CRUMB
         n = q[0, 0]
         for j in range(1, n + 1):
