@@ -320,7 +320,8 @@ def test_subdivision_kernels_match_twins_along_cut_paths(monkeypatch):
     patterns of every cut tet and every compact split are the twins' (the rules as first written,
     with dicts and lists): the same triangles and owners in the same order, the same split tets
     and angle, the refusals too (a volume floor raised to 5 % on the ball); with and without
-    centre nodes."""
+    centre nodes.  The kernel that searches the free diagonals picks what the same search in
+    Python picks."""
     from _cut_paths import delaunay_ball, jittered_block, make_path
     from _twins_cut import compact_split_twin, face_triangles_twin
 
@@ -351,7 +352,31 @@ def test_subdivision_kernels_match_twins_along_cut_paths(monkeypatch):
         calls["made" if got[0] is not None else "refused"] += 1
         return kernel(ct, x, o, tris, corner, face, group, vol_min)
 
-    monkeypatch.setattr(KP, "compact_split", both)
+    over_kernel = KP.compact_split_over_diagonals
+
+    def over_diagonals(ct, x, o, mask, centre_nodes, group, vol_min, free):
+        # the kernel's search against the same search in Python, each choice checked by both()
+        diag = ct.face_diag.copy()
+        got = over_kernel(ct, x, o, mask, centre_nodes, group, vol_min, free)
+        after = ct.face_diag.copy()
+        ct.face_diag[:] = diag
+        best = None
+        for bits in range(1 << free.shape[0]):
+            for i, (f, lo, hi) in enumerate(free.tolist()):
+                ct.face_diag[f] = hi if bits >> i & 1 else lo
+            tris, corner, face = KP.face_triangles(ct, o, mask, centre_nodes)
+            tets, angle = both(ct, x, o, tris, corner, face, group, vol_min)
+            if tets.shape[0] and (best is None or angle > best[5] + KP.SCORE_TIE_DEG):
+                best = (bits, tris, corner, face, tets, angle)
+        np.testing.assert_array_equal(ct.face_diag, after)
+        assert (got[0] < 0) == (best is None)
+        if best is not None:
+            assert got[0] == best[0] and got[5] == best[5]
+            for a, b in zip(got[1:5], best[1:5]):
+                np.testing.assert_array_equal(a, b)
+        return got
+
+    monkeypatch.setattr(KP, "compact_split_over_diagonals", over_diagonals)
     for (p, t), floor, centre in ((jittered_block(), SP.COMPACT_VOL_MIN, False), (delaunay_ball(), 0.05, False),
                                   (jittered_block(seed=3), SP.COMPACT_VOL_MIN, True)):
         monkeypatch.setattr(SP, "COMPACT_VOL_MIN", floor)

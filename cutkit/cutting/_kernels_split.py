@@ -526,3 +526,46 @@ def best_face_apex(x, tris, tri_face, face_nodes, vol_min):
         if worst > best + SCORE_TIE_DEG:
             best_lf, best = lf, worst
     return best_lf, best
+
+
+@njit(cache=True, nogil=True)
+def compact_split_over_diagonals(ct, x, o, mask, centre_nodes, group, vol_min, free):
+    """The best compact split of original tet ``o`` over every choice of its free split-face diagonals
+    (:func:`cutkit.cutting.splits.compact_split`).
+
+    Parameters
+    ----------
+    ct : CutTables
+        ``ct.face_diag`` is written: each free face is left on the last choice tried.
+    x : (n, 3) float64
+    o, mask : int
+        The tet and its cut edges (6-bit, reduced).
+    centre_nodes : bool
+    group : (4,) int64
+        Side (0 or 1) of each corner.
+    vol_min : float
+        mm^3.
+    free : (f, 3) int64
+        The free diagonals: a split face, the vertex of its default diagonal and of the other;
+        choice ``bits`` takes the other one at face ``i`` when bit ``i`` is set.
+
+    Returns
+    -------
+    (bits, tris, corner, face, tets, angle)
+        The best choice (the first of equals within :data:`SCORE_TIE_DEG`, the default diagonals
+        first) with its face triangles, their corners and faces (:func:`face_triangles`), its
+        tets (p, 4) and their smallest dihedral angle in degrees (:func:`compact_split`); bits
+        -1 and no tets when no choice passes the volume test.
+    """
+    best_bits, best_angle = -1, 0.0
+    tris, corner, face = face_triangles(ct, o, mask, centre_nodes)
+    best_tris, best_corner, best_face, best_tets = tris, corner, face, np.zeros((0, 4), np.int64)
+    for bits in range(1 << free.shape[0]):
+        for i in range(free.shape[0]):
+            ct.face_diag[free[i, 0]] = free[i, 2] if bits >> i & 1 else free[i, 1]
+        tris, corner, face = face_triangles(ct, o, mask, centre_nodes)
+        tets, angle = compact_split(ct, x, o, tris, corner, face, group, vol_min)
+        if tets.shape[0] and (best_bits < 0 or angle > best_angle + SCORE_TIE_DEG):
+            best_bits, best_angle = bits, angle
+            best_tris, best_corner, best_face, best_tets = tris, corner, face, tets
+    return best_bits, best_tris, best_corner, best_face, best_tets, best_angle
