@@ -39,10 +39,17 @@ def _rest_volume(X, tv):
 
 
 @njit(cache=True, nogil=True)
-def _state(mark, base, t):
-    """State of tet t in this call (0: not seen)."""
-    v = mark[t] - base
+def _state(marks, t):
+    """State of tet t in this call (0: not seen); ``marks`` is (mark, base), as
+    :func:`loose_small_pieces` takes them."""
+    v = marks[0][t] - marks[1]
     return v if v > 0 else 0
+
+
+@njit(cache=True, nogil=True)
+def _set_state(marks, t, state):
+    """Tet t takes ``state`` in this call."""
+    marks[0][t] = marks[1] + state
 
 
 @njit(cache=True, nogil=True)
@@ -124,7 +131,7 @@ def _pop_largest(q, hk):
 
 
 @njit(cache=True, nogil=True)
-def _visit_uncut(X, tets, inc, alive, mark, base, t, q, hk):
+def _visit_uncut(X, tets, inc, alive, marks, t, q, hk):
     """Face neighbours of uncut original tet t that are uncut too join the piece (``q``).
 
     Returns (q, hk, state, added): state 1 if a cut tet is next to t (its
@@ -139,11 +146,11 @@ def _visit_uncut(X, tets, inc, alive, mark, base, t, q, hk):
         if inc.sub_count[nb] > 0:
             near_cut = 1
             continue
-        st = _state(mark, base, nb)
+        st = _state(marks, nb)
         if st == _LARGE:
             return q, hk, 2, added
         if st == 0:
-            mark[nb] = base + _GROWING
+            _set_state(marks, nb, _GROWING)
             v = _rest_volume(X, tets[nb])
             q, hk = _enqueue(q, hk, nb, True, v)
             added += v
@@ -151,7 +158,7 @@ def _visit_uncut(X, tets, inc, alive, mark, base, t, q, hk):
 
 
 @njit(cache=True, nogil=True)
-def _scan_nodes(X, tets, alive, inc, t, mark, base, q, hk):
+def _scan_nodes(X, tets, alive, inc, t, marks, q, hk):
     """Live tets sharing a node with tet t join the piece.  Returns (q, hk, large, added): ``large``
     if a tet of a piece already found large shares one; ``added`` the rest volume that joined."""
     m0 = inc.sub_count.shape[0]
@@ -165,13 +172,13 @@ def _scan_nodes(X, tets, alive, inc, t, mark, base, q, hk):
             if inc.sub_count[o] > 0:
                 lo, hi = inc.sub_start[o], inc.sub_start[o] + inc.sub_count[o]
             for c in range(lo, hi):
-                if not alive[c] or _state(mark, base, c) == _GROWING:
+                if not alive[c] or _state(marks, c) == _GROWING:
                     continue
                 if tets[c, 0] != v and tets[c, 1] != v and tets[c, 2] != v and tets[c, 3] != v:
                     continue
-                if _state(mark, base, c) == _LARGE:
+                if _state(marks, c) == _LARGE:
                     return q, hk, True, added
-                mark[c] = base + _GROWING
+                _set_state(marks, c, _GROWING)
                 w = _rest_volume(X, tets[c])
                 q, hk = _enqueue(q, hk, c, c < m0, w)
                 added += w
@@ -179,7 +186,7 @@ def _scan_nodes(X, tets, alive, inc, t, mark, base, q, hk):
 
 
 @njit(cache=True, nogil=True)
-def _grow(X, tets, alive, inc, s, limit, mark, base, q, hk):
+def _grow(X, tets, alive, inc, s, limit, marks, q, hk):
     """Grow the piece of live tet ``s``; returns (q, hk, large): its members are ``q[0, 1:q[0, 0] + 1]``.
 
     A tet's volume counts when it joins.  Uncut original tets grow across
@@ -190,19 +197,19 @@ def _grow(X, tets, alive, inc, s, limit, mark, base, q, hk):
     A piece is a crumb only when both queues ran dry below the limit.
     """
     q[:, 0] = 0
-    mark[s] = base + _GROWING
+    _set_state(marks, s, _GROWING)
     vol = _rest_volume(X, tets[s])
     q, hk = _enqueue(q, hk, s, s < inc.sub_count.shape[0], vol)
     while vol <= limit and (q[1, 0] > 0 or q[2, 0] > 0):
         if q[1, 0] > 0:
             t = _pop_largest(q, hk)
-            q, hk, st, added = _visit_uncut(X, tets, inc, alive, mark, base, t, q, hk)
+            q, hk, st, added = _visit_uncut(X, tets, inc, alive, marks, t, q, hk)
             if st == 1:
                 q, hk = _push_nodes(q, hk, t)
         else:
             t = q[2, q[2, 0]]
             q[2, 0] -= 1
-            q, hk, large, added = _scan_nodes(X, tets, alive, inc, t, mark, base, q, hk)
+            q, hk, large, added = _scan_nodes(X, tets, alive, inc, t, marks, q, hk)
             st = 2 if large else 0
         if st == 2:
             return q, hk, True
@@ -230,6 +237,7 @@ def loose_small_pieces(X, tets, alive, inc, seeds, limit, mark, base):
     crumbs : (c,) int64  the crumbs' tets, piece after piece
     n_pieces : int  crumbs found
     """
+    marks = (mark, base)
     q = np.zeros((3, 256), np.int64)
     hk = np.zeros(256)
     out = np.empty(64, np.int64)
@@ -237,13 +245,13 @@ def loose_small_pieces(X, tets, alive, inc, seeds, limit, mark, base):
     n_pieces = 0
     for i in range(seeds.shape[0]):
         s = seeds[i]
-        if not alive[s] or _state(mark, base, s) != 0:
+        if not alive[s] or _state(marks, s) != 0:
             continue
-        q, hk, large = _grow(X, tets, alive, inc, s, limit, mark, base, q, hk)
+        q, hk, large = _grow(X, tets, alive, inc, s, limit, marks, q, hk)
         flag = _LARGE if large else _CRUMB
         n = q[0, 0]
         for j in range(1, n + 1):
-            mark[q[0, j]] = base + flag
+            _set_state(marks, q[0, j], flag)
         if not large:
             for j in range(1, n + 1):
                 out = _push(out, n_out, q[0, j])
