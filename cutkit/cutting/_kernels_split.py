@@ -225,13 +225,15 @@ def best_compact_split(x, tets, starts, rotation, side, n_rotations, vol_min):
     for i in range(n_c):
         worst = np.inf
         lowest = np.inf
+        r, s = rotation[i], side[i]
         for t in range(starts[i], starts[i + 1]):
             lowest = min(lowest, min_volume(x, tets[t:t + 1]))
             tet_dihedrals(x, tets, t, normals, angles)
             for e in range(6):
                 worst = min(worst, angles[t, e])
+            if worst <= side_best[r, s] + SCORE_TIE_DEG:
+                break  # its score can only fall (or be -1): it cannot replace the side's best
         score = worst if lowest >= vol_min else -1.0
-        r, s = rotation[i], side[i]
         if score > side_best[r, s] + SCORE_TIE_DEG:
             side_best[r, s] = score
             side_pick[r, s] = i
