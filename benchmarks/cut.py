@@ -5,12 +5,18 @@ incision with a slight wobble; the per-step cost should not depend on the
 model size (all work is local to the blade).
 
     python benchmarks/cut.py [--json] [--sizes 10k,100k,1M] [--steps 200] [--model knee.h5] [--simulate knee.h5]
+                             [--cold]
 
 ``--model`` also cuts a model file (e.g. the demo's ``knee.h5``) along the
 shipped incision (``sample_volumes/incision.csv``) and reports its step
 times, whether the written mesh passes ``cutkit check``, and the end of the
 stroke: the rebase of the cut mesh (``rebase_s``) and, within it, finding
 the copies of edges and faces along the cut (``find_twins_s``).
+
+``--cold`` times a 40-step cut of a small box (8 x 8 x 8 cubes) in a fresh
+interpreter twice: with an empty numba cache (``NUMBA_CACHE_DIR`` a new
+folder: every kernel of the cut compiles) and again with that cache filled
+(the kernels load): ``cold_s`` and ``warm_s``, import and mesh excluded.
 
 ``--simulate`` runs ``cutkit simulate`` on a model file with the shipped
 incision (no frames, the default element model; a first run loads the
@@ -101,6 +107,32 @@ def bench_simulate(path, trajectory):
             "handover_p90_ms": c["handover_p90"], "new_tets_per_cut_tet": s["new_tets"] / max(s["cut_tets"], 1)}
 
 
+_COLD_CUT = """
+import time, numpy as np
+from cutkit.cutting import CutMesh, cut_step
+from cutkit.mesh.generate import box_mesh
+cm = CutMesh(*box_mesh((8, 8, 8)), blade_length=4.0)
+t0 = time.perf_counter()
+for x in np.linspace(-0.5, 6.0, 40):
+    cut_step(cm, np.array([x, 3.3 + 0.2 * np.sin(x), 3.1]), np.array([0.0, 0.0, 1.0]))
+print(time.perf_counter() - t0)
+"""
+
+
+def bench_cold():
+    """Seconds of a small cut with every kernel compiled (empty cache) and then loaded."""
+    import os
+    import subprocess
+    import sys
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as cache:
+        env = dict(os.environ, NUMBA_CACHE_DIR=cache)
+        out = [float(subprocess.run([sys.executable, "-c", _COLD_CUT], env=env, check=True, capture_output=True,
+                                    text=True).stdout.split()[-1]) for _ in range(2)]
+    return {"cold_s": out[0], "warm_s": out[1]}
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--json", action="store_true")
@@ -109,8 +141,11 @@ def main():
     ap.add_argument("--model", default=None, help="also cut this model file along --trajectory")
     ap.add_argument("--trajectory", default="sample_volumes/incision.csv")
     ap.add_argument("--simulate", default=None, help="also time the cut steps of `cutkit simulate` on this model")
+    ap.add_argument("--cold", action="store_true", help="also time a small cut with an empty numba cache")
     args = ap.parse_args()
     res = {s: bench(SIZES[s], args.steps) for s in args.sizes.split(",") if s}
+    if args.cold:
+        res["cold"] = bench_cold()
     if args.model:
         res[args.model] = bench_model(args.model, args.trajectory)
     if args.simulate:
@@ -119,6 +154,9 @@ def main():
         print(json.dumps(res, indent=2))
     else:
         for s, r in res.items():
+            if s == "cold":
+                print(f" cold: a 40-step cut {r['cold_s']:.1f} s compiling, {r['warm_s']:.2f} s with the kernels cached")
+                continue
             print(f"{s:>5}: {r['tets']} tets, median step {r['median_step_ms']:.2f} ms, "
                   f"p90 {r['p90_step_ms']:.2f} ms, {r['new_tets_per_cut_tet']:.1f} tets per cut tet"
                   + (f", check {'passed' if r['check_passed'] else 'FAILED'}" if "check_passed" in r else ""))
