@@ -781,8 +781,9 @@ class ElasticTissue(TissueBase):
                             self.prestrain[orig], self.fibre[orig], ids=redo)
             placed = np.concatenate([old_moved, np.arange(n_old, n_new)])
             self._unfold(redo, placed, np.concatenate([x_before, self.state.positions[n_old:n_new]]))
-        self._hold_orphans(np.unique(np.concatenate([store.tet_corners[np.concatenate([removed, redo])].ravel(),
-                                                     np.arange(n_old, n_new)])))
+        # (a node listed twice is looked at twice, to the same effect: no sort for np.unique)
+        self._hold_orphans(np.concatenate([store.tet_corners[np.concatenate([removed, redo])].ravel(),
+                                           np.arange(n_old, n_new)]))
         self._recolour(added, n_old)
         if self.r2.shape[0] < em.n_nodes:
             self.r2 = append_rows(self.r2, np.zeros(em.n_nodes - self.r2.shape[0]))
@@ -791,7 +792,7 @@ class ElasticTissue(TissueBase):
         touched = [np.arange(n_old, em.n_nodes), moved]
         if redo.size:
             touched.append(em.tets[redo].ravel())
-        self._seeds.append(np.unique(np.concatenate(touched)))
+        self._seeds.append(np.concatenate(touched))  # marked once each by step_seeds, repeats or not
         if self._newton is not None:
             self._newton.reset()  # nodes and elements changed: the matrix pattern is updated
         self.hessian_pattern.changed()
