@@ -492,3 +492,18 @@ def test_rows_reserved_before_the_elements_are_the_rows_laid_out_after():
     uncoloured = elastic.ElementModel.empty(model.n_points, model.n_tets)
     with pytest.raises(ValueError, match="coloured"):
         uncoloured.reserve_rows(model.tets)
+
+
+def test_mass_shares_add_as_numpy_adds_them_in_order():
+    """``add_mass_shares`` gives ``np.add.at``'s sums to the bit (the same additions in the same
+    order), repeated corners and negative shares (a removal) included."""
+    from cutkit.relax import _adjacency_kernels as KA
+
+    rng = np.random.default_rng(3)
+    tets = rng.integers(0, 40, size=(300, 4))
+    share = rng.uniform(-1.0, 1.0, 300) * 10.0 ** rng.integers(-9, 3, 300)
+    want = rng.uniform(0.0, 1.0, 40)
+    got = want.copy()
+    np.add.at(want, tets.ravel(), np.repeat(share, 4))
+    KA.add_mass_shares(got, tets, share)
+    np.testing.assert_array_equal(got, want)

@@ -1,4 +1,4 @@
-"""Numba kernels that keep the element model's node table: adjacency rows and colour classes.
+"""Numba kernels that keep the element model's node table: adjacency rows, colour classes, masses.
 
 A node's adjacency row (:class:`~cutkit.relax._elastic_kernels.Adjacency`)
 holds, for each tet around it, the tet, the node's corner, the three other
@@ -59,6 +59,24 @@ def colour_classes(colour, movable, n_colours):
             nodes[fill[colour[i]]] = i
             fill[colour[i]] += 1
     return counts, nodes
+
+
+@njit(cache=True, nogil=True)
+def add_mass_shares(masses, tets, share):
+    """``masses[tets[k, j]] += share[k]`` for every tet k and corner j, in that order (the sums of
+    ``np.add.at(masses, tets.ravel(), np.repeat(share, 4))`` to the bit, without its dispatch).
+
+    Parameters
+    ----------
+    masses : (n,) float64
+        Changed in place.
+    tets : (k, 4) int64
+    share : (k,) float64
+        Each tet's mass share per corner (negative to take it out).
+    """
+    for k in range(tets.shape[0]):
+        for j in range(4):
+            masses[tets[k, j]] += share[k]
 
 
 @njit(cache=True, nogil=True)

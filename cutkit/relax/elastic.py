@@ -240,7 +240,7 @@ class ElementModel:
         self.lam[ids] = lam
         share = np.asarray(density, np.float64) * np.maximum(rest_volume, 0.0) / 4.0
         self.mass_share[ids] = share
-        np.add.at(self.masses, tets.ravel(), np.repeat(share, 4))
+        KA.add_mass_shares(self.masses, tets, share)
         self.n_elements = max(self.n_elements, int(ids.max()) + 1)
         self._make_room(tets.ravel())
         KA.add_to_adjacency(self.adjacency, self.tets, K.node_term_rows(Dminv, volume, self.mu[ids], self.lam[ids]),
@@ -256,8 +256,8 @@ class ElementModel:
         if self._tet_mark is None or self._tet_mark.shape[0] < self.tets.shape[0]:
             self._tet_mark = np.zeros(self.tets.shape[0], bool)  # all False between calls
         KA.remove_from_adjacency(self.adjacency, self.tets, ids, self._tet_mark)
+        KA.add_mass_shares(self.masses, self.tets[ids], -self.mass_share[ids])
         corners = self.tets[ids].ravel()
-        np.add.at(self.masses, corners, np.repeat(-self.mass_share[ids], 4))
         self.masses[corners[self.adj_degree[corners] == 0]] = 0.0  # exactly: what is left is rounding
         self.volume[ids] = 0.0
         self.mass_share[ids] = 0.0
