@@ -46,7 +46,17 @@ def _t_cone(tris, keep):
 
 @njit(cache=True, nogil=True)
 def partial_cone(ct, x, o, mask, tb, free_T, notch_cone, rule, spare):
-    """The sub-tets of partly cut original tet ``o``.
+    """The sub-tets of original tet ``o``, coned over its Fig. 2 face triangles.
+
+    Where the tip's path crossed the tet and left it (``notch_cone``), its
+    crack front runs between its notched faces' nodes F: the cone from one
+    of them over the other faces' triangles (:func:`best_face_apex`) tiles
+    the tet without T and with fewer tets (the notched face's own triangles
+    are not coned).  It is kept unless it is poor (below ``angle_good``) and
+    the T-cone is better by ``angle_gain``, the rule of the complete
+    splits' compact cones.  Otherwise the triangles are coned to T: at the
+    tip, or (``free_T``) from the cut nodes' centroid towards the tet's
+    centroid where its cone is best shaped (:func:`best_cone_apex`).
 
     Parameters
     ----------

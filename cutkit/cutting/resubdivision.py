@@ -100,14 +100,14 @@ def _split(cm, o, mask, case, group):
         tb = K.cut_nodes_centroid(ct, o, mask)
     tb = clamp_bary(tb, TET_BARY_MIN)
     new, choice = None, []
-    if case != "general":  # a forked face: one T per piece, always the T-cone
+    if case != "general":
         tris, corner, face, new, angle, choice = compact_split(cm, ct, o, mask, group)
         if new is not None and angle < SPLIT_ANGLE_GOOD:
             # a poor compact cone: the T-cone may be better (more tets, but no sliver)
             tb_c, cone = _best_T(cm, v, tb, tris, free_T)
             if cone > angle + SPLIT_ANGLE_GAIN:
                 new, tb = None, tb_c
-    else:
+    else:  # a forked face: one T per piece, always the T-cone
         tris, corner, face = KP.face_triangles(ct, o, mask, cm.centre_nodes)
         if free_T:
             tb, _ = _best_T(cm, v, tb, tris, free_T)
