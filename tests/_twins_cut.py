@@ -598,32 +598,3 @@ def loose_small_pieces_twin(X, tets, alive, seeds, limit):
     crumbs = {find(int(s)) for s in seeds if alive[s] and vol[find(int(s))] <= limit}
     out = sorted(t for t in live.tolist() if find(t) in crumbs)
     return np.array(out, np.int64), len(crumbs)
-
-
-def partial_cone_twin(cm, o, mask):
-    """A tet coned over its faces (partly cut, or a complete split with compact splits off), by the
-    rule in plain Python over the twins above: (tets as 4-tuples with -1 for T, coned to T, T's
-    weights)."""
-    from cutkit.cutting.resubdivision import T_BLENDS
-    from cutkit.cutting.splits import COMPACT_VOL_MIN, SPLIT_ANGLE_GAIN, SPLIT_ANGLE_GOOD
-    from cutkit.cutting.tolerances import TET_BARY_MIN
-
-    x, corners = cm._x, cm.orig_tets[o]
-    tb = cm.tip_bary.get(o)
-    free = tb is None
-    tb = clamp_bary_twin(cut_nodes_centroid_twin(cm, o, mask) if free else tb, TET_BARY_MIN)
-    pattern = face_triangles_twin(cm, o, mask)
-    tris, faces = [t for t, _, _ in pattern], [f for _, _, f in pattern]
-    blends = T_BLENDS if free else (0.0,)
-    t_cone = [(a, c, b, -1) for a, b, c in tris]
-    if o == cm.tip_tet:  # the tip is inside: T
-        if free:
-            tb = best_cone_apex_twin(x, corners, tb, blends, tris, TET_BARY_MIN)[0]
-        return t_cone, True, tb
-    face_nodes = [int(cm.face_node[f, 0]) if cm.face_ncut[f] == 1 else -1 for f in cm.tet_faces[o].tolist()]
-    lf, angle = best_face_apex_twin(x, tris, faces, face_nodes, COMPACT_VOL_MIN * min_volume_twin(x, [corners]))
-    if lf < 0 or angle < SPLIT_ANGLE_GOOD:
-        tb_cone, cone = best_cone_apex_twin(x, corners, tb, blends, tris, TET_BARY_MIN)
-        if lf < 0 or cone > angle + SPLIT_ANGLE_GAIN:
-            return t_cone, True, tb_cone
-    return [(a, c, b, face_nodes[lf]) for (a, b, c), f in zip(tris, faces) if f != lf], False, tb

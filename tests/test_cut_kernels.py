@@ -320,8 +320,7 @@ def test_subdivision_kernels_match_twins_along_cut_paths(monkeypatch):
     patterns of every cut tet and every compact split are the twins' (the rules as first written,
     with dicts and lists): the same triangles and owners in the same order, the same split tets
     and angle, the refusals too (a volume floor raised to 5 % on the ball); with and without
-    centre nodes.  The kernel that searches the free diagonals picks what the same search in
-    Python picks."""
+    centre nodes."""
     from _cut_paths import delaunay_ball, jittered_block, make_path
     from _twins_cut import compact_split_twin, face_triangles_twin
 
@@ -352,31 +351,7 @@ def test_subdivision_kernels_match_twins_along_cut_paths(monkeypatch):
         calls["made" if got[0] is not None else "refused"] += 1
         return kernel(ct, x, o, tris, corner, face, group, vol_min)
 
-    over_kernel = KP.compact_split_over_diagonals
-
-    def over_diagonals(ct, x, o, mask, centre_nodes, group, vol_min, free):
-        # the kernel's search against the same search in Python, each choice checked by both()
-        diag = ct.face_diag.copy()
-        got = over_kernel(ct, x, o, mask, centre_nodes, group, vol_min, free)
-        after = ct.face_diag.copy()
-        ct.face_diag[:] = diag
-        best = None
-        for bits in range(1 << free.shape[0]):
-            for i, (f, lo, hi) in enumerate(free.tolist()):
-                ct.face_diag[f] = hi if bits >> i & 1 else lo
-            tris, corner, face = KP.face_triangles(ct, o, mask, centre_nodes)
-            tets, angle = both(ct, x, o, tris, corner, face, group, vol_min)
-            if tets.shape[0] and (best is None or angle > best[5] + KP.SCORE_TIE_DEG):
-                best = (bits, tris, corner, face, tets, angle)
-        np.testing.assert_array_equal(ct.face_diag, after)
-        assert (got[0] < 0) == (best is None)
-        if best is not None:
-            assert got[0] == best[0] and got[5] == best[5]
-            for a, b in zip(got[1:5], best[1:5]):
-                np.testing.assert_array_equal(a, b)
-        return got
-
-    monkeypatch.setattr(KP, "compact_split_over_diagonals", over_diagonals)
+    monkeypatch.setattr(KP, "compact_split", both)
     for (p, t), floor, centre in ((jittered_block(), SP.COMPACT_VOL_MIN, False), (delaunay_ball(), 0.05, False),
                                   (jittered_block(seed=3), SP.COMPACT_VOL_MIN, True)):
         monkeypatch.setattr(SP, "COMPACT_VOL_MIN", floor)
@@ -395,54 +370,6 @@ def test_subdivision_kernels_match_twins_along_cut_paths(monkeypatch):
                         assert as_list(cm, o, *got) == face_triangles_twin(cm, o, mask)
                         calls["faces"] += 1
     assert calls["made"] > 50 and calls["refused"] > 0 and calls["faces"] > 1000
-
-
-def test_the_cone_of_faces_kernel_matches_its_twin_along_cut_paths():
-    """Along cut paths (jittered block and Delaunay ball; tremor, crossing; compact splits
-    off on one block, so complete splits are coned too), every tet a step re-subdivides that is
-    coned over its faces gets from ``_kernels_resub.partial_cone`` the cone the rule written over
-    the twins gives: the same tets in the same order, F-cone or T-cone, and T's weights."""
-    from _cut_paths import delaunay_ball, jittered_block, make_path
-    from _twins_cut import partial_cone_twin
-
-    from cutkit.cutting import _kernels_resub as KR
-    from cutkit.cutting import cut_step
-    from cutkit.cutting import subdivision as S
-    from cutkit.cutting.resubdivision import T_BLENDS
-    from cutkit.cutting.splits import COMPACT_VOL_MIN, SPLIT_ANGLE_GAIN, SPLIT_ANGLE_GOOD
-    from cutkit.cutting.tolerances import TET_BARY_MIN
-
-    rule = KR.ConeRule(False, np.array(T_BLENDS), np.zeros(1), TET_BARY_MIN, COMPACT_VOL_MIN, SPLIT_ANGLE_GOOD,
-                       SPLIT_ANGLE_GAIN)
-    seen = {"F": 0, "T": 0, "complete": 0}
-    for (p, t), compact in ((jittered_block(), True), (delaunay_ball(), True), (jittered_block(seed=3), False)):
-        L = p.max(axis=0)
-        for seed, (kind, tremor) in enumerate([("tremor", 0.3), ("crossing", 1.0)]):
-            cm = CutMesh(p, t, compact_splits=compact)
-            for pose in make_path(kind, np.random.default_rng(seed), L, tremor):
-                if pose is None:
-                    cm.rebase()
-                    continue
-                before = cm.sub_start.copy()
-                cut_step(cm, *pose)
-                for o in np.flatnonzero(cm.sub_start != before).tolist():  # re-subdivided this step
-                    mask = S.REDUCE_TABLE[cm.tet_mask(o)]
-                    case = S.CLASSIFY_TABLE[mask][0]
-                    if case != "partial" and (compact or case == "general"):
-                        continue
-                    tb = cm.tip_bary.get(o)
-                    cm.store.reserve_nodes(1)
-                    tets, _, t_cone, tb_got = KR.partial_cone(
-                        cm.cut_tables(), cm._x, o, mask, np.zeros(4) if tb is None else np.asarray(tb, np.float64),
-                        tb is None, o != cm.tip_tet, rule, cm.n_points)
-                    want, t_cone_want, tb_want = partial_cone_twin(cm, o, mask)
-                    assert [tuple(q) for q in tets.tolist()] == want
-                    assert t_cone == t_cone_want
-                    if t_cone:
-                        np.testing.assert_allclose(tb_got, tb_want, rtol=0, atol=1e-12)
-                    seen["T" if t_cone else "F"] += 1
-                    seen["complete"] += case != "partial"
-    assert seen["F"] > 50 and seen["T"] > 50 and seen["complete"] > 10, seen
 
 
 def test_the_vectorised_oracle_is_the_scalar_one():

@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from cutkit.cutting import _kernels_resub as KR
 from cutkit.cutting import _kernels_split as KP
 from cutkit.cutting import _kernels_step as K
 from cutkit.cutting import subdivision as S
@@ -28,10 +27,6 @@ from cutkit.cutting.splits import COMPACT_VOL_MIN, SPLIT_ANGLE_GAIN, SPLIT_ANGLE
 T_BLENDS = (0.0, 0.35, 0.7)
 _T_BLENDS = np.array(T_BLENDS)
 _T_AT_CENTROID = np.zeros(1)
-#: The rules of a partly cut tet's cone, without and with centre nodes (``_kernels_resub.ConeRule``).
-_CONE_RULES = {c: KR.ConeRule(c, _T_BLENDS, _T_AT_CENTROID, TET_BARY_MIN, COMPACT_VOL_MIN, SPLIT_ANGLE_GOOD,
-                              SPLIT_ANGLE_GAIN) for c in (False, True)}
-_NO_TIP = np.zeros(4)
 
 
 def _cone(tris, apex):
@@ -48,11 +43,43 @@ def resubdivide(cm, o):
     case, group = S.CLASSIFY_TABLE[mask]
     if case == "uncut":
         return
+    v = cm.orig_tets[o].tolist()
+    # tip / centre node T
+    tb = cm.tip_bary.get(o)
+    free_T = tb is None  # no tip inside: T may go where its cone is best shaped
+    ct = cm.cut_tables()
+    if free_T:  # the mean of the tet's cut nodes
+        tb = K.cut_nodes_centroid(ct, o, mask)
+    tb = clamp_bary(tb, TET_BARY_MIN)
+    complete = case in ("corner", "quad")
+    general = case == "general"  # a forked face: one T per piece, always the T-cone
     group = np.array(group, np.int64)  # side (piece) of each corner
-    if case == "partial" or (case != "general" and not cm.compact_splits):
-        new, choice = _cone_of_faces(cm, o, mask, case != "partial", group), []
+    new, choice = None, []
+    if general:
+        tris, corner, face = KP.face_triangles(ct, o, mask, cm.centre_nodes)
+        if free_T:
+            tb, _ = _best_T(cm, v, tb, tris, free_T)
+    elif complete and cm.compact_splits:
+        tris, corner, face, new, angle, choice = compact_split(cm, ct, o, mask, group)
+        if new is not None and angle < SPLIT_ANGLE_GOOD:
+            # a poor compact cone: the T-cone may be better (more tets, but no sliver)
+            tb_c, cone = _best_T(cm, v, tb, tris, free_T)
+            if cone > angle + SPLIT_ANGLE_GAIN:
+                new, tb = None, tb_c
     else:
-        new, choice = _split(cm, o, mask, case, group)
+        tris, corner, face = KP.face_triangles(ct, o, mask, cm.centre_nodes)
+        if o != cm.tip_tet:  # no tip inside: the crack front may run between notch nodes
+            new, tb = _face_apex_cone(cm, o, v, tb, free_T, tris, face)
+        elif free_T:
+            tb, _ = _best_T(cm, v, tb, tris, free_T)
+    if new is None:
+        for c in range(int(group.max()) + 1 if complete or general else 1):
+            if cm.tet_T[o, c] < 0:
+                cm.tet_T[o, c] = cm._new_node(v, tb)
+            else:
+                cm._move_node(cm.tet_T[o, c], v, tb)
+        # the cone of the face triangles to T (each piece's copy of T for a complete split or a general tet)
+        new = _cone(tris, cm.tet_T[o][group[corner]] if complete or general else cm.tet_T[o, 0])
     # replace the old sub-tets
     old = forget_crumb_tets(cm, cm.subtets.get(o, [o]))  # a crumb's tets are dead already
     cm.remove_tets(old)
@@ -64,62 +91,29 @@ def resubdivide(cm, o):
         resubdivide(cm, nb)
 
 
-def _cone_of_faces(cm, o, mask, complete, group):
-    """The sub-tets (k, 4) int64 of tet ``o`` coned over its face triangles: from a notch node F where
-    the tip has left the tet and that cone is well shaped, else to T (each piece's copy of T in a
-    ``complete`` split, pieces by ``group`` (4,) int64).  One kernel call
-    (``_kernels_resub.partial_cone``); T is made or moved here."""
-    tb = cm.tip_bary.get(o)
-    free_T = tb is None  # no tip inside: T may go where its cone is best shaped
-    cm.store.reserve_nodes(1)  # the spare row of T's candidates
-    new, corner, t_cone, tb = KR.partial_cone(cm.cut_tables(), cm._x, o, mask,
-                                              _NO_TIP if free_T else np.asarray(tb, np.float64), free_T,
-                                              o != cm.tip_tet, _CONE_RULES[bool(cm.centre_nodes)], cm.n_points)
-    if t_cone:
-        v = cm.orig_tets[o].tolist()
-        for c in range(int(group.max()) + 1 if complete else 1):
-            if cm.tet_T[o, c] < 0:
-                cm.tet_T[o, c] = cm._new_node(v, tb)
-            else:
-                cm._move_node(cm.tet_T[o, c], v, tb)
-        new[:, 3] = cm.tet_T[o][group[corner]] if complete else cm.tet_T[o, 0]
-    return new
+def _face_apex_cone(cm, o, v, tb, free_T, tris, face):
+    """The cone of a partly cut tet no tip is in from one of its notch nodes F, or the T-cone.
 
-
-def _split(cm, o, mask, case, group):
-    """The sub-tets (k, 4) int64 of a forked tet ``o`` (``case`` "general") or of a complete split with
-    compact splits on, and the split faces' diagonals it chose
-    (:func:`~cutkit.cutting.splits.fix_diagonals`): its compact split where one is well shaped, else
-    each piece's face triangles coned to its copy of T.  ``group`` (4,) int64: the side (piece) of
-    each corner."""
-    v = cm.orig_tets[o].tolist()
-    tb = cm.tip_bary.get(o)
-    free_T = tb is None  # no tip inside: T may go where its cone is best shaped
-    ct = cm.cut_tables()
-    if free_T:  # the mean of the tet's cut nodes
-        tb = K.cut_nodes_centroid(ct, o, mask)
-    tb = clamp_bary(tb, TET_BARY_MIN)
-    new, choice = None, []
-    if case != "general":
-        tris, corner, face, new, angle, choice = compact_split(cm, ct, o, mask, group)
-        if new is not None and angle < SPLIT_ANGLE_GOOD:
-            # a poor compact cone: the T-cone may be better (more tets, but no sliver)
-            tb_c, cone = _best_T(cm, v, tb, tris, free_T)
-            if cone > angle + SPLIT_ANGLE_GAIN:
-                new, tb = None, tb_c
-    else:  # a forked face: one T per piece, always the T-cone
-        tris, corner, face = KP.face_triangles(ct, o, mask, cm.centre_nodes)
-        if free_T:
-            tb, _ = _best_T(cm, v, tb, tris, free_T)
-    if new is None:
-        for c in range(int(group.max()) + 1):
-            if cm.tet_T[o, c] < 0:
-                cm.tet_T[o, c] = cm._new_node(v, tb)
-            else:
-                cm._move_node(cm.tet_T[o, c], v, tb)
-        # the cone of the face triangles to each piece's copy of T
-        new = _cone(tris, cm.tet_T[o][group[corner]])
-    return new, choice
+    The tip's path crossed the tet and left it, so its crack front runs
+    between its notched faces' nodes: the cone from one of them over the
+    other faces' triangles (``_kernels_split.best_face_apex``) tiles the tet
+    without T and with fewer tets (a notched face's four triangles are not
+    coned).  It is kept unless it is poor (below ``SPLIT_ANGLE_GOOD``) and the
+    T-cone is better by ``SPLIT_ANGLE_GAIN``: the rule of the complete splits'
+    compact cones.  Returns ``(cone, tb)``: the F-cone's tets (k, 4) or None
+    for the T-cone, and T's barycentric weights (placed by
+    :func:`_best_T` where it was looked at).
+    """
+    f = cm.tet_faces[o]
+    face_nodes = np.where(cm.face_ncut[f] == 1, cm.face_node[f, 0], -1)
+    lf, angle = -1, -1.0
+    if (face_nodes >= 0).any():
+        lf, angle = KP.best_face_apex(cm._x, tris, face, face_nodes, COMPACT_VOL_MIN * float(cm._vol0(o)))
+    if lf < 0 or angle < SPLIT_ANGLE_GOOD:
+        tb, cone = _best_T(cm, v, tb, tris, free_T)
+        if lf < 0 or cone > angle + SPLIT_ANGLE_GAIN:
+            return None, tb
+    return _cone(tris[face != lf], face_nodes[lf]), tb
 
 
 def _best_T(cm, v, tb, tris, free):

@@ -305,7 +305,7 @@ def _follow_tip(cm: CutMesh, tip_tet: int, P1, changed: set) -> None:
         if tip_tet not in changed:
             cm.move_tip_node(tip_tet)
     # where the tip left a tet, its T node stays (freezes) and the tet may cone to a notch node
-    # instead (_kernels_resub.partial_cone); a cut tet the tip enters is coned to T again
+    # instead (resubdivision._face_apex_cone); a cut tet the tip enters is coned to T again
     if tip_tet != cm.tip_tet:
         changed.update(o for o in (cm.tip_tet, tip_tet) if o in cm.subtets and not cm.completely_split(o))
     cm.tip_tet = tip_tet
