@@ -30,6 +30,7 @@ import numpy as np
 
 from cutkit.mesh.geometry import TET_EDGES, tet_volumes
 from cutkit.relax import Control, NodeLists, build_spring_model, initial_state
+from cutkit.relax import _adjacency_kernels as KA
 from cutkit.relax.materials import material_of_tets, prestress_of_tets
 from cutkit.relax.model import STIFFNESS_CALIBRATION
 from cutkit.relax.topology import recolour
@@ -207,7 +208,7 @@ class Tissue(TissueBase):
                 V, sv = self.rec_V[ids], self.rec_sv[ids]
             orig = store.tet_origins[ids]
             q = store.tet_corners[ids]
-            np.add.at(masses, q.ravel(), np.repeat(sign * self.rho[orig] * V / 4.0, 4))
+            KA.add_mass_shares(masses, np.ascontiguousarray(q, np.int64), sign * self.rho[orig] * V / 4.0)
             np.add.at(self.node_tet_count, q.ravel(), int(sign))
             ea, eb = q[:, TET_EDGES[:, 0]], q[:, TET_EDGES[:, 1]]  # (t, 6)
             keys.append((np.minimum(ea, eb) * key_base + np.maximum(ea, eb)).ravel())
