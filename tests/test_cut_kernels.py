@@ -387,3 +387,45 @@ def test_the_vectorised_oracle_is_the_scalar_one():
         want = np.array([segment_triangle(x, y, a, b, c) for x, y in zip(p0, p1)])
         assert np.array_equal(got < 0, want < 0)
         np.testing.assert_allclose(got, want, rtol=0, atol=1e-12)
+
+
+def test_fair_place_matches_twin():
+    """The fairing's compass search: over random edge, face and tet nodes coned to random triangles
+    around them (none through the node's own simplex, which would be flat), the kernel's weights and
+    angle are the twin's, the weights stay in the box (each >= lo, within move_max of w_cut, summing
+    to 1) or are w0, the angle never falls, and x is left as it was."""
+    from _twins_cut import fair_place_twin
+
+    from cutkit.cutting import _kernels_fair as KF
+
+    rng = np.random.default_rng(11)
+    steps = np.array([0.08, 0.04, 0.02, 0.01])
+    moved = 0
+    for trial in range(45):
+        k = 2 + trial % 3
+        x = rng.uniform(-1.0, 1.0, (12, 3))
+        corners = np.arange(k, dtype=np.int64)
+        w0 = 0.25 + 0.5 * rng.dirichlet(np.ones(k))
+        w0 /= w0.sum()
+        x[10] = x[11] = w0 @ x[corners]  # the node and its coincident copy
+        tets = []
+        for _ in range(int(rng.integers(3, 9))):
+            t = [int(rng.choice([10, 11]))] + rng.choice(np.arange(k, 10), 3, replace=False).tolist()
+            a, b, c, d = x[t]
+            tets.append(t if np.dot(np.cross(b - a, c - a), d - a) > 0 else [t[0], t[2], t[1], t[3]])
+        tets = np.array(tets, np.int64)
+        copies = np.array([10, 11], np.int64)
+        before = x.copy()
+        w_cut = w0 if trial % 2 else 0.25 + 0.5 * rng.dirichlet(np.ones(k))  # a box around another point
+        w_cut = w_cut / w_cut.sum()
+        w, angle = KF.fair_place(x, tets, copies, corners, w0, w_cut, 0.15, 0.2, steps)
+        w_t, angle_t = fair_place_twin(before, tets, copies, corners, w0, w_cut, 0.15, 0.2, steps)
+        np.testing.assert_allclose(w, w_t, atol=1e-12)
+        assert angle == pytest.approx(angle_t, abs=1e-9)
+        np.testing.assert_array_equal(x, before)
+        assert w.min() >= 0.15 - 1e-12 and w.sum() == pytest.approx(1.0)
+        assert np.array_equal(w, w0) or np.abs(w - w_cut).max() <= 0.2 + 1e-12
+        start = fair_place_twin(before, tets, copies, corners, w0, w_cut, 0.15, 0.2, np.zeros(0))[1]
+        assert angle >= start - 1e-9
+        moved += angle > start + 1e-9
+    assert moved >= 15  # the search moves most nodes

@@ -79,6 +79,7 @@ class CutMesh:
     blade_length : float  mm
     centre_nodes : bool  use the Fig. 2c centre node in split faces (default False: fewer, better tets)
     compact_splits : bool  cone complete splits to a vertex per side (see _compact_split)
+    fair_nodes : bool  re-place cut nodes around slivers within their simplex after each step (:mod:`.fairing`)
     snap_vertices : bool  move an uncut vertex away from the cut before an edge is cut near it (:mod:`.snapping`)
     """
 
@@ -113,19 +114,19 @@ class CutMesh:
     _tet_orig = _store_buffer("tet_buffers", "origin")
 
     def __init__(self, points, tets, rest_points=None, texcoords=None, labels=None,
-                 blade_length=20.0, centre_nodes=False, compact_splits=True, snap_vertices=False):
+                 blade_length=20.0, centre_nodes=False, compact_splits=True, snap_vertices=False, fair_nodes=True):
         store = TissueStore(points, tets, rest_points=rest_points, texcoords=texcoords, labels=labels)
-        self._cut_over(store, blade_length, centre_nodes, compact_splits, snap_vertices)
+        self._cut_over(store, blade_length, centre_nodes, compact_splits, snap_vertices, fair_nodes)
 
     @classmethod
     def over(cls, store: TissueStore, blade_length=20.0, centre_nodes=False, compact_splits=True,
-             snap_vertices=False) -> CutMesh:
+             snap_vertices=False, fair_nodes=True) -> CutMesh:
         """The cut state of the tissue ``store`` (nothing cut since its last rebase); cuts write into it."""
         cm = cls.__new__(cls)
-        cm._cut_over(store, blade_length, centre_nodes, compact_splits, snap_vertices)
+        cm._cut_over(store, blade_length, centre_nodes, compact_splits, snap_vertices, fair_nodes)
         return cm
 
-    def _cut_over(self, store, blade_length, centre_nodes, compact_splits, snap_vertices):
+    def _cut_over(self, store, blade_length, centre_nodes, compact_splits, snap_vertices, fair_nodes):
         if not blade_length > 0:
             raise InputError(f"blade_length: {blade_length}, expected > 0")
         self.store = store
@@ -139,6 +140,9 @@ class CutMesh:
         self.blade_length = float(blade_length)
         self.centre_nodes = bool(centre_nodes)
         self.compact_splits = bool(compact_splits)
+        self.fair_nodes = bool(fair_nodes)
+        self.fair_pending = set()  # originals with a node the blade held at the last step (fairing.py)
+        self.fair_origin = {}  # faired node -> (weights where the cut put it, weights fairing gave it)
         m0 = store.n_orig_tets
         # edge -> tets ring (CSR), built once
         self.edge_tet_off, self.edge_tet_idx = edge_to_tets(self.tet_edges, self.edges.shape[0])
@@ -172,11 +176,12 @@ class CutMesh:
         init_snapping(self, snap_vertices)  # vertices moved away from the cut instead of slivers
 
     @classmethod
-    def from_model(cls, model, blade_length=20.0, centre_nodes=False, compact_splits=True, snap_vertices=False):
+    def from_model(cls, model, blade_length=20.0, centre_nodes=False, compact_splits=True, snap_vertices=False,
+                   fair_nodes=True):
         """Cut state of a :class:`~cutkit.model.tetmodel.TetModel` (rest = current positions)."""
         return cls(model.points, model.tets, texcoords=model.texcoords, labels=model.labels,
                    blade_length=blade_length, centre_nodes=centre_nodes, compact_splits=compact_splits,
-                   snap_vertices=snap_vertices)
+                   snap_vertices=snap_vertices, fair_nodes=fair_nodes)
 
     def rebase(self):
         """Make the live tets the original ones of a fresh cut state (blade out); see :func:`.rebase.rebase`.

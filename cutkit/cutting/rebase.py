@@ -114,7 +114,8 @@ def rebase(cm):
     uncut, uncut_places = cm.edges_left_uncut(), cm.uncut_edge_places()
     ids = cm.store.rebase()  # the one renumbering: every holder of the store sees it
     fresh = type(cm).over(cm.store, blade_length=cm.blade_length, centre_nodes=cm.centre_nodes,
-                          compact_splits=cm.compact_splits, snap_vertices=cm.snap_vertices)
+                          compact_splits=cm.compact_splits, snap_vertices=cm.snap_vertices,
+                          fair_nodes=cm.fair_nodes)
     fresh.cut_faces_before = cut_faces
     fresh.uncut_before, fresh.uncut_places_before = uncut, uncut_places
     fresh.step_count = cm.step_count

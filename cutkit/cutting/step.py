@@ -34,6 +34,7 @@ from cutkit.errors import InputError
 from cutkit.cutting import _kernels_step as KS
 from cutkit.cutting.contact import touches_only
 from cutkit.cutting.crumbs import remove_crumbs
+from cutkit.cutting.fairing import fair_cut_nodes
 from cutkit.cutting.snapping import new_crossings, recrossed, snap_away
 from cutkit.cutting.cutmesh import CutMesh
 from cutkit.tissue.delta import TopologyDelta, twins_of
@@ -210,6 +211,9 @@ def cut_step(cm: CutMesh, tip, a) -> StepResult:
     # (complete splits first: they choose the diagonals of their split faces, splits.compact_split)
     for o in sorted(changed, key=lambda o: (not cm.completely_split(o), o)):
         cm.resubdivide(o)
+    # 4. cut nodes around slivers re-placed within their simplex, but for those the blade placed (fairing.py)
+    if cm.fair_nodes and (changed or cm.fair_pending):
+        fair_cut_nodes(cm, sorted(changed), _blade_placed_nodes(cm, tip_tet, ev_id))
     cm.previous_active_tets = cm.active_tets
     cm.active_tets = np.unique(active)
     cm.prev_pose = (P1, Q1)
@@ -226,6 +230,17 @@ def _blade_pose(tip, a):
     if na == 0:
         raise InputError("blade pose: a is the zero vector")
     return tip, a / na
+
+
+def _blade_placed_nodes(cm: CutMesh, tip_tet: int, ev_id) -> set:
+    """The nodes the blade placed this step: the T nodes of the tet the tip is in and the notch nodes of
+    the faces the blade crossed (the crack front)."""
+    faces = ev_id[ev_id[:, 0] == KS.EV_FACE, 1]
+    held = set(cm.face_node[faces].ravel().tolist())
+    if tip_tet >= 0:
+        held.update(cm.tet_T[tip_tet].tolist())
+    held.discard(-1)
+    return held
 
 
 def _step_seeds(cm: CutMesh, P0, Q0, P1, Q1):
