@@ -393,7 +393,8 @@ def test_fair_place_matches_twin():
     """The fairing's compass search: over random edge, face and tet nodes coned to random triangles
     around them (none through the node's own simplex, which would be flat), the kernel's weights and
     angle are the twin's, the weights stay in the box (each >= lo, within move_max of w_cut, summing
-    to 1) or are w0, the angle never falls, and x is left as it was."""
+    to 1) or are w0, the angle never falls, x is left as it was, dead tets are not looked at, and a
+    node at or above the angle limit is not moved."""
     from _twins_cut import fair_place_twin
 
     from cutkit.cutting import _kernels_fair as KF
@@ -418,7 +419,12 @@ def test_fair_place_matches_twin():
         before = x.copy()
         w_cut = w0 if trial % 2 else 0.25 + 0.5 * rng.dirichlet(np.ones(k))  # a box around another point
         w_cut = w_cut / w_cut.sum()
-        w, angle = KF.fair_place(x, tets, copies, corners, w0, w_cut, 0.15, 0.2, steps)
+        # the tets in one original's range, with a dead tet among them (not looked at)
+        buf = np.vstack([tets, [[10, 0, 1, 2]]])
+        mesh = KF.FairMesh(x, buf, np.r_[np.ones(len(tets), bool), False], np.zeros(1, np.int64),
+                           np.array([len(buf)]))
+        limits = np.array([0.15, 0.2, np.inf])
+        w, angle, start_k = KF.fair_place(mesh, np.zeros(1, np.int64), copies, corners, w0, w_cut, limits, steps)
         w_t, angle_t = fair_place_twin(before, tets, copies, corners, w0, w_cut, 0.15, 0.2, steps)
         np.testing.assert_allclose(w, w_t, atol=1e-12)
         assert angle == pytest.approx(angle_t, abs=1e-9)
@@ -426,6 +432,10 @@ def test_fair_place_matches_twin():
         assert w.min() >= 0.15 - 1e-12 and w.sum() == pytest.approx(1.0)
         assert np.array_equal(w, w0) or np.abs(w - w_cut).max() <= 0.2 + 1e-12
         start = fair_place_twin(before, tets, copies, corners, w0, w_cut, 0.15, 0.2, np.zeros(0))[1]
-        assert angle >= start - 1e-9
+        assert start_k == pytest.approx(start, abs=1e-9) and angle >= start - 1e-9
         moved += angle > start + 1e-9
+        # at or above the limit nothing is searched
+        limits[2] = start_k
+        w_s, angle_s, _ = KF.fair_place(mesh, np.zeros(1, np.int64), copies, corners, w0, w_cut, limits, steps)
+        assert np.array_equal(w_s, w0) and angle_s == start_k
     assert moved >= 15  # the search moves most nodes

@@ -3,6 +3,8 @@
 Slow, obviously correct NumPy twin: ``tests/_twins_cut.py::fair_place``.
 """
 
+from collections import namedtuple
+
 import numpy as np
 from numba import njit
 
@@ -41,24 +43,86 @@ def _put(x, copies, corners, w):
             x[copies[i], c] = s
 
 
+#: The cut state :func:`fair_place` reads: node positions x (n, 3) float64 (rows of the node and
+#: its copies written during the search, then restored); the store's tet corners (cap, 4) int64
+#: and alive flags (cap,) bool; each original tet's contiguous range of sub-tets, sub_start and
+#: sub_count (m0,) int64.
+FairMesh = namedtuple("FairMesh", ["x", "tets", "alive", "sub_start", "sub_count"])
+#: The search's limits, (3,) float64: smallest weight, largest change of a weight from where the cut
+#: put the node, and the smallest angle (degrees) at or above which the node is left alone.
+LIM_LO, LIM_MOVE, LIM_BELOW = 0, 1, 2
+
+
 @njit(cache=True, nogil=True)
-def fair_place(x, tets, copies, corners, w0, w_cut, lo, move_max, steps):
+def poor_tets(mesh, originals, below):
+    """The live sub-tets of ``originals`` (q,) int64 with a dihedral angle below ``below`` (degrees).
+
+    Returns
+    -------
+    (tets, owner) : (p,) int64 each
+        The tets and their original tets.
+    """
+    n = 0
+    for o in originals:
+        n += mesh.sub_count[o]
+    tets = np.empty(n, np.int64)
+    owner = np.empty(n, np.int64)
+    one = np.empty((1, 4), np.int64)
+    normals = np.empty((4, 3))
+    angles = np.empty((1, 6))
+    p = 0
+    for o in originals:
+        for t in range(mesh.sub_start[o], mesh.sub_start[o] + mesh.sub_count[o]):
+            if not mesh.alive[t]:
+                continue
+            one[0] = mesh.tets[t]
+            tet_dihedrals(mesh.x, one, 0, normals, angles)
+            if angles[0].min() < below:
+                tets[p] = t
+                owner[p] = o
+                p += 1
+    return tets[:p], owner[:p]
+
+
+@njit(cache=True, nogil=True)
+def _tets_around(mesh, around, copies):
+    """(r, 4) int64 the live sub-tets of the originals ``around`` that hold one of ``copies``."""
+    n = 0
+    for o in around:
+        n += mesh.sub_count[o]
+    out = np.empty((n, 4), np.int64)
+    r = 0
+    for o in around:
+        for t in range(mesh.sub_start[o], mesh.sub_start[o] + mesh.sub_count[o]):
+            if not mesh.alive[t]:
+                continue
+            hit = False
+            for c in range(4):
+                for i in range(copies.shape[0]):
+                    hit |= mesh.tets[t, c] == copies[i]
+            if hit:
+                out[r] = mesh.tets[t]
+                r += 1
+    return out[:r]
+
+
+@njit(cache=True, nogil=True)
+def fair_place(mesh, around, copies, corners, w0, w_cut, limits, steps):
     """Weights of a cut node (and its coincident copies) that maximise the smallest dihedral angle of
     the tets around it, by a compass search over its defining simplex.
 
     The node is ``w . x[corners]``; a move adds ``s`` to one weight and takes
     it from another, for each step ``s`` of ``steps`` in turn, as long as the
-    best move raises the smallest angle; every weight stays ``>= lo`` and
-    within ``move_max`` of ``w_cut`` (where the cut put the node), and every
-    tet stays positive.  ``x`` is
-    left as it was.
+    best move raises the smallest angle; every weight stays ``>= limits[LIM_LO]`` and
+    within ``limits[LIM_MOVE]`` of ``w_cut`` (where the cut put the node), and every
+    tet stays positive.  Nothing is searched when the smallest angle is
+    already at least ``limits[LIM_BELOW]``.  ``mesh.x`` is left as it was.
 
     Parameters
     ----------
-    x : (n, 3) float64
-        Node positions (rows ``copies`` written during the search, then restored).
-    tets : (m, 4) int64
-        The live tets that hold one of ``copies``.
+    mesh : FairMesh
+    around : (a,) int64
+        The original tets whose sub-tets may hold the node or a copy.
     copies : (c,) int64
         The node and its coincident copies (both sides of a cut).
     corners : (k,) int64
@@ -67,27 +131,32 @@ def fair_place(x, tets, copies, corners, w0, w_cut, lo, move_max, steps):
         Its weights now (the search starts there).
     w_cut : (k,) float64
         Its weights where the cut put it (the centre of the box).
-    lo, move_max : float
-        Smallest weight; largest change of any weight from ``w0``.
+    limits : (3,) float64
+        ``LIM_LO``, ``LIM_MOVE``, ``LIM_BELOW`` (above).
     steps : (q,) float64
         Step lengths, largest first.
 
     Returns
     -------
-    (w, angle) : (k,) float64 and float
-        The best weights found (``w0`` when nothing is better) and their
-        smallest angle, degrees (-1 when ``w0`` itself leaves a tet not
-        positive).
+    (w, angle, start) : (k,) float64, float, float
+        The best weights found (``w0`` when nothing is better), their
+        smallest angle, and the smallest angle at ``w0`` (degrees; -1 when
+        a tet around is not positive; inf when no live tet holds the node).
     """
+    x = mesh.x
+    tets = _tets_around(mesh, around, copies)
+    lo, move_max = limits[LIM_LO], limits[LIM_MOVE]
     k = corners.shape[0]
-    m = tets.shape[0]
     normals = np.empty((4, 3))
-    angles = np.empty((m, 6))
+    angles = np.empty((tets.shape[0], 6))
     keep = x[copies[0]].copy()
     w = w0.copy()
-    best = _worst_angle(x, tets, -np.inf, normals, angles)
-    cand = np.empty(k)
     best_w = w.copy()
+    start = _worst_angle(x, tets, -np.inf, normals, angles)
+    best = start
+    if start >= limits[LIM_BELOW]:
+        return best_w, best, start
+    cand = np.empty(k)
     for si in range(steps.shape[0]):
         s = steps[si]
         for _ in range(64):  # each move gains; the box bounds the moves
@@ -113,4 +182,4 @@ def fair_place(x, tets, copies, corners, w0, w_cut, lo, move_max, steps):
         x[copies[i], 0] = keep[0]
         x[copies[i], 1] = keep[1]
         x[copies[i], 2] = keep[2]
-    return best_w, best
+    return best_w, best, start

@@ -56,10 +56,12 @@ _LO = {2: EDGE_SNAP, 3: FACE_BARY_MIN, 4: TET_BARY_MIN}
 
 
 def fair_cut_nodes(cm, originals, held) -> int:
-    """Re-place the cut nodes of ``originals`` whose tetrahedra include a sliver; returns how many moved.
+    """Re-place the cut nodes of ``originals`` that have a sliver around them; returns how many moved.
 
-    An original with a node the blade held is looked at again at the next
-    step (``cm.fair_pending``): the blade moves on, or the stroke ends.
+    The live sub-tets of ``originals`` below :data:`FAIR_BELOW_DEG` name the
+    nodes to look at (their cut nodes, each with its copies).  An original
+    with such a node the blade held is looked at again at the next step
+    (``cm.fair_pending``): the blade moves on, or the stroke ends.
 
     Parameters
     ----------
@@ -69,63 +71,68 @@ def fair_cut_nodes(cm, originals, held) -> int:
     held : set of int
         Nodes the blade placed this step: left where they are (and their copies).
     """
-    moved, pending = 0, set()
-    for o, copies, around, edges in _node_groups(cm, sorted(set(originals) | cm.fair_pending)):
+    mesh = KF.FairMesh(cm._x, cm._tets, cm._alive, cm.sub_start, cm.sub_count)
+    groups, cm.fair_pending = _poor_groups(cm, mesh, sorted(set(originals) | cm.fair_pending), held)
+    return sum(_fair_group(cm, mesh, copies, around, edges) for copies, around, edges in groups)
+
+
+def _poor_groups(cm, mesh, originals, held):
+    """The cut nodes of the live sub-tets of ``originals`` below :data:`FAIR_BELOW_DEG`, each once, with
+    its coincident copies (the two sides of the cut; on an edge or face with copies along an earlier
+    stroke's cut (``edge_twins``, ``face_twins``), theirs too: they must stay coincident).
+
+    Returns
+    -------
+    groups : list of (copies (c,) int64, originals around (a,) int64, cut edges (list))
+    pending : set of int
+        The originals with such a node the blade holds (one of ``held``).
+    """
+    tets, owner = KF.poor_tets(mesh, np.array(originals, np.int64), FAIR_BELOW_DEG)
+    nodes = cm._tets[tets].ravel()
+    nodes = set(nodes[nodes >= cm.n_orig_points].tolist())
+    seen, out, pending = set(), [], set()
+
+    def add(key, o, members, copies, around, edges=()):
+        if key in seen:
+            return
+        seen.update(members)
+        copies = np.concatenate(copies) if len(copies) > 1 else copies[0]
+        copies = copies[copies >= 0]
         if held.intersection(copies.tolist()):
             pending.add(o)
-            continue
-        moved += _fair_group(cm, copies, around, edges)
-    cm.fair_pending = pending
-    return moved
+            return
+        around = np.concatenate(around) if len(around) > 1 else around[0]
+        out.append((copies, np.ascontiguousarray(around[around >= 0]), list(edges)))
 
-
-def _node_groups(cm, originals):
-    """[(original, copies (c,) int64, originals around (list), cut edges (list))] of the cut nodes of ``originals``,
-    each once; a node on an edge or face with coincident copies along an earlier stroke's cut
-    (``edge_twins``, ``face_twins``) comes with theirs (they must stay coincident)."""
-    seen, out = set(), []
-    for o in originals:
-        if o not in cm.subtets:
-            continue
+    for o in np.unique(owner).tolist():
         for e in cm.tet_edges[o].tolist():
-            if e in seen or not np.isfinite(cm.edge_t[e]):
-                continue
-            edges = [e] + list(cm.edge_twins.get(e, ()))
-            seen.update(edges)
-            copies = np.concatenate([cm.edge_node[g][cm.edge_node[g] >= 0] for g in edges])
-            out.append((o, copies, [t for g in edges for t in cm.edge_ring(g).tolist()], edges))
+            a, b = cm.edge_node[e].tolist()
+            if a in nodes or b in nodes:
+                edges = [e] + list(cm.edge_twins.get(e, ()))
+                add(("e", e), o, [("e", g) for g in edges], [cm.edge_node[g] for g in edges],
+                    [cm.edge_ring(g) for g in edges], edges)
         for f in cm.tet_faces[o].tolist():
-            if -1 - f in seen or cm.face_node[f, 0] < 0:
-                continue
-            faces = [f] + list(cm.face_twins.get(f, ()))
-            seen.update(-1 - g for g in faces)
-            copies = np.concatenate([cm.face_node[g][cm.face_node[g] >= 0] for g in faces])
-            out.append((o, copies, [t for g in faces for t in cm.face_tets[g].tolist() if t >= 0], []))
-        if cm.tet_T[o, 0] >= 0:
-            out.append((o, cm.tet_T[o][cm.tet_T[o] >= 0], [o], []))
-    return out
+            if not nodes.isdisjoint(cm.face_node[f].tolist()):
+                faces = [f] + list(cm.face_twins.get(f, ()))
+                add(("f", f), o, [("f", g) for g in faces], [cm.face_node[g] for g in faces],
+                    [cm.face_tets[g] for g in faces])
+        if not nodes.isdisjoint(cm.tet_T[o].tolist()):
+            add(("t", o), o, [("t", o)], [cm.tet_T[o]], [np.array([o], np.int64)])
+    return out, pending
 
 
-def _fair_group(cm, copies, around, edges) -> int:
-    """Re-place one node and its copies if a tet around it is a sliver; returns 1 if it moved."""
-    ids = np.array([t for o in around for t in cm.subtets.get(o, ())], np.int64)
-    tets = cm._tets[ids[cm._alive[ids]]]
-    tets = np.ascontiguousarray(tets[np.isin(tets, copies).any(axis=1)])
-    if tets.shape[0] == 0:
-        return 0
+def _fair_group(cm, mesh, copies, around, edges) -> int:
+    """Re-place one node and its copies where the search gains; returns 1 if it moved."""
     node = int(copies[0])
     k = int((cm._def_nodes[node] >= 0).sum())
     corners, w0 = cm._def_nodes[node, :k].copy(), cm._def_w[node, :k].copy()  # copies: moving rewrites the rows
-    now = _smallest_angle(cm, tets)
-    if now >= FAIR_BELOW_DEG:
-        return 0
     # the box is around where the cut put the node: its weights before its first fairing, unless
     # the cut has placed it again since (its weights are not those the last fairing gave it)
     cut_at, faired_to = cm.fair_origin.get(node, (w0, None))
     w_cut = cut_at if faired_to is not None and np.array_equal(faired_to, w0) else w0
-    w, angle = KF.fair_place(cm._x, tets, np.ascontiguousarray(copies, np.int64), corners, w0, w_cut,
-                             _LO[k], FAIR_MOVE_MAX, FAIR_STEPS)
-    if not angle >= now + FAIR_MIN_GAIN_DEG:
+    limits = np.array([_LO[k], FAIR_MOVE_MAX, FAIR_BELOW_DEG])
+    w, angle, start = KF.fair_place(mesh, around, copies, corners, w0, w_cut, limits, FAIR_STEPS)
+    if not angle >= start + FAIR_MIN_GAIN_DEG:
         return 0
     cm.fair_origin[node] = (w_cut, w.copy())
     # a copy along an earlier cut is defined on coincident copies of the corners (equal node_rep)
@@ -136,9 +143,3 @@ def _fair_group(cm, copies, around, edges) -> int:
     for e in edges:  # the edge's cut parameter follows its node (read by the face and T placements)
         cm.edge_t[e] = weight_of[int(cm.node_rep[cm.edges[e, 1]])]
     return 1
-
-
-def _smallest_angle(cm, tets) -> float:
-    from cutkit.mesh.quality import min_dihedral_angles
-
-    return float(min_dihedral_angles(cm._x, tets).min())
