@@ -600,8 +600,8 @@ def loose_small_pieces_twin(X, tets, alive, seeds, limit):
     return np.array(out, np.int64), len(crumbs)
 
 
-def fair_place_twin(x, tets, copies, corners, w0, w_cut, lo, move_max, steps):
-    """The compass search of ``_kernels_fair.fair_place`` by plain loops: every move e_i - e_j of each step
+def fair_place_twin(x, tets, copies, corners, w0, w_cut, lo, move_max, steps, directions):
+    """The compass search of ``_kernels_fair.fair_place`` by plain loops: every move ``s d`` of each step
     inside the box, the best of each sweep taken while it gains; a candidate counts only if every tet
     stays positive."""
     x = x.copy()
@@ -614,20 +614,16 @@ def fair_place_twin(x, tets, copies, corners, w0, w_cut, lo, move_max, steps):
 
     w = np.array(w0, float)
     best = worst(w)
-    k = len(corners)
     for s in steps:
         while True:
             best_w = None
-            for i in range(k):
-                for j in range(k):
-                    cand = w.copy()
-                    cand[i] += s
-                    cand[j] -= s
-                    if i == j or cand[j] < lo or np.abs(cand - w_cut).max() > move_max:
-                        continue
-                    a = worst(cand)
-                    if a > best + 1e-9:
-                        best, best_w = a, cand
+            for d in directions:
+                cand = w + s * d
+                if cand.min() < lo or np.abs(cand - w_cut).max() > move_max:
+                    continue
+                a = worst(cand)
+                if a > best + 1e-9:
+                    best, best_w = a, cand
             if best_w is None:
                 break
             w = best_w

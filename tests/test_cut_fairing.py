@@ -96,3 +96,37 @@ def test_fairing_is_on_by_default_and_kept_over_a_rebase():
         cut_step(off, *pose)
     rebase_if_left(off) or off.rebase()
     assert off.fair_nodes is False and off.fair_pending == set()
+
+
+def test_a_t_node_moves_only_within_its_cut_plane():
+    """A T node's moves (fairing._plane_moves) keep its weights summing to one and its place in the plane
+    through it with the given normal; each move's largest weight change is one step."""
+    rng = np.random.default_rng(3)
+    for _ in range(20):
+        xc = rng.normal(size=(4, 3))
+        normal = rng.normal(size=3)
+        normal /= np.linalg.norm(normal)
+        d = FA._plane_moves(xc, normal)
+        assert d.shape == (8, 4)
+        np.testing.assert_allclose(d.sum(axis=1), 0.0, atol=1e-12)
+        np.testing.assert_allclose((d @ xc) @ normal, 0.0, atol=1e-12)
+        np.testing.assert_allclose(np.abs(d).max(axis=1), 1.0)
+        assert np.linalg.matrix_rank(d) == 2
+
+
+@pytest.mark.parametrize("centre", [False, True])
+def test_a_straight_cut_stays_in_the_blade_plane(centre):
+    """Through a bar, a straight vertical blade at y = 1.37: every node of the cut surface lies in that
+    plane up to the snap of its split faces' centre nodes (fairing moves none off it)."""
+    from cutkit.cutting import cut_surface_faces
+
+    from test_cut import bar
+
+    p, t = bar()
+    devs = []
+    for fair in (False, True):
+        cm = CutMesh(p, t, blade_length=10.0, centre_nodes=centre, fair_nodes=fair)
+        for x in np.linspace(-0.5, 6.5, 30):
+            cut_step(cm, [x, 1.37, -0.5], [0, 0, -1.0])
+        devs.append(np.abs(cm.points[np.unique(cut_surface_faces(cm))][:, 1] - 1.37).max())
+    assert devs[1] <= devs[0] + 1e-12

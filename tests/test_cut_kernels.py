@@ -398,6 +398,7 @@ def test_fair_place_matches_twin():
     from _twins_cut import fair_place_twin
 
     from cutkit.cutting import _kernels_fair as KF
+    from cutkit.cutting import fairing as FA
 
     rng = np.random.default_rng(11)
     steps = np.array([0.08, 0.04, 0.02, 0.01])
@@ -424,18 +425,20 @@ def test_fair_place_matches_twin():
         mesh = KF.FairMesh(x, buf, np.r_[np.ones(len(tets), bool), False], np.zeros(1, np.int64),
                            np.array([len(buf)]))
         limits = np.array([0.15, 0.2, np.inf])
-        w, angle, start_k = KF.fair_place(mesh, np.zeros(1, np.int64), copies, corners, w0, w_cut, limits, steps)
-        w_t, angle_t = fair_place_twin(before, tets, copies, corners, w0, w_cut, 0.15, 0.2, steps)
+        moves = FA._MOVES[k] if trial % 4 != 3 else FA._plane_moves(x[corners], rng.normal(size=3)) if k == 4 \
+            else FA._MOVES[k][::-1]
+        w, angle, start_k = KF.fair_place(mesh, np.zeros(1, np.int64), copies, corners, w0, w_cut, limits, steps, moves)
+        w_t, angle_t = fair_place_twin(before, tets, copies, corners, w0, w_cut, 0.15, 0.2, steps, moves)
         np.testing.assert_allclose(w, w_t, atol=1e-12)
         assert angle == pytest.approx(angle_t, abs=1e-9)
         np.testing.assert_array_equal(x, before)
         assert w.min() >= 0.15 - 1e-12 and w.sum() == pytest.approx(1.0)
         assert np.array_equal(w, w0) or np.abs(w - w_cut).max() <= 0.2 + 1e-12
-        start = fair_place_twin(before, tets, copies, corners, w0, w_cut, 0.15, 0.2, np.zeros(0))[1]
+        start = fair_place_twin(before, tets, copies, corners, w0, w_cut, 0.15, 0.2, np.zeros(0), moves)[1]
         assert start_k == pytest.approx(start, abs=1e-9) and angle >= start - 1e-9
         moved += angle > start + 1e-9
         # at or above the limit nothing is searched
         limits[2] = start_k
-        w_s, angle_s, _ = KF.fair_place(mesh, np.zeros(1, np.int64), copies, corners, w0, w_cut, limits, steps)
+        w_s, angle_s, _ = KF.fair_place(mesh, np.zeros(1, np.int64), copies, corners, w0, w_cut, limits, steps, moves)
         assert np.array_equal(w_s, w0) and angle_s == start_k
     assert moved >= 15  # the search moves most nodes

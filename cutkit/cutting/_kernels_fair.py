@@ -107,16 +107,17 @@ def _tets_around(mesh, around, copies):
 
 
 @njit(cache=True, nogil=True)
-def fair_place(mesh, around, copies, corners, w0, w_cut, limits, steps):
+def fair_place(mesh, around, copies, corners, w0, w_cut, limits, steps, directions):
     """Weights of a cut node (and its coincident copies) that maximise the smallest dihedral angle of
     the tets around it, by a compass search over its defining simplex.
 
-    The node is ``w . x[corners]``; a move adds ``s`` to one weight and takes
-    it from another, for each step ``s`` of ``steps`` in turn, as long as the
-    best move raises the smallest angle; every weight stays ``>= limits[LIM_LO]`` and
-    within ``limits[LIM_MOVE]`` of ``w_cut`` (where the cut put the node), and every
-    tet stays positive.  Nothing is searched when the smallest angle is
-    already at least ``limits[LIM_BELOW]``.  ``mesh.x`` is left as it was.
+    The node is ``w . x[corners]``; a move adds ``s d`` to its weights, for
+    each direction ``d`` of ``directions`` and each step ``s`` of ``steps`` in
+    turn, as long as the best move raises the smallest angle; every weight
+    stays ``>= limits[LIM_LO]`` and within ``limits[LIM_MOVE]`` of ``w_cut``
+    (where the cut put the node), and every tet stays positive.  Nothing is
+    searched when the smallest angle is already at least
+    ``limits[LIM_BELOW]``.  ``mesh.x`` is left as it was.
 
     Parameters
     ----------
@@ -135,6 +136,8 @@ def fair_place(mesh, around, copies, corners, w0, w_cut, limits, steps):
         ``LIM_LO``, ``LIM_MOVE``, ``LIM_BELOW`` (above).
     steps : (q,) float64
         Step lengths, largest first.
+    directions : (r, k) float64
+        Moves of the weights, each summing to zero (largest entry 1).
 
     Returns
     -------
@@ -145,7 +148,6 @@ def fair_place(mesh, around, copies, corners, w0, w_cut, limits, steps):
     """
     x = mesh.x
     tets = _tets_around(mesh, around, copies)
-    lo, move_max = limits[LIM_LO], limits[LIM_MOVE]
     k = corners.shape[0]
     normals = np.empty((4, 3))
     angles = np.empty((tets.shape[0], 6))
@@ -158,23 +160,21 @@ def fair_place(mesh, around, copies, corners, w0, w_cut, limits, steps):
         return best_w, best, start
     cand = np.empty(k)
     for si in range(steps.shape[0]):
-        s = steps[si]
         for _ in range(64):  # each move gains; the box bounds the moves
             moved = False
-            for i in range(k):
-                for j in range(k):
-                    if i == j or w[j] - s < lo or abs(w[i] + s - w_cut[i]) > move_max or abs(w[j] - s - w_cut[j]) > move_max:
-                        continue
-                    for q in range(k):
-                        cand[q] = w[q]
-                    cand[i] += s
-                    cand[j] -= s
-                    _put(x, copies, corners, cand)
-                    a = _worst_angle(x, tets, best + _GAIN_EPS_DEG, normals, angles)
-                    if a > best + _GAIN_EPS_DEG:
-                        best = a
-                        best_w[:] = cand
-                        moved = True
+            for r in range(directions.shape[0]):
+                inside = True
+                for q in range(k):
+                    cand[q] = w[q] + steps[si] * directions[r, q]
+                    inside &= cand[q] >= limits[LIM_LO] and abs(cand[q] - w_cut[q]) <= limits[LIM_MOVE]
+                if not inside:
+                    continue
+                _put(x, copies, corners, cand)
+                a = _worst_angle(x, tets, best + _GAIN_EPS_DEG, normals, angles)
+                if a > best + _GAIN_EPS_DEG:
+                    best = a
+                    best_w[:] = cand
+                    moved = True
             if not moved:
                 break
             w[:] = best_w

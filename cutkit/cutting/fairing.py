@@ -20,6 +20,9 @@ What a move keeps:
   and at least the snap limit (``EDGE_SNAP``, ``FACE_BARY_MIN``,
   ``TET_BARY_MIN``), so the cut surface is at most ``FAIR_MOVE_MAX`` of
   the simplex's size off the crossing the cut made;
+* a T node moves only within the plane of its tetrahedron's other cut
+  nodes (its edge and face nodes, :func:`_cut_plane`): the cut surface a
+  flat blade made stays flat through it;
 * the node stays in its simplex, all copies together: the mesh stays
   conforming, the original faces and edges are the same point sets, so the
   model's volume and outer surface do not change (an edge or face node on
@@ -28,7 +31,8 @@ What a move keeps:
   rises.
 
 Nodes the blade places this step (the tip tet's T, the notch nodes of the
-faces the blade crossed) are left where they are; a node on an edge or face
+faces the blade crossed) are left where they are, and so is a split face's
+centre node (``CutMesh(centre_nodes=True)``, the midpoint of its cut line); a node on an edge or face
 with coincident copies along an earlier stroke's cut moves with them.  A moved node is a moved node of the step
 (``StepResult.moved_nodes``), as a moving crack front's: the physics places
 it through the old shape.
@@ -53,6 +57,8 @@ FAIR_STEPS = np.array([0.08, 0.04, 0.02, 0.01])
 FAIR_MIN_GAIN_DEG = 0.5
 #: The smallest weight by simplex size (2: edge, 3: face, 4: tet): the cut's snap limits.
 _LO = {2: EDGE_SNAP, 3: FACE_BARY_MIN, 4: TET_BARY_MIN}
+#: The compass moves of k weights: one weight up, another down (i != j, in that order).
+_MOVES = {k: np.array([np.eye(k)[i] - np.eye(k)[j] for i in range(k) for j in range(k) if i != j]) for k in (2, 3, 4)}
 
 
 def fair_cut_nodes(cm, originals, held) -> int:
@@ -73,7 +79,7 @@ def fair_cut_nodes(cm, originals, held) -> int:
     """
     mesh = KF.FairMesh(cm._x, cm._tets, cm._alive, cm.sub_start, cm.sub_count)
     groups, cm.fair_pending = _poor_groups(cm, mesh, sorted(set(originals) | cm.fair_pending), held)
-    return sum(_fair_group(cm, mesh, copies, around, edges) for copies, around, edges in groups)
+    return sum(_fair_group(cm, mesh, *group) for group in groups)
 
 
 def _poor_groups(cm, mesh, originals, held):
@@ -83,7 +89,8 @@ def _poor_groups(cm, mesh, originals, held):
 
     Returns
     -------
-    groups : list of (copies (c,) int64, originals around (a,) int64, cut edges (list))
+    groups : list of (copies (c,) int64, originals around (a,) int64, cut edges (list), plane)
+        ``plane``: the unit normal (3,) of a T node's cut plane (:func:`_cut_plane`), else None.
     pending : set of int
         The originals with such a node the blade holds (one of ``held``).
     """
@@ -92,7 +99,7 @@ def _poor_groups(cm, mesh, originals, held):
     nodes = set(nodes[nodes >= cm.n_orig_points].tolist())
     seen, out, pending = set(), [], set()
 
-    def add(key, o, members, copies, around, edges=()):
+    def add(key, o, members, copies, around, edges=(), plane=None):
         if key in seen:
             return
         seen.update(members)
@@ -102,7 +109,7 @@ def _poor_groups(cm, mesh, originals, held):
             pending.add(o)
             return
         around = np.concatenate(around) if len(around) > 1 else around[0]
-        out.append((copies, np.ascontiguousarray(around[around >= 0]), list(edges)))
+        out.append((copies, np.ascontiguousarray(around[around >= 0]), list(edges), plane))
 
     for o in np.unique(owner).tolist():
         for e in cm.tet_edges[o].tolist():
@@ -112,16 +119,40 @@ def _poor_groups(cm, mesh, originals, held):
                 add(("e", e), o, [("e", g) for g in edges], [cm.edge_node[g] for g in edges],
                     [cm.edge_ring(g) for g in edges], edges)
         for f in cm.tet_faces[o].tolist():
-            if not nodes.isdisjoint(cm.face_node[f].tolist()):
+            # a split face's centre node (``centre_nodes``) stays: it is the midpoint of the cut line
+            if cm.face_ncut[f] != 2 and not nodes.isdisjoint(cm.face_node[f].tolist()):
                 faces = [f] + list(cm.face_twins.get(f, ()))
                 add(("f", f), o, [("f", g) for g in faces], [cm.face_node[g] for g in faces],
                     [cm.face_tets[g] for g in faces])
         if not nodes.isdisjoint(cm.tet_T[o].tolist()):
-            add(("t", o), o, [("t", o)], [cm.tet_T[o]], [np.array([o], np.int64)])
+            add(("t", o), o, [("t", o)], [cm.tet_T[o]], [np.array([o], np.int64)], plane=_cut_plane(cm, o))
     return out, pending
 
 
-def _fair_group(cm, mesh, copies, around, edges) -> int:
+def _cut_plane(cm, o):
+    """(3,) unit normal of the plane through original tet ``o``'s cut nodes (its edge and face nodes), or
+    None when they are fewer than three."""
+    e = cm.tet_edges[o]
+    nodes = [cm.edge_node[e[np.isfinite(cm.edge_t[e])], 0], cm.face_node[cm.tet_faces[o], 0]]
+    nodes = np.concatenate(nodes)
+    nodes = nodes[nodes >= 0]
+    if nodes.size < 3:
+        return None
+    p = cm._x[nodes]
+    return np.linalg.svd(p - p.mean(axis=0))[2][2]
+
+
+def _plane_moves(x_corners, normal):
+    """(8, 4) moves of a T node's four weights that keep it in the plane with ``normal`` (3,): the
+    weight directions d with sum(d) = 0 and d . (x_corners @ normal) = 0, each scaled to a largest
+    entry of 1, both ways, and their diagonals."""
+    basis = np.linalg.svd(np.vstack([np.ones(4), x_corners @ normal]))[2][2:]
+    d = np.vstack([basis, basis[0] + basis[1], basis[0] - basis[1]])
+    d /= np.abs(d).max(axis=1, keepdims=True)
+    return np.vstack([d, -d])
+
+
+def _fair_group(cm, mesh, copies, around, edges, plane) -> int:
     """Re-place one node and its copies where the search gains; returns 1 if it moved."""
     node = int(copies[0])
     k = int((cm._def_nodes[node] >= 0).sum())
@@ -131,7 +162,8 @@ def _fair_group(cm, mesh, copies, around, edges) -> int:
     cut_at, faired_to = cm.fair_origin.get(node, (w0, None))
     w_cut = cut_at if faired_to is not None and np.array_equal(faired_to, w0) else w0
     limits = np.array([_LO[k], FAIR_MOVE_MAX, FAIR_BELOW_DEG])
-    w, angle, start = KF.fair_place(mesh, around, copies, corners, w0, w_cut, limits, FAIR_STEPS)
+    moves = _MOVES[k] if plane is None else _plane_moves(cm._x[corners], plane)
+    w, angle, start = KF.fair_place(mesh, around, copies, corners, w0, w_cut, limits, FAIR_STEPS, moves)
     if not angle >= start + FAIR_MIN_GAIN_DEG:
         return 0
     cm.fair_origin[node] = (w_cut, w.copy())
