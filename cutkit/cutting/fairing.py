@@ -90,7 +90,7 @@ def _poor_groups(cm, mesh, originals, held):
     Returns
     -------
     groups : list of (copies (c,) int64, originals around (a,) int64, cut edges (list), plane)
-        ``plane``: the unit normal (3,) of a T node's cut plane (:func:`_cut_plane`), else None.
+        ``plane``: a T node's original tet (its moves keep it in :func:`_cut_plane`), else None.
     pending : set of int
         The originals with such a node the blade holds (one of ``held``).
     """
@@ -125,7 +125,7 @@ def _poor_groups(cm, mesh, originals, held):
                 add(("f", f), o, [("f", g) for g in faces], [cm.face_node[g] for g in faces],
                     [cm.face_tets[g] for g in faces])
         if not nodes.isdisjoint(cm.tet_T[o].tolist()):
-            add(("t", o), o, [("t", o)], [cm.tet_T[o]], [np.array([o], np.int64)], plane=_cut_plane(cm, o))
+            add(("t", o), o, [("t", o)], [cm.tet_T[o]], [np.array([o], np.int64)], plane=o)
     return out, pending
 
 
@@ -162,7 +162,8 @@ def _fair_group(cm, mesh, copies, around, edges, plane) -> int:
     cut_at, faired_to = cm.fair_origin.get(node, (w0, None))
     w_cut = cut_at if faired_to is not None and np.array_equal(faired_to, w0) else w0
     limits = np.array([_LO[k], FAIR_MOVE_MAX, FAIR_BELOW_DEG])
-    moves = _MOVES[k] if plane is None else _plane_moves(cm._x[corners], plane)
+    normal = None if plane is None else _cut_plane(cm, plane)
+    moves = _MOVES[k] if normal is None else _plane_moves(cm._x[corners], normal)
     w, angle, start = KF.fair_place(mesh, around, copies, corners, w0, w_cut, limits, FAIR_STEPS, moves)
     if not angle >= start + FAIR_MIN_GAIN_DEG:
         return 0
