@@ -95,7 +95,7 @@ def test_fairing_is_on_by_default_and_kept_over_a_rebase():
             break
         cut_step(off, *pose)
     rebase_if_left(off) or off.rebase()
-    assert off.fair_nodes is False and off.fair_pending == set()
+    assert off.fair_nodes is False and off.fair_pending == {}
 
 
 def test_a_t_node_moves_only_within_its_cut_plane():

@@ -150,7 +150,7 @@ def fair_place(mesh, around, copies, corners, w0, w_cut, limits, steps, directio
     tets = _tets_around(mesh, around, copies)
     k = corners.shape[0]
     normals = np.empty((4, 3))
-    angles = np.empty((tets.shape[0], 6))
+    angles = np.zeros((tets.shape[0], 6))  # rows past a non-positive tet stay 0 (the order below only)
     keep = x[copies[0]].copy()
     w = w0.copy()
     best_w = w.copy()
@@ -158,6 +158,11 @@ def fair_place(mesh, around, copies, corners, w0, w_cut, limits, steps, directio
     best = start
     if start >= limits[LIM_BELOW]:
         return best_w, best, start
+    # the poorest tets first: a candidate that cannot win is then left at its first tet
+    worst_of = np.empty(tets.shape[0])
+    for j in range(tets.shape[0]):
+        worst_of[j] = angles[j].min()
+    tets = tets[np.argsort(worst_of, kind="mergesort")]
     cand = np.empty(k)
     for si in range(steps.shape[0]):
         for _ in range(64):  # each move gains; the box bounds the moves

@@ -141,7 +141,7 @@ class CutMesh:
         self.centre_nodes = bool(centre_nodes)
         self.compact_splits = bool(compact_splits)
         self.fair_nodes = bool(fair_nodes)
-        self.fair_pending = set()  # originals with a node the blade held at the last step (fairing.py)
+        self.fair_pending = {}  # nodes the blade held at the last step: key -> original tet (fairing.py)
         self.fair_origin = {}  # faired node -> (weights where the cut put it, weights fairing gave it)
         m0 = store.n_orig_tets
         # edge -> tets ring (CSR), built once

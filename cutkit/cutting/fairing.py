@@ -65,9 +65,9 @@ def fair_cut_nodes(cm, originals, held) -> int:
     """Re-place the cut nodes of ``originals`` that have a sliver around them; returns how many moved.
 
     The live sub-tets of ``originals`` below :data:`FAIR_BELOW_DEG` name the
-    nodes to look at (their cut nodes, each with its copies).  An original
-    with such a node the blade held is looked at again at the next step
-    (``cm.fair_pending``): the blade moves on, or the stroke ends.
+    nodes to look at (their cut nodes, each with its copies).  Such a node
+    the blade held is looked at again at the next step (``cm.fair_pending``:
+    its key and original tet): the blade moves on, or the stroke ends.
 
     Parameters
     ----------
@@ -78,35 +78,39 @@ def fair_cut_nodes(cm, originals, held) -> int:
         Nodes the blade placed this step: left where they are (and their copies).
     """
     mesh = KF.FairMesh(cm._x, cm._tets, cm._alive, cm.sub_start, cm.sub_count)
-    groups, cm.fair_pending = _poor_groups(cm, mesh, sorted(set(originals) | cm.fair_pending), held)
+    groups, cm.fair_pending = _poor_groups(cm, mesh, set(originals), held)
     return sum(_fair_group(cm, mesh, *group) for group in groups)
 
 
-def _poor_groups(cm, mesh, originals, held):
-    """The cut nodes of the live sub-tets of ``originals`` below :data:`FAIR_BELOW_DEG`, each once, with
-    its coincident copies (the two sides of the cut; on an edge or face with copies along an earlier
+def _poor_groups(cm, mesh, fresh, held):
+    """The cut nodes of the live sub-tets below :data:`FAIR_BELOW_DEG` of the originals ``fresh`` (set)
+    and of those the last step held (``cm.fair_pending``, only the nodes held), each once, with its
+    coincident copies (the two sides of the cut; on an edge or face with copies along an earlier
     stroke's cut (``edge_twins``, ``face_twins``), theirs too: they must stay coincident).
 
     Returns
     -------
     groups : list of (copies (c,) int64, originals around (a,) int64, cut edges (list), plane)
         ``plane``: a T node's original tet (its moves keep it in :func:`_cut_plane`), else None.
-    pending : set of int
-        The originals with such a node the blade holds (one of ``held``).
+    pending : dict
+        The nodes the blade holds (one of ``held``) by key, with their original tet.
     """
+    again = cm.fair_pending
+    originals = sorted(fresh | set(again.values()))
     tets, owner = KF.poor_tets(mesh, np.array(originals, np.int64), FAIR_BELOW_DEG)
     nodes = cm._tets[tets].ravel()
     nodes = set(nodes[nodes >= cm.n_orig_points].tolist())
-    seen, out, pending = set(), [], set()
+    seen, out, pending = set(), [], {}
+
+    def wanted(key, o):  # not looked at in this step yet, nor by an earlier step (unless held then)
+        return key not in seen and (o in fresh or key in again)
 
     def add(key, o, members, copies, around, edges=(), plane=None):
-        if key in seen:
-            return
         seen.update(members)
         copies = np.concatenate(copies) if len(copies) > 1 else copies[0]
         copies = copies[copies >= 0]
         if held.intersection(copies.tolist()):
-            pending.add(o)
+            pending[key] = o
             return
         around = np.concatenate(around) if len(around) > 1 else around[0]
         out.append((copies, np.ascontiguousarray(around[around >= 0]), list(edges), plane))
@@ -114,17 +118,17 @@ def _poor_groups(cm, mesh, originals, held):
     for o in np.unique(owner).tolist():
         for e in cm.tet_edges[o].tolist():
             a, b = cm.edge_node[e].tolist()
-            if a in nodes or b in nodes:
+            if (a in nodes or b in nodes) and wanted(("e", e), o):
                 edges = [e] + list(cm.edge_twins.get(e, ()))
                 add(("e", e), o, [("e", g) for g in edges], [cm.edge_node[g] for g in edges],
                     [cm.edge_ring(g) for g in edges], edges)
         for f in cm.tet_faces[o].tolist():
             # a split face's centre node (``centre_nodes``) stays: it is the midpoint of the cut line
-            if cm.face_ncut[f] != 2 and not nodes.isdisjoint(cm.face_node[f].tolist()):
+            if cm.face_ncut[f] != 2 and not nodes.isdisjoint(cm.face_node[f].tolist()) and wanted(("f", f), o):
                 faces = [f] + list(cm.face_twins.get(f, ()))
                 add(("f", f), o, [("f", g) for g in faces], [cm.face_node[g] for g in faces],
                     [cm.face_tets[g] for g in faces])
-        if not nodes.isdisjoint(cm.tet_T[o].tolist()):
+        if not nodes.isdisjoint(cm.tet_T[o].tolist()) and wanted(("t", o), o):
             add(("t", o), o, [("t", o)], [cm.tet_T[o]], [np.array([o], np.int64)], plane=o)
     return out, pending
 
