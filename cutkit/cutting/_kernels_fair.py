@@ -107,6 +107,15 @@ def _tets_around(mesh, around, copies):
 
 
 @njit(cache=True, nogil=True)
+def _poorest_first(tets, angles):
+    """``tets`` (m, 4) in ascending order of their smallest angle (``angles`` (m, 6), stable)."""
+    worst_of = np.empty(tets.shape[0])
+    for j in range(tets.shape[0]):
+        worst_of[j] = angles[j].min()
+    return tets[np.argsort(worst_of, kind="mergesort")]
+
+
+@njit(cache=True, nogil=True)
 def fair_place(mesh, around, copies, corners, w0, w_cut, limits, steps, directions):
     """Weights of a cut node (and its coincident copies) that maximise the smallest dihedral angle of
     the tets around it, by a compass search over its defining simplex.
@@ -158,11 +167,7 @@ def fair_place(mesh, around, copies, corners, w0, w_cut, limits, steps, directio
     best = start
     if start >= limits[LIM_BELOW]:
         return best_w, best, start
-    # the poorest tets first: a candidate that cannot win is then left at its first tet
-    worst_of = np.empty(tets.shape[0])
-    for j in range(tets.shape[0]):
-        worst_of[j] = angles[j].min()
-    tets = tets[np.argsort(worst_of, kind="mergesort")]
+    tets = _poorest_first(tets, angles)  # a candidate that cannot win is then left at its first tet
     cand = np.empty(k)
     for si in range(steps.shape[0]):
         for _ in range(64):  # each move gains; the box bounds the moves
