@@ -433,15 +433,18 @@ def test_a_cut_is_preceded_by_a_frame_when_the_newest_frame_is_half_a_period_old
 
 
 def test_the_warm_up_loads_the_kernels_a_stroke_needs_that_its_short_cut_misses():
-    """Before a live session's clock starts: the T-cone kernel of a tet the tip has left, the swept
-    triangle query and the Newton pattern's update, each with the argument types a cut or a resting
+    """Before a live session's clock starts: the T-cone kernel of a tet the tip has left, the
+    fairing's search, the swept triangle query and the Newton pattern's update, each with the
+    argument types a cut or a resting
     step passes (C-contiguous float64 / int64 arrays, the hierarchy's structs), so the first stroke
     loads none of them mid-cut or just after it."""
     from numba import types
 
     from cutkit.collision import _kernels as CK
     from cutkit.collision import _swept_kernels as SK
+    from cutkit.cutting import _kernels_fair as KF
     from cutkit.cutting import _kernels_step as KS
+    from cutkit.cutting.fairing import load_fair_kernels
     from cutkit.cutting.resubdivision import load_cone_kernel
     from cutkit.relax import _pattern_kernels as KP
     from cutkit.simulate.warmup import warm_up_missed_kernels
@@ -456,3 +459,8 @@ def test_the_warm_up_loads_the_kernels_a_stroke_needs_that_its_short_cut_misses(
         assert any(sig[0] == types.int64[:, :] or sig[0] == i2 for sig in kernel.signatures), kernel
     # the unit tet's cone over one face: the regular corner's own angles bound it
     assert 0.0 < load_cone_kernel() <= 90.0
+    # the fairing's kernels with a cut step's types: the FairMesh struct of C-contiguous arrays
+    mesh_types = (f2, i2, types.bool_[::1], i1, i1)
+    for kernel in (KF.fair_place, KF.poor_tets):
+        assert any(tuple(sig[0].types) == mesh_types and sig[1] == i1 for sig in kernel.signatures), kernel
+    assert 0.0 < load_fair_kernels() <= 90.0

@@ -180,3 +180,18 @@ def _fair_group(cm, mesh, copies, around, edges, plane) -> int:
     for e in edges:  # the edge's cut parameter follows its node (read by the face and T placements)
         cm.edge_t[e] = weight_of[int(cm.node_rep[cm.edges[e, 1]])]
     return 1
+
+
+def load_fair_kernels() -> float:
+    """Load (or compile) the fairing's kernels with the argument types a cut step passes, on one unit
+    tetrahedron with a node inside it; a live session calls it before its clock starts (the warm-up's
+    short cut may make no sliver to fair).  Returns the search's smallest angle, degrees."""
+    x = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [0.25, 0.25, 0.25]])
+    tets = np.array([[4, 1, 2, 3], [0, 4, 2, 3], [0, 1, 4, 3], [0, 1, 2, 4]], np.int64)
+    mesh = KF.FairMesh(x, tets, np.ones(4, bool), np.zeros(1, np.int64), np.array([4], np.int64))
+    KF.poor_tets(mesh, np.zeros(1, np.int64), FAIR_BELOW_DEG)
+    w0 = np.full(4, 0.25)
+    limits = np.array([_LO[4], FAIR_MOVE_MAX, np.inf])
+    _, angle, _ = KF.fair_place(mesh, np.zeros(1, np.int64), np.array([4], np.int64), np.arange(4, dtype=np.int64),
+                                w0, w0.copy(), limits, FAIR_STEPS, _MOVES[4])
+    return float(angle)
