@@ -442,3 +442,28 @@ def test_fair_place_matches_twin():
         w_s, angle_s, _ = KF.fair_place(mesh, np.zeros(1, np.int64), copies, corners, w0, w_cut, limits, steps, moves)
         assert np.array_equal(w_s, w0) and angle_s == start_k
     assert moved >= 15  # the search moves most nodes
+
+
+def test_poor_tets_are_the_live_sub_tets_below_the_limit():
+    """poor_tets against min_dihedral_angles over every live sub-tet of the originals asked for, on a cut
+    that made slivers: the same tets, in the same order, with their originals."""
+    from test_cut_thousand_paths import MESHES, _path
+
+    from cutkit.cutting import CutMesh, cut_step
+    from cutkit.cutting import _kernels_fair as KF
+    from cutkit.mesh.quality import min_dihedral_angles
+
+    p, t = MESHES["gmsh"]
+    poses, blade_length, _ = _path("gmsh", 105)
+    cm = CutMesh(p, t, blade_length=blade_length, fair_nodes=False)
+    for pose in poses[:40]:
+        if pose is not None:
+            cut_step(cm, *pose)
+    originals = np.array(sorted(cm.subtets), np.int64)
+    mesh = KF.FairMesh(cm._x, cm._tets, cm._alive, cm.sub_start, cm.sub_count)
+    for below in (5.0, 12.0, 30.0):
+        tets, owner = KF.poor_tets(mesh, originals, below)
+        want = [(int(s), int(o)) for o in originals.tolist() for s in cm.subtets[o]
+                if cm._alive[s] and min_dihedral_angles(cm._x, cm._tets[[s]])[0] < below]
+        assert list(zip(tets.tolist(), owner.tolist())) == want
+    assert 0 < len(KF.poor_tets(mesh, originals, 12.0)[0]) < len(KF.poor_tets(mesh, originals, 30.0)[0])

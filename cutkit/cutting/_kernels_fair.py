@@ -1,6 +1,13 @@
-"""Numba kernel of the cut-node fairing (:mod:`cutkit.cutting.fairing`): the best place of one cut node.
+"""Numba kernels of the cut-node fairing (:mod:`cutkit.cutting.fairing`).
 
-Slow, obviously correct NumPy twin: ``tests/_twins_cut.py::fair_place``.
+* :func:`poor_tets`: the live sub-tets of some original tets with a
+  dihedral angle below a limit;
+* :func:`fair_place`: the best place of one cut node (and its copies) in
+  its simplex, by a compass search.
+
+Slow, obviously correct NumPy twins: ``tests/_twins_cut.py::fair_place_twin``,
+and ``min_dihedral_angles`` over the sub-tets for :func:`poor_tets`
+(``tests/test_cut_kernels.py``).
 """
 
 from collections import namedtuple
