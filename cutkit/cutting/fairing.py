@@ -72,13 +72,13 @@ def fair_cut_nodes(cm, originals, held) -> int:
     Parameters
     ----------
     cm : CutMesh
-    originals : iterable of int
+    originals : set of int
         Original tets re-subdivided by the step.
     held : set of int
         Nodes the blade placed this step: left where they are (and their copies).
     """
     mesh = KF.FairMesh(cm._x, cm._tets, cm._alive, cm.sub_start, cm.sub_count)
-    groups, cm.fair_pending = _poor_groups(cm, mesh, set(originals), held)
+    groups, cm.fair_pending = _poor_groups(cm, mesh, originals, held)
     return sum(_fair_group(cm, mesh, *group) for group in groups)
 
 

@@ -213,7 +213,7 @@ def cut_step(cm: CutMesh, tip, a) -> StepResult:
         cm.resubdivide(o)
     # 4. cut nodes around slivers re-placed within their simplex, but for those the blade placed (fairing.py)
     if cm.fair_nodes and (changed or cm.fair_pending):
-        fair_cut_nodes(cm, sorted(changed), _blade_placed_nodes(cm, tip_tet, ev_id))
+        fair_cut_nodes(cm, changed, _blade_placed_nodes(cm, tip_tet, ev_id))
     cm.previous_active_tets = cm.active_tets
     cm.active_tets = np.unique(active)
     cm.prev_pose = (P1, Q1)
