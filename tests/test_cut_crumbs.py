@@ -61,6 +61,20 @@ def test_a_larger_piece_cut_loose_stays_and_is_reported():
     assert_sound(cm, v0)
 
 
+def test_a_crumb_cut_again_into_a_larger_loose_piece_goes_with_it():
+    """A retrace with tremor on the Kuhn box (without fairing) cuts the corner around one vertex loose
+    below the crumb limit several steps running, and then makes part of it again as a piece just above
+    the limit: kept alone, that piece was the corner with the removed part missing (an edge in four
+    boundary faces).  It goes with the crumb (CRUMB_REGROWN_FRACTION)."""
+    from _cut_paths import make_path
+    from test_cut_thousand_paths import MESHES, cut_path
+
+    p, t = MESHES["kuhn"]
+    poses = make_path("retrace", np.random.default_rng(1000 * 237 + 99991), p.max(axis=0), 1.0)
+    missed, _ = cut_path(p, t, poses, 2.5, "kuhn retrace", fair_nodes=False)  # checks every stroke's end
+    assert not missed
+
+
 def test_crumb_kernel_matches_twin():
     p, t = box_mesh((6, 4, 4))
     cm = CutMesh(p, t, blade_length=12.0)

@@ -75,11 +75,11 @@ def _unreported(cm, stroke):
     return {e for e in crossed if not np.isfinite(cm.edge_t[e]) and e not in counted}
 
 
-def cut_path(p, t, poses, blade_length, where):
-    """Cut ``poses``; check the mesh at every stroke's end; returns the unreported uncut edges and the worst
-    cut-made dihedral angle (deg)."""
+def cut_path(p, t, poses, blade_length, where, **options):
+    """Cut ``poses`` (``options``: of :class:`CutMesh`); check the mesh at every stroke's end; returns the
+    unreported uncut edges and the worst cut-made dihedral angle (deg)."""
     v0 = float(signed_volumes(p, t).sum())
-    cm = CutMesh(p, t, blade_length=blade_length)
+    cm = CutMesh(p, t, blade_length=blade_length, **options)
     stroke, missed, worst = [], [], [180.0]
 
     def end():

@@ -24,6 +24,11 @@ from cutkit.mesh.topology import node_to_tets
 #: A piece cut loose with a rest volume at most this fraction of the model's is a crumb and is
 #: removed (the measure of issue 30: a body this small carries no useful physics).
 CRUMB_VOLUME_FRACTION = 1e-3
+#: A piece a step makes again out of a removed crumb's region (it shares a node with the crumb's dead
+#: tets) is removed with the crumb while its rest volume is at most this fraction of the model's:
+#: kept, it would be the loose body with the crumb's part missing (a hole whose rim edges are
+#: non-manifold).  The main body is far larger, so only loose pieces are removed this way.
+CRUMB_REGROWN_FRACTION = 1e-2
 
 
 def init_crumbs(cm):
@@ -77,7 +82,17 @@ def remove_crumbs(cm, seeds) -> int:
     cm.crumb_stamp += 4  # marks of earlier calls are below it: no per-step reset
     inc = KC.Incidence(cm.node_tet_off, cm.node_tet_idx, cm._def_nodes, cm.n_orig_points, cm.sub_start,
                        cm.sub_count, cm.neighbors)
-    limit = CRUMB_VOLUME_FRACTION * cm.model_volume
+    regrown = _touching_crumbs(cm, seeds)  # before this call's crumbs join cm.crumb_tets
+    n = _remove_pieces(cm, inc, seeds, CRUMB_VOLUME_FRACTION * cm.model_volume)
+    regrown = regrown[cm._alive[regrown]]
+    if regrown.size:
+        cm.crumb_stamp += 4
+        n += _remove_pieces(cm, inc, regrown, CRUMB_REGROWN_FRACTION * cm.model_volume)
+    return n
+
+
+def _remove_pieces(cm, inc, seeds, limit) -> int:
+    """Remove the pieces through live tets ``seeds`` whose rest volume is at most ``limit``."""
     dead, n_pieces = KC.loose_small_pieces(cm._X, cm._tets, cm._alive, inc, seeds, limit, cm.crumb_mark,
                                            cm.crumb_stamp)
     if not n_pieces:
@@ -86,6 +101,20 @@ def remove_crumbs(cm, seeds) -> int:
     cm.crumb_tets.update(dead.tolist())
     cm.crumb_count += int(n_pieces)
     return int(n_pieces)
+
+
+def _touching_crumbs(cm, seeds):
+    """The live tets among ``seeds`` that share a node with a removed crumb's (dead) tets.
+
+    A crumb is a whole piece when it is removed, so afterwards only tets a
+    later step makes again in its original tets can share its nodes: the
+    crumb's region cut again (:data:`CRUMB_REGROWN_FRACTION`).
+    """
+    if not cm.crumb_tets:
+        return seeds[:0]
+    crumb_nodes = np.unique(cm._tets[np.fromiter(cm.crumb_tets, np.int64, len(cm.crumb_tets))])
+    live = seeds[cm._alive[seeds]]
+    return live[np.isin(cm._tets[live], crumb_nodes).any(axis=1)]
 
 
 def forget_crumb_tets(cm, ids) -> list:
