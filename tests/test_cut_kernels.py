@@ -154,6 +154,15 @@ def test_clamp_set_node_min_volume_match_twins():
             rx, rX, ru = set_node_twin(x, X, tex if len(tex) else None, nodes, clamp_bary_twin(w_raw, 0.05))
             np.testing.assert_allclose(x[9], rx, atol=1e-14)
             np.testing.assert_allclose(dw[9, :k], clamp_bary_twin(w_raw, 0.05), atol=1e-15)
+            # several nodes in one call: each as alone
+            rows = rng.uniform(-0.3, 1.0, (2, k))
+            SK.set_nodes_clamped(x, X, tex, dn, dw, np.array([6, 7], np.int64), np.array([nodes, nodes[::-1]]),
+                                 rows, 0.05)
+            for i, nd, wr in ((6, nodes, rows[0]), (7, nodes[::-1], rows[1])):
+                rx, rX, ru = set_node_twin(x, X, tex if len(tex) else None, nd, clamp_bary_twin(wr, 0.05))
+                np.testing.assert_allclose(x[i], rx, atol=1e-14)
+                np.testing.assert_allclose(X[i], rX, atol=1e-14)
+                assert list(dn[i, :k]) == list(nd)
     p, t = _jittered_box(8)
     t = t.copy()
     t[::3] = t[::3, [1, 0, 2, 3]]  # some inverted
@@ -320,7 +329,8 @@ def test_subdivision_kernels_match_twins_along_cut_paths(monkeypatch):
     patterns of every cut tet and every compact split are the twins' (the rules as first written,
     with dicts and lists): the same triangles and owners in the same order, the same split tets
     and angle, the refusals too (a volume floor raised to 5 % on the ball); with and without
-    centre nodes."""
+    centre nodes.  The fused kernel that tries every combination of free diagonals picks the
+    first best of them."""
     from _cut_paths import delaunay_ball, jittered_block, make_path
     from _twins_cut import compact_split_twin, face_triangles_twin
 
@@ -328,16 +338,16 @@ def test_subdivision_kernels_match_twins_along_cut_paths(monkeypatch):
     from cutkit.cutting import cut_step
     from cutkit.cutting import subdivision as S
 
-    kernel = KP.compact_split
-    calls = {"made": 0, "refused": 0, "faces": 0}
+    kernel, fused = KP.compact_split, KP.compact_split_diagonals
+    calls = {"made": 0, "refused": 0, "faces": 0, "several": 0}
     current = {}
 
     def as_list(cm, o, tris, corner, face):
         v = cm.orig_tets[o].tolist()
         return [(tuple(t), v[c], f) for t, c, f in zip(tris.tolist(), corner.tolist(), face.tolist())]
 
-    def both(ct, x, o, tris, corner, face, group, vol_min):
-        # every call: each combination of free split-face diagonals the split tries
+    def one(ct, x, o, tris, corner, face, group, vol_min):
+        """The kernel's split of one combination of diagonals, checked against the twin's."""
         cm = current["cm"]
         got = kernel(ct, x, o, tris, corner, face, group, vol_min)
         got = (None if got[0].shape[0] == 0 else got[0], got[1])
@@ -349,9 +359,27 @@ def test_subdivision_kernels_match_twins_along_cut_paths(monkeypatch):
             assert [tuple(q) for q in got[0].tolist()] == [tuple(int(a) for a in q) for q in want[0]]
             assert got[1] == pytest.approx(want[1], abs=1e-9)
         calls["made" if got[0] is not None else "refused"] += 1
-        return kernel(ct, x, o, tris, corner, face, group, vol_min)
+        return got
 
-    monkeypatch.setattr(KP, "compact_split", both)
+    def both(ct, x, o, mask, group, vol_min, free, centre_nodes):
+        # every combination of free split-face diagonals the fused kernel tries, in its order; its pick
+        # is the first best (ties within SCORE_TIE_DEG keep the earlier)
+        best = (-1, None, 0.0)
+        for bits in range(1 << free.shape[0]):
+            for i in range(free.shape[0]):
+                ct.face_diag[free[i, 0]] = free[i, 1 + (bits >> i & 1)]
+            tris, corner, face = KP.face_triangles(ct, o, mask, centre_nodes)
+            tets, angle = one(ct, x, o, tris, corner, face, group, vol_min)
+            if tets is not None and (best[0] < 0 or angle > best[2] + KP.SCORE_TIE_DEG):
+                best = (bits, tets, angle)
+        calls["several"] += free.shape[0] > 0
+        got = fused(ct, x, o, mask, group, vol_min, free, centre_nodes)
+        assert got[0] == best[0]
+        if best[0] >= 0:
+            assert got[4].tolist() == best[1].tolist() and got[5] == best[2]
+        return got
+
+    monkeypatch.setattr(KP, "compact_split_diagonals", both)
     for (p, t), floor, centre in ((jittered_block(), SP.COMPACT_VOL_MIN, False), (delaunay_ball(), 0.05, False),
                                   (jittered_block(seed=3), SP.COMPACT_VOL_MIN, True)):
         monkeypatch.setattr(SP, "COMPACT_VOL_MIN", floor)
@@ -370,6 +398,7 @@ def test_subdivision_kernels_match_twins_along_cut_paths(monkeypatch):
                         assert as_list(cm, o, *got) == face_triangles_twin(cm, o, mask)
                         calls["faces"] += 1
     assert calls["made"] > 50 and calls["refused"] > 0 and calls["faces"] > 1000
+    assert calls["several"] > 10  # splits with a free diagonal: several combinations tried
 
 
 def test_the_vectorised_oracle_is_the_scalar_one():

@@ -476,6 +476,44 @@ def compact_split(ct, x, o, tris, tri_corner, tri_face, group, vol_min):
 
 
 @njit(cache=True, nogil=True)
+def compact_split_diagonals(ct, x, o, mask, group, vol_min, free, centre_nodes):
+    """:func:`compact_split` of original tet ``o`` under every combination of its free diagonals, the best kept
+    (:func:`cutkit.cutting.splits.compact_split`: one call instead of two per combination).
+
+    Parameters
+    ----------
+    ct, x, o, group, vol_min : as :func:`compact_split`
+    mask : int  the tet's cut edges (6-bit, reduced)
+    free : (d, 3) int64
+        The split faces whose diagonal is not fixed: face, the smaller-id vertex (bit 0), the other (bit 1).
+        Combination ``bits`` sets face i's diagonal to column ``1 + (bits >> i & 1)`` of row i in
+        ``ct.face_diag``, which is left at the last combination tried.
+    centre_nodes : bool
+
+    Returns
+    -------
+    (bits, tris, corner, face, tets, angle)
+        The winning combination (the first of equals within :data:`SCORE_TIE_DEG`) with its face
+        triangles (:func:`face_triangles`), its split's tets and their smallest dihedral angle; bits -1
+        with combination 0's triangles, no tets and angle 0 when no combination passes the volume test.
+    """
+    best_bits, best_angle = -1, 0.0
+    best_tris, best_tets = np.zeros((0, 3), np.int64), np.zeros((0, 4), np.int64)
+    best_corner, best_face = np.zeros(0, np.int64), np.zeros(0, np.int64)
+    for bits in range(1 << free.shape[0]):
+        for i in range(free.shape[0]):
+            ct.face_diag[free[i, 0]] = free[i, 1 + (bits >> i & 1)]
+        tris, corner, face = face_triangles(ct, o, mask, centre_nodes)
+        if bits == 0:
+            best_tris, best_corner, best_face = tris, corner, face
+        tets, angle = compact_split(ct, x, o, tris, corner, face, group, vol_min)
+        if tets.shape[0] and (best_bits < 0 or angle > best_angle + SCORE_TIE_DEG):
+            best_bits, best_angle = bits, angle
+            best_tris, best_corner, best_face, best_tets = tris, corner, face, tets
+    return best_bits, best_tris, best_corner, best_face, best_tets, best_angle
+
+
+@njit(cache=True, nogil=True)
 def best_face_apex(x, tris, tri_face, face_nodes, vol_min):
     """The notched face whose node F is the best apex of a cone over the other faces' triangles.
 

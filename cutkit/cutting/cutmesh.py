@@ -394,6 +394,25 @@ class CutMesh:
             self._set_face_crossing(g, twin_face_bary(self, int(f), g, bary))
         return self._set_face_crossing(f, bary)
 
+    def set_face_crossings(self, faces, bary):
+        """:meth:`set_face_crossing` of faces ``faces`` (k,) int64 at ``bary`` (k, 3) float64, in order (a
+        face crossed twice keeps the later crossing); each notch node F is moved once."""
+        fl = faces.tolist()
+        bary = np.array(bary, np.float64)  # own rows: the sweep's event buffer is used again
+        if self.face_twins and not self.face_twins.keys().isdisjoint(fl):
+            for f, b in zip(fl, bary):  # copies along an earlier cut: one crossing after the other
+                self.set_face_crossing(f, b)
+            return
+        self.face_bary.update(zip(fl, bary))
+        notched = np.array(list(dict.fromkeys(faces[self.face_ncut[faces] == 1].tolist())), np.int64)
+        node = self.face_node[notched, 0]
+        for f in notched[node < 0].tolist():  # none yet: made as the edge cut makes it
+            self._update_face_node(f)
+        notched = notched[node >= 0]
+        if notched.size:  # each notch node F to its face's latest crossing (_update_face_node)
+            self.store.move_nodes(self.face_node[notched, 0], self.faces[notched],
+                                  np.array([self.face_bary[f] for f in notched.tolist()]), FACE_BARY_MIN)
+
     def _set_face_crossing(self, f, bary):
         self.face_bary[f] = np.asarray(bary, np.float64)
         if self.face_ncut[f] == 1:

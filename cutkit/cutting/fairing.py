@@ -50,6 +50,9 @@ FAIR_BELOW_DEG = 12.0
 #: No weight of a re-placed node moves more than this from where the cut put it (a fraction of its
 #: edge, face or tet: the cut surface stays that close to the blade's crossing).
 FAIR_MOVE_MAX = 0.2
+#: Where the first round leaves a sub-tet below this (degrees) in the original tets around the
+#: nodes it moved, a second round looks at the poor sub-tets there that hold a moved node (0: never).
+FAIR_AGAIN_BELOW_DEG = 6.0
 #: Steps of the compass search over the weights, largest first.
 FAIR_STEPS = np.array([0.08, 0.04, 0.02, 0.01])
 #: A node moves only when its smallest angle rises by at least this (degrees): a move costs the
@@ -67,7 +70,10 @@ def fair_cut_nodes(cm, originals, held) -> int:
     The live sub-tets of ``originals`` below :data:`FAIR_BELOW_DEG` name the
     nodes to look at (their cut nodes, each with its copies).  Such a node
     the blade held is looked at again at the next step (``cm.fair_pending``:
-    its key and original tet): the blade moves on, or the stroke ends.
+    its key and original tet): the blade moves on, or the stroke ends.  Where
+    the moves leave a sub-tet below :data:`FAIR_AGAIN_BELOW_DEG` in the
+    originals around them, the nodes of the poor sub-tets that hold a moved
+    node are looked at once more (a second round, same rule).
 
     Parameters
     ----------
@@ -78,15 +84,27 @@ def fair_cut_nodes(cm, originals, held) -> int:
         Nodes the blade placed this step: left where they are (and their copies).
     """
     mesh = KF.FairMesh(cm._x, cm._tets, cm._alive, cm.sub_start, cm.sub_count)
-    groups, cm.fair_pending = _poor_groups(cm, mesh, originals, held)
-    return sum(_fair_group(cm, mesh, *group) for group in groups)
+    groups, cm.fair_pending = _poor_groups(cm, mesh, originals, held, cm.fair_pending, FAIR_BELOW_DEG)
+    moved = [group for group in groups if _fair_group(cm, mesh, *group)]
+    if not moved or FAIR_AGAIN_BELOW_DEG <= 0.0:
+        return len(moved)
+    # a move changes its neighbours' best places (and theirs its): where a sliver is left around
+    # the moves, the nodes of the poor sub-tets at a moved node are looked at once more
+    around = set(np.concatenate([group[1] for group in moved]).tolist())
+    if not KF.poor_tets(mesh, np.array(sorted(around), np.int64), FAIR_AGAIN_BELOW_DEG)[0].size:
+        return len(moved)
+    near = np.concatenate([group[0] for group in moved])
+    groups, pending = _poor_groups(cm, mesh, around, held, {}, FAIR_BELOW_DEG, near)
+    cm.fair_pending.update(pending)
+    return len(moved) + sum(_fair_group(cm, mesh, *group) for group in groups)
 
 
-def _poor_groups(cm, mesh, fresh, held):
-    """The cut nodes of the live sub-tets below :data:`FAIR_BELOW_DEG` of the originals ``fresh`` (set)
-    and of those the last step held (``cm.fair_pending``, only the nodes held), each once, with its
-    coincident copies (the two sides of the cut; on an edge or face with copies along an earlier
-    stroke's cut (``edge_twins``, ``face_twins``), theirs too: they must stay coincident).
+def _poor_groups(cm, mesh, fresh, held, again, below, near=None):
+    """The cut nodes of the live sub-tets below ``below`` (degrees) of the originals ``fresh`` (set)
+    and of those an earlier step held (``again``: key -> original tet, only the nodes held), each
+    once, with its coincident copies (the two sides of the cut; on an edge or face with copies along
+    an earlier stroke's cut (``edge_twins``, ``face_twins``), theirs too: they must stay coincident).
+    ``near`` (q,) int64 nodes, or None: only the sub-tets with a corner among them count.
 
     Returns
     -------
@@ -95,10 +113,13 @@ def _poor_groups(cm, mesh, fresh, held):
     pending : dict
         The nodes the blade holds (one of ``held``) by key, with their original tet.
     """
-    again = cm.fair_pending
     originals = sorted(fresh | set(again.values()))
-    tets, owner = KF.poor_tets(mesh, np.array(originals, np.int64), FAIR_BELOW_DEG)
-    nodes = cm._tets[tets].ravel()
+    tets, owner = KF.poor_tets(mesh, np.array(originals, np.int64), below)
+    corners = cm._tets[tets]
+    if near is not None:  # only the poor tets at a node moved since they were looked at
+        keep = np.isin(corners, near).any(axis=1)
+        corners, owner = corners[keep], owner[keep]
+    nodes = corners.ravel()
     nodes = set(nodes[nodes >= cm.n_orig_points].tolist())
     seen, out, pending = set(), [], {}
 

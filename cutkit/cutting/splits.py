@@ -19,6 +19,8 @@ avoids slivers where a better choice exists.
 
 from __future__ import annotations
 
+import numpy as np
+
 from cutkit.cutting import _kernels_split as KP
 from cutkit.cutting.subdivision import FACE_EDGES
 from cutkit.mesh.topology import TET_EDGES
@@ -74,24 +76,11 @@ def compact_split(cm, ct, o, mask, group):
     """
     free = _free_diagonals(cm, o, mask)
     vol_min = COMPACT_VOL_MIN * float(cm._vol0(o))
-    best = None
-    for bits in range(1 << len(free)):
-        _set_diagonals(cm, free, bits)
-        tris, corner, face = KP.face_triangles(ct, o, mask, cm.centre_nodes)
-        tets, angle = KP.compact_split(ct, cm._x, o, tris, corner, face, group, vol_min)
-        if tets.shape[0] and (best is None or angle > best[5] + KP.SCORE_TIE_DEG):
-            best = (bits, tris, corner, face, tets, float(angle))
-    if best is None:
-        _set_diagonals(cm, free, 0)
-        best = (0, *KP.face_triangles(ct, o, mask, cm.centre_nodes), None, 0.0)
-    choice = [(f, hi if best[0] >> i & 1 else lo, lo) for i, (f, lo, hi) in enumerate(free)]
+    bits, tris, corner, face, tets, angle = KP.compact_split_diagonals(
+        ct, cm._x, o, mask, group, vol_min, np.array(free, np.int64).reshape(-1, 3), cm.centre_nodes)
+    choice = [(f, hi if bits > 0 and bits >> i & 1 else lo, lo) for i, (f, lo, hi) in enumerate(free)]
     cm.face_diag[[f for f, _, _ in free]] = -1
-    return (*best[1:], choice)
-
-
-def _set_diagonals(cm, free, bits):
-    for i, (f, lo, hi) in enumerate(free):
-        cm.face_diag[f] = hi if bits >> i & 1 else lo
+    return tris, corner, face, (tets if bits >= 0 else None), float(angle), choice
 
 
 def _free_diagonals(cm, o, mask):

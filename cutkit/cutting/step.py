@@ -283,22 +283,27 @@ def _replay_events(cm: CutMesh, ev_id, ev_val, swept):
     """
     changed = set()
     cut_edges = []
-    for (kind, i), val in zip(ev_id.tolist(), ev_val):
-        if kind == KS.EV_EDGE:
-            if np.isfinite(cm.edge_t[i]):  # cut already: an edge is cut once
-                continue
-            s = recrossed(cm, i, val[0], swept)  # an end moved away from the cut earlier in the step
-            s = -1.0 if s < 0.0 or touches_only(cm, i, s, swept) else snap_away(cm, i, s, swept)
-            ring = s >= 0.0 and cm.try_cut_edge(i, s)
-            if ring:
-                cut_edges.append(i)
-                cut_edges.extend(cm.retried_edges)  # deferred edges this cut let through
-                changed.update(ring)
-            cm.retried_edges.clear()
-        else:
-            # the blade crosses face i: moves its notch node F (crack front);
-            # only positions change, the topology does not
-            cm.set_face_crossing(i, val.copy())
+    edge_events = np.flatnonzero(ev_id[:, 0] == KS.EV_EDGE).tolist()
+    start = 0
+    for k in edge_events + [ev_id.shape[0]]:
+        if k > start:
+            # the blade crosses these faces: moves their notch nodes F (crack front); only
+            # positions change, the topology does not (a run between two edge events at once)
+            cm.set_face_crossings(ev_id[start:k, 1], ev_val[start:k])
+        start = k + 1
+        if k == ev_id.shape[0]:
+            break
+        i = int(ev_id[k, 1])
+        if np.isfinite(cm.edge_t[i]):  # cut already: an edge is cut once
+            continue
+        s = recrossed(cm, i, ev_val[k, 0], swept)  # an end moved away from the cut earlier in the step
+        s = -1.0 if s < 0.0 or touches_only(cm, i, s, swept) else snap_away(cm, i, s, swept)
+        ring = s >= 0.0 and cm.try_cut_edge(i, s)
+        if ring:
+            cut_edges.append(i)
+            cut_edges.extend(cm.retried_edges)  # deferred edges this cut let through
+            changed.update(ring)
+        cm.retried_edges.clear()
     for i, s in new_crossings(cm, swept):  # edges of nodes moved away from the cut that cross now
         ring = not touches_only(cm, i, s, swept) and cm.try_cut_edge(i, s)
         if ring:

@@ -49,3 +49,11 @@ def set_node_clamped(x, X, uvw, def_nodes, def_w, i, nodes, w, lo):
     """:func:`set_node` with the weights :func:`clamp_bary` ``(w, lo)`` first, in one call (a notch
     node F following the blade across its face: a few dozen per cut step)."""
     set_node(x, X, uvw, def_nodes, def_w, i, nodes, clamp_bary(w, lo))
+
+
+@njit(cache=True, nogil=True)
+def set_nodes_clamped(x, X, uvw, def_nodes, def_w, ids, nodes, w, lo):
+    """:func:`set_node_clamped` of nodes ``ids`` (p,) int64, node ``ids[r]`` by weights ``w[r]`` (p, k)
+    float64 on original nodes ``nodes[r]`` (p, k) int64: the notch nodes F the blade moves in one step."""
+    for r in range(ids.shape[0]):
+        set_node(x, X, uvw, def_nodes, def_w, ids[r], nodes[r], clamp_bary(w[r], lo))

@@ -296,6 +296,18 @@ class TissueStore:
         self._place(i, nodes, w, lo)
         self.step_log.moved_nodes.append(i)
 
+    def move_nodes(self, ids, nodes, w, lo: float) -> None:
+        """:meth:`move_node` of nodes ``ids`` (p,) int64 by weights ``w`` (p, k) float64 on original
+        ``nodes`` (p, k) int64, each clamped to at least ``lo``, in one kernel call."""
+        moved_from = self.step_log.moved_from
+        b = self.node_buffers
+        first = [i for i in ids.tolist() if i not in moved_from]
+        moved_from.update(zip(first, b.X[first].copy()))
+        K.set_nodes_clamped(b.x, b.X, _NO_UVW if b.uvw is None else b.uvw, b.parents, b.weights,
+                            np.ascontiguousarray(ids, np.int64), np.ascontiguousarray(nodes, np.int64),
+                            np.ascontiguousarray(w, np.float64), float(lo))
+        self.step_log.moved_nodes.extend(ids.tolist())
+
     def _place(self, i, nodes, w, lo) -> None:
         b = self.node_buffers
         uvw = _NO_UVW if b.uvw is None else b.uvw
