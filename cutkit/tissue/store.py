@@ -302,7 +302,7 @@ class TissueStore:
         moved_from = self.step_log.moved_from
         b = self.node_buffers
         first = [i for i in ids.tolist() if i not in moved_from]
-        moved_from.update(zip(first, b.X[first].copy()))
+        moved_from.update(zip(first, b.X[first]))  # rows of a fresh array (fancy indexing copies)
         K.set_nodes_clamped(b.x, b.X, _NO_UVW if b.uvw is None else b.uvw, b.parents, b.weights,
                             np.ascontiguousarray(ids, np.int64), np.ascontiguousarray(nodes, np.int64),
                             np.ascontiguousarray(w, np.float64), float(lo))
