@@ -248,8 +248,8 @@ def test_a_crushing_point_load_never_inverts_a_tet(hessian, monkeypatch):
     lowest = []
     search = N.line_search
 
-    def watched(problem, x, d, r, res):
-        out = search(problem, x, d, r, res)
+    def watched(problem, x, d, r, res, g0=None):
+        out = search(problem, x, d, r, res, g0)
         lowest.append(np.linalg.det(deformation_gradients(x, *arrays(em)[:2])).min())
         return out
 

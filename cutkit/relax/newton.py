@@ -349,6 +349,7 @@ class NewtonSolver:
         r0 = res = float(np.linalg.norm(r))
         it = 0
         rings = self.region_rings
+        g = None  # G at x where the last line search moved it
         while res > atol and it < max_iterations:
             if stop is not None and stop[0]:
                 if it == 0:
@@ -367,7 +368,7 @@ class NewtonSolver:
                     return SolveInfo(0, r0, r0, False, taken=False)
                 break
             before = res
-            moved, r = line_search(problem, x, d, r, res)
+            moved, r, g = line_search(problem, x, d, r, res, g)
             it += 1
             res = float(np.linalg.norm(r))
             if local and res > max(atol, REGION_WIDEN * before):
@@ -699,7 +700,7 @@ class _Potential:
         return float(stored(self.em, x) + kin + damp - np.sum(np.where(f, t.force * x, 0.0)))
 
 
-def line_search(problem, x: np.ndarray, d: np.ndarray, r: np.ndarray, res: float):
+def line_search(problem, x: np.ndarray, d: np.ndarray, r: np.ndarray, res: float, g0: float | None = None):
     """Backtracking (Armijo) along d from the longest step that inverts no element.
 
     The first trial is ``min(1, INVERSION_SAFETY a0)`` with a0 the first
@@ -723,26 +724,37 @@ def line_search(problem, x: np.ndarray, d: np.ndarray, r: np.ndarray, res: float
         The residual at x, N.
     res : float
         Its norm, N.
+    g0 : float, optional
+        G at x where the caller has it (the last line search's accepted value on the same
+        ``problem``): the number :meth:`energy` would give, one pass over the elements fewer.
+
+    Returns
+    -------
+    moved : bool
+    r : (n, 3) float64
+        The residual at x (the new x where moved), N.
+    g : float or None
+        G at x where moved (the next line search's ``g0``), else None.
     """
     slope = float(np.sum(r * d))  # -dG/da at a = 0
     if not slope > 0.0:
-        return False, r
+        return False, r, None
     a0 = KN.step_bound(x, d, problem.el, 1.0)
     a = 1.0 if a0 > 1.0 else INVERSION_SAFETY * a0
-    g0 = problem.energy(x)
+    g0 = problem.energy(x) if g0 is None else g0
     for _ in range(MAX_BACKTRACKS):
         trial = x + a * d
         g = problem.energy(trial)
         if g <= g0 - ARMIJO_C1 * a * slope:
             x[:] = trial
-            return True, problem.residual(x)
+            return True, problem.residual(x), g
         if a * slope <= ROUNDING * max(abs(g0), 1e-300):  # below what G can resolve: go by the residual
             rt = problem.residual(trial)
             if np.linalg.norm(rt) < res:
                 x[:] = trial
-                return True, rt
+                return True, rt, g
         a *= 0.5
-    return False, r
+    return False, r, None
 
 
 def _free_terms(em: ElementModel, x, h, f_ext, gravity, y=None) -> KE.NodeTerms:
