@@ -5,7 +5,7 @@ incision with a slight wobble; the per-step cost should not depend on the
 model size (all work is local to the blade).
 
     python benchmarks/cut.py [--json] [--sizes 10k,100k,1M] [--steps 200] [--model knee.h5] [--simulate knee.h5]
-                             [--cold] [--no-fairing]
+                             [--cold] [--no-fairing] [--no-smoothing]
 
 ``--model`` also cuts a model file (e.g. the demo's ``knee.h5``) along the
 shipped incision (``sample_volumes/incision.csv``) and reports its step
@@ -16,7 +16,8 @@ cut-made tets' smallest dihedral angles (worst, p1, p5, median, and how
 many are below 5 degrees).
 
 ``--no-fairing`` cuts the boxes and ``--model`` with ``fair_nodes=False``
-(``cutkit.cutting.fairing``), for a comparison in one version of the code.
+(``cutkit.cutting.fairing``), ``--no-smoothing`` with ``smooth_vertices=False``
+(``cutkit.cutting.smoothing``), for a comparison in one version of the code.
 
 ``--cold`` times a 40-step cut of a small box (8 x 8 x 8 cubes) in a fresh
 interpreter twice: with an empty numba cache (``NUMBA_CACHE_DIR`` a new
@@ -39,7 +40,8 @@ import numpy as np
 SIZES = {"10k": (12, 12, 12), "100k": (26, 26, 25), "1M": (55, 55, 55)}
 
 
-#: CutMesh options of the kinematic cuts (``--no-fairing`` sets fair_nodes=False).
+#: CutMesh options of the kinematic cuts (``--no-fairing`` sets fair_nodes=False, ``--no-smoothing``
+#: smooth_vertices=False).
 CUT_OPTIONS = {}
 
 
@@ -155,9 +157,13 @@ def main():
     ap.add_argument("--simulate", default=None, help="also time the cut steps of `cutkit simulate` on this model")
     ap.add_argument("--cold", action="store_true", help="also time a small cut with an empty numba cache")
     ap.add_argument("--no-fairing", action="store_true", help="cut the boxes and --model with fair_nodes=False")
+    ap.add_argument("--no-smoothing", action="store_true",
+                    help="cut the boxes and --model with smooth_vertices=False")
     args = ap.parse_args()
     if args.no_fairing:
         CUT_OPTIONS["fair_nodes"] = False
+    if args.no_smoothing:
+        CUT_OPTIONS["smooth_vertices"] = False
     res = {s: bench(SIZES[s], args.steps) for s in args.sizes.split(",") if s}
     if args.cold:
         res["cold"] = bench_cold()

@@ -12,7 +12,7 @@ the paths that failed (mesh, index, kind, tremor and the first line of the
 failure) and the distribution of the worst cut-made dihedral angle per path.
 
     python benchmarks/cut_fresh_draw.py [--seed 424242] [--meshes kuhn,gmsh,decimated]
-                                        [--no-fairing] [--json]
+                                        [--no-fairing] [--no-smoothing] [--json]
 
 About 45 s for the three meshes on one core once the kernels are compiled.
 """
@@ -28,7 +28,7 @@ import numpy as np
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "tests"))
 
 
-def run(seed: int, meshes: list, fairing: bool) -> dict:
+def run(seed: int, meshes: list, fairing: bool, smoothing: bool = True) -> dict:
     from rich.progress import Progress
 
     from _cut_paths import make_path
@@ -45,7 +45,8 @@ def run(seed: int, meshes: list, fairing: bool) -> dict:
                 poses = make_path(kind, np.random.default_rng(1000 * i + seed), p.max(axis=0), tremor)
                 where = [name, i, kind, tremor]
                 try:
-                    missed, angle = cut_path(p, t, poses, 2.5 if i % 2 else 10.0, where, fair_nodes=fairing)
+                    missed, angle = cut_path(p, t, poses, 2.5 if i % 2 else 10.0, where, fair_nodes=fairing,
+                                             smooth_vertices=smoothing)
                     worst.append(angle)
                     if missed:
                         failed.append(where + [f"{len(missed)} crossed edges left uncut and uncounted"])
@@ -53,7 +54,7 @@ def run(seed: int, meshes: list, fairing: bool) -> dict:
                     failed.append(where + [f"{type(e).__name__}: {str(e).splitlines()[0][:200] if str(e) else ''}"])
                 bar.advance(task)
     w = np.array(worst)
-    return {"seed": seed, "meshes": meshes, "fairing": fairing, "paths": len(meshes) * PATHS_PER_MESH,
+    return {"seed": seed, "meshes": meshes, "fairing": fairing, "smoothing": smoothing, "paths": len(meshes) * PATHS_PER_MESH,
             "failures": len(failed), "failed": failed[:20], "wall_s": time.perf_counter() - t0,
             "worst_angle_min_p1_p10_median_deg": [float(v) for v in np.percentile(w, [0, 1, 10, 50])],
             "paths_below_5_deg": int((w < 5).sum()), "paths_below_1_deg": int((w < 1).sum())}
@@ -64,13 +65,14 @@ def main():
     ap.add_argument("--seed", type=int, default=424242, help="seed offset of the draw (the test's is 7)")
     ap.add_argument("--meshes", default="kuhn,gmsh,decimated", help="comma-separated: kuhn, gmsh, decimated")
     ap.add_argument("--no-fairing", action="store_true", help="cut with CutMesh(fair_nodes=False)")
+    ap.add_argument("--no-smoothing", action="store_true", help="cut with CutMesh(smooth_vertices=False)")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args()
     meshes = [m for m in args.meshes.split(",") if m]
     known = {"kuhn", "gmsh", "decimated"}
     if not meshes or not set(meshes) <= known:
         ap.error(f"--meshes takes some of {', '.join(sorted(known))}, not {args.meshes!r}")
-    res = run(args.seed, meshes, not args.no_fairing)
+    res = run(args.seed, meshes, not args.no_fairing, not args.no_smoothing)
     if args.json:
         print(json.dumps(res, indent=2))
     else:

@@ -15,7 +15,7 @@ what made it:
 Prints the distribution of the worst cut-made angle per path (min, p1,
 p10, median) and a histogram of the causes of the strokes below 5 degrees.
 
-    python benchmarks/cut_slivers.py [--every 3] [--json] [--snap]
+    python benchmarks/cut_slivers.py [--every 3] [--json] [--snap] [--no-smoothing]
 """
 
 import argparse
@@ -69,7 +69,7 @@ def worst_of_stroke(cm, tip_tets):
     return float(ang[w]), cause
 
 
-def run(every, snap):
+def run(every, snap, smooth=True):
     from test_cut_thousand_paths import ALL_KINDS, MESHES, PATHS_PER_MESH, TREMORS
     from _cut_paths import make_path
     from cutkit.cutting import CutMesh, cut_step
@@ -91,6 +91,7 @@ def run(every, snap):
             kind, tremor = ALL_KINDS[i % len(ALL_KINDS)], TREMORS[(i // len(ALL_KINDS)) % len(TREMORS)]
             poses = make_path(kind, np.random.default_rng(1000 * i + 7), L, tremor)
             kw = {"snap_vertices": True} if snap else {}
+            kw["smooth_vertices"] = smooth
             cm = CutMesh(p, t, blade_length=2.5 if i % 2 else 10.0, **kw)
             cm.raw_edge_t, tips, worst = {}, set(), []
 
@@ -134,9 +135,10 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--every", type=int, default=1, help="take every k-th path of each mesh")
     ap.add_argument("--snap", action="store_true", help="cut with snap_vertices=True")
+    ap.add_argument("--no-smoothing", action="store_true", help="cut with smooth_vertices=False")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args()
-    res = run(args.every, args.snap)
+    res = run(args.every, args.snap, not args.no_smoothing)
     print(json.dumps(res, indent=2) if args.json else res)
 
 

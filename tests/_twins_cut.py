@@ -628,3 +628,37 @@ def fair_place_twin(x, tets, copies, corners, w0, w_cut, lo, move_max, steps, di
                 break
             w = best_w
     return w, best
+
+
+def vertex_place_twin(x, tets, share, vertex, ends, swept, directions, steps, move_max):
+    """The compass search of ``_kernels_fair.vertex_place`` by plain loops: from dx = 0, every move
+    dx + s d of each step within ``move_max``, the best of each sweep taken while it gains; a
+    candidate counts only where every tet stays positive and no edge from the vertex to one of
+    ``ends`` that misses every triangle of ``swept`` now comes to cross one."""
+
+    def crossing(p):
+        return np.array([any(edge_crosses_triangle(p, q, tri) >= 0.0 for tri in swept) for q in ends], bool)
+
+    def worst(dx):
+        y = x + share[:, None] * dx
+        if volumes(y, tets).min() <= 0.0:
+            return -1.0, None
+        return min(min(_dihedrals_twin(y[t])) for t in tets), crossing(y[vertex])
+
+    now = crossing(x[vertex])
+    dx = np.zeros(3)
+    start = best = worst(dx)[0]
+    for s in steps:
+        while True:
+            pick = None
+            for d in directions:
+                cand = dx + s * d
+                if cand @ cand > move_max * move_max:
+                    continue
+                a, after = worst(cand)
+                if a > best + 1e-9 and not (after & ~now).any():
+                    best, pick = a, cand
+            if pick is None:
+                break
+            dx = pick
+    return dx, best, start

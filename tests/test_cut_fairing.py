@@ -36,7 +36,7 @@ def _cut(name, i, fair, monkeypatch):
         return cut_edge(self, e, s)
 
     monkeypatch.setattr(CM.CutMesh, "_cut_edge", recording)
-    cm = CutMesh(p, t, blade_length=blade_length, fair_nodes=fair)
+    cm = CutMesh(p, t, blade_length=blade_length, fair_nodes=fair, smooth_vertices=False)
     results = []
     for pose in poses:
         if pose is None:

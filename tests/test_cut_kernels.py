@@ -496,3 +496,57 @@ def test_poor_tets_are_the_live_sub_tets_below_the_limit():
                 if cm._alive[s] and min_dihedral_angles(cm._x, cm._tets[[s]])[0] < below]
         assert list(zip(tets.tolist(), owner.tolist())) == want
     assert 0 < len(KF.poor_tets(mesh, originals, 12.0)[0]) < len(KF.poor_tets(mesh, originals, 30.0)[0])
+
+
+def test_vertex_place_matches_twin():
+    """vertex_place (the smoothing's search) against its twin on random stars: a vertex, a cut node
+    halfway along one of its edges following it by half its move, tets around both, the vertex's
+    uncut edges and swept triangles near them.  Same move and angles; the move within reach; every
+    tet positive after it; no uncut edge that missed the triangles crosses one after it; the input
+    left as it was; and where a triangle blocks the unconstrained best move, a shorter or other one."""
+    from _twins_cut import edge_crosses_triangle, vertex_place_twin
+
+    from cutkit.cutting import _kernels_fair as KF
+    from cutkit.cutting import smoothing as SM
+
+    rng = np.random.default_rng(23)
+    steps = np.array([0.1, 0.05, 0.02, 0.01])
+    moved = blocked = 0
+    for trial in range(40):
+        x = rng.uniform(-1.0, 1.0, (9, 3))
+        x[0] = 0.0
+        x[8] = 0.5 * (x[0] + x[1])  # a cut node on edge (0, 1): half the vertex's move
+        share = np.zeros(9)
+        share[0], share[8] = 1.0, 0.5
+        tets = []
+        for _ in range(int(rng.integers(4, 9))):
+            t = [int(rng.choice([0, 8]))] + rng.choice(np.arange(2, 8), 3, replace=False).tolist()
+            a, b, c, d = x[t]
+            tets.append(t if np.dot(np.cross(b - a, c - a), d - a) > 0 else [t[0], t[2], t[1], t[3]])
+        tets = np.array(tets, np.int64)
+        ends = x[2:6].copy()
+        swept = rng.uniform(-1.0, 1.0, (trial % 3, 3, 3))
+        free, _, _ = KF.vertex_place(KF.VertexStar(x, tets, share, 0, ends, np.zeros((0, 3, 3))), SM._SPACE, steps, 0.3)
+        if trial % 2 and free.any():  # a large triangle across the free move, halfway along it
+            u = free / np.linalg.norm(free)
+            e1 = np.cross(u, [1.0, 0.0, 0.0] if abs(u[0]) < 0.9 else [0.0, 1.0, 0.0])
+            e1 /= np.linalg.norm(e1)
+            e2 = np.cross(u, e1)
+            c = x[0] + 0.5 * free
+            swept = np.array([[c - 10 * e1 - 10 * e2, c + 20 * e1 - 10 * e2, c - 10 * e1 + 20 * e2]])
+        before = x.copy()
+        star = KF.VertexStar(x, tets, share, 0, ends, swept)
+        dx, angle, start = KF.vertex_place(star, SM._SPACE, steps, 0.3)
+        dx_t, angle_t, start_t = vertex_place_twin(before, tets, share, 0, ends, swept, SM._SPACE, steps, 0.3)
+        np.testing.assert_allclose(dx, dx_t, atol=1e-12)
+        assert angle == pytest.approx(angle_t, abs=1e-9) and start == pytest.approx(start_t, abs=1e-9)
+        np.testing.assert_array_equal(x, before)
+        assert np.linalg.norm(dx) <= 0.3 + 1e-12 and angle >= start
+        y = x + share[:, None] * dx
+        assert all(np.dot(np.cross(y[b] - y[a], y[c] - y[a]), y[d] - y[a]) > 0 for a, b, c, d in tets)
+        for q in ends:
+            was = any(edge_crosses_triangle(x[0], q, tri) >= 0.0 for tri in swept)
+            assert was or not any(edge_crosses_triangle(y[0], q, tri) >= 0.0 for tri in swept)
+        moved += angle > start + 1e-9
+        blocked += not np.allclose(free, dx)
+    assert moved >= 20 and blocked >= 3  # the search moves most vertices; triangles block some moves

@@ -122,8 +122,9 @@ def test_a_thousand_paths_stay_sound(name, chunk):
         assert not missed, (where, sorted(missed)[:10])
 
 
-@pytest.mark.xfail(strict=True, reason="after fairing: corners cut off near a vertex (about 2 deg) and, below "
-                   "1 deg, later strokes over earlier ones (docs/cutting.md, Angles; benchmarks/cut_slivers.py)")
+@pytest.mark.xfail(strict=True, reason="after fairing and vertex smoothing: corners cut off near a vertex that may "
+                   "not move (a curved surface or earlier cut) and later strokes over earlier ones "
+                   "(docs/cutting.md, Angles; benchmarks/cut_slivers.py)")
 @pytest.mark.parametrize("name", sorted(MESHES))
 def test_cut_made_tets_keep_the_dihedral_bound(name):
     p, t = MESHES[name]

@@ -434,7 +434,7 @@ def test_a_cut_is_preceded_by_a_frame_when_the_newest_frame_is_half_a_period_old
 
 def test_the_warm_up_loads_the_kernels_a_stroke_needs_that_its_short_cut_misses():
     """Before a live session's clock starts: the T-cone kernel of a tet the tip has left, the
-    fairing's search, the swept triangle query and the Newton pattern's update, each with the
+    fairing's and the vertex smoothing's searches, the swept triangle query and the Newton pattern's update, each with the
     argument types a cut or a resting
     step passes (C-contiguous float64 / int64 arrays, the hierarchy's structs), so the first stroke
     loads none of them mid-cut or just after it."""
@@ -464,3 +464,7 @@ def test_the_warm_up_loads_the_kernels_a_stroke_needs_that_its_short_cut_misses(
     for kernel in (KF.fair_place, KF.poor_tets):
         assert any(tuple(sig[0].types) == mesh_types and sig[1] == i1 for sig in kernel.signatures), kernel
     assert 0.0 < load_fair_kernels() <= 90.0
+    # the vertex smoothing's search with a cut step's types: the VertexStar struct, directions, steps
+    star_types = (f2, i2, f1, types.int64, f2, types.float64[:, :, ::1])
+    assert any(tuple(sig[0].types) == star_types and sig[1:] == (f2, f1, types.float64)
+               for sig in KF.vertex_place.signatures)

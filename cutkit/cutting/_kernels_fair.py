@@ -3,9 +3,13 @@
 * :func:`poor_tets`: the live sub-tets of some original tets with a
   dihedral angle below a limit;
 * :func:`fair_place`: the best place of one cut node (and its copies) in
-  its simplex, by a compass search.
+  its simplex, by a compass search;
+* :func:`vertex_place`: the best move of one mesh vertex (the cut nodes
+  defined on it following), by a compass search in space
+  (:mod:`cutkit.cutting.smoothing`).
 
 Slow, obviously correct NumPy twins: ``tests/_twins_cut.py::fair_place_twin``,
+``tests/_twins_cut.py::vertex_place_twin``,
 and ``min_dihedral_angles`` over the sub-tets for :func:`poor_tets`
 (``tests/test_cut_kernels.py``).
 """
@@ -15,7 +19,7 @@ from collections import namedtuple
 import numpy as np
 from numba import njit
 
-from cutkit.mesh.geometry import tet_dihedrals, tet_signed_volume
+from cutkit.mesh.geometry import edge_triangle_crossing, tet_dihedrals, tet_signed_volume
 
 #: A pattern-search move is taken only when it raises the smallest angle by more than this (degrees):
 #: equal candidates keep the earlier one, whatever the rounding.
@@ -200,3 +204,96 @@ def fair_place(mesh, around, copies, corners, w0, w_cut, limits, steps, directio
         x[copies[i], 1] = keep[1]
         x[copies[i], 2] = keep[2]
     return best_w, best, start
+
+
+#: A vertex's local problem for :func:`vertex_place`: ``x`` (k, 3) float64 the positions of the nodes
+#: of the tets around the vertex, ``tets`` (m, 4) int64 those tets over them (local rows), ``share``
+#: (k,) float64 each node's weight on the vertex (1 for the vertex, a cut node's weight for one
+#: defined on it, else 0: a move dx of the vertex moves node i by share[i] dx, affine inside every
+#: original tet), ``vertex`` int its row, ``ends`` (g, 3) float64 the far ends of its uncut edges
+#: and ``swept`` (h, 3, 3) float64 the stroke's swept triangles near it: no move may make one of
+#: those edges cross one of those triangles.
+VertexStar = namedtuple("VertexStar", ["x", "tets", "share", "vertex", "ends", "swept"])
+
+
+@njit(cache=True, nogil=True)
+def _shifted(x0, share, dx, y):
+    """y = x0 + share dx (each row by its weight)."""
+    for i in range(x0.shape[0]):
+        for c in range(3):
+            y[i, c] = x0[i, c] + share[i] * dx[c]
+
+
+@njit(cache=True, nogil=True)
+def _edges_crossing(p, ends, swept, out):
+    """out[j]: whether the edge from p to ends[j] crosses one of the triangles ``swept``."""
+    for j in range(ends.shape[0]):
+        out[j] = False
+        for t in range(swept.shape[0]):
+            if edge_triangle_crossing(p, ends[j], swept[t]) >= 0.0:
+                out[j] = True
+                break
+
+
+@njit(cache=True, nogil=True)
+def vertex_place(star, directions, steps, move_max):
+    """The move of a vertex that maximises the smallest dihedral angle of the tets around it.
+
+    A compass search: from dx = 0, for each step length of ``steps`` in turn
+    (largest first), the best of the moves dx + s d over ``directions`` is
+    taken while it raises the smallest angle by more than a rounding margin;
+    a trial is refused where a tet would not be positive, where |dx| would
+    exceed ``move_max``, or where an uncut edge of the vertex that does not
+    cross a swept triangle now would cross one.  ``star.x`` is not changed.
+
+    Parameters
+    ----------
+    star : VertexStar
+    directions : (d, 3) float64
+        Unit directions the vertex may move along.
+    steps : (s,) float64
+        Step lengths, mm, largest first.
+    move_max : float
+        mm, the longest move.
+
+    Returns
+    -------
+    dx : (3,) float64
+        The move (zero where nothing gains).
+    best : float
+        The smallest angle after it, degrees.
+    start : float
+        The smallest angle before it, degrees.
+    """
+    x0 = star.x
+    y = x0.copy()
+    normals = np.empty((4, 3))
+    angles = np.empty((star.tets.shape[0], 6))
+    start = _worst_angle(y, star.tets, -np.inf, normals, angles)
+    now = np.empty(star.ends.shape[0], np.bool_)
+    _edges_crossing(x0[star.vertex], star.ends, star.swept, now)
+    after = np.empty_like(now)
+    best = start
+    dx = np.zeros(3)
+    trial = np.empty(3)
+    for s in steps:
+        while True:
+            pick = -1
+            for d in range(directions.shape[0]):
+                for c in range(3):
+                    trial[c] = dx[c] + s * directions[d, c]
+                if trial[0] * trial[0] + trial[1] * trial[1] + trial[2] * trial[2] > move_max * move_max:
+                    continue
+                _shifted(x0, star.share, trial, y)
+                a = _worst_angle(y, star.tets, best + _GAIN_EPS_DEG, normals, angles)
+                if not a > best + _GAIN_EPS_DEG:
+                    continue
+                _edges_crossing(y[star.vertex], star.ends, star.swept, after)
+                if (after & ~now).any():
+                    continue
+                best, pick = a, d
+            if pick < 0:
+                break
+            for c in range(3):
+                dx[c] += s * directions[pick, c]
+    return dx, best, start

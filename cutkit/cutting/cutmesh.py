@@ -36,6 +36,7 @@ from cutkit.cutting import _kernels_step as K
 from cutkit.cutting.crumbs import init_crumbs
 from cutkit.cutting.rebase import cut_twins, init_records, rebase, twin_face_bary
 from cutkit.cutting.resubdivision import resubdivide
+from cutkit.cutting.smoothing import init_smoothing
 from cutkit.cutting.snapping import init_snapping
 from cutkit.cutting.tolerances import EDGE_SNAP, FACE_BARY_MIN, TET_BARY_MIN, clamp_bary
 from cutkit.tissue.store import TissueStore
@@ -81,6 +82,8 @@ class CutMesh:
     compact_splits : bool  cone complete splits to a vertex per side (see _compact_split)
     fair_nodes : bool  re-place cut nodes around slivers within their simplex after each step (:mod:`.fairing`)
     snap_vertices : bool  move an uncut vertex away from the cut before an edge is cut near it (:mod:`.snapping`)
+    smooth_vertices : bool  move a vertex of a sliver's original tet where that lifts it, after fairing
+        (:mod:`.smoothing`; the element tissue takes moved vertices, the paper's springs do not)
     """
 
     # What the cut reads of its tissue store that a step changes, under the cut's names (the store's
@@ -114,19 +117,20 @@ class CutMesh:
     _tet_orig = _store_buffer("tet_buffers", "origin")
 
     def __init__(self, points, tets, rest_points=None, texcoords=None, labels=None,
-                 blade_length=20.0, centre_nodes=False, compact_splits=True, snap_vertices=False, fair_nodes=True):
+                 blade_length=20.0, centre_nodes=False, compact_splits=True, snap_vertices=False, fair_nodes=True,
+                 smooth_vertices=True):
         store = TissueStore(points, tets, rest_points=rest_points, texcoords=texcoords, labels=labels)
-        self._cut_over(store, blade_length, centre_nodes, compact_splits, snap_vertices, fair_nodes)
+        self._cut_over(store, blade_length, centre_nodes, compact_splits, snap_vertices, fair_nodes, smooth_vertices)
 
     @classmethod
     def over(cls, store: TissueStore, blade_length=20.0, centre_nodes=False, compact_splits=True,
-             snap_vertices=False, fair_nodes=True) -> CutMesh:
+             snap_vertices=False, fair_nodes=True, smooth_vertices=True) -> CutMesh:
         """The cut state of the tissue ``store`` (nothing cut since its last rebase); cuts write into it."""
         cm = cls.__new__(cls)
-        cm._cut_over(store, blade_length, centre_nodes, compact_splits, snap_vertices, fair_nodes)
+        cm._cut_over(store, blade_length, centre_nodes, compact_splits, snap_vertices, fair_nodes, smooth_vertices)
         return cm
 
-    def _cut_over(self, store, blade_length, centre_nodes, compact_splits, snap_vertices, fair_nodes):
+    def _cut_over(self, store, blade_length, centre_nodes, compact_splits, snap_vertices, fair_nodes, smooth_vertices):
         if not blade_length > 0:
             raise InputError(f"blade_length: {blade_length}, expected > 0")
         self.store = store
@@ -174,14 +178,15 @@ class CutMesh:
         init_records(self)  # what outlives a rebase (model counts, earlier strokes' cut surface)
         init_crumbs(self)  # pieces cut loose below CRUMB_VOLUME_FRACTION of the model are removed
         init_snapping(self, snap_vertices)  # vertices moved away from the cut instead of slivers
+        init_smoothing(self, smooth_vertices)  # vertices moved where a sliver is left after fairing
 
     @classmethod
     def from_model(cls, model, blade_length=20.0, centre_nodes=False, compact_splits=True, snap_vertices=False,
-                   fair_nodes=True):
+                   fair_nodes=True, smooth_vertices=True):
         """Cut state of a :class:`~cutkit.model.tetmodel.TetModel` (rest = current positions)."""
         return cls(model.points, model.tets, texcoords=model.texcoords, labels=model.labels,
                    blade_length=blade_length, centre_nodes=centre_nodes, compact_splits=compact_splits,
-                   snap_vertices=snap_vertices, fair_nodes=fair_nodes)
+                   snap_vertices=snap_vertices, fair_nodes=fair_nodes, smooth_vertices=smooth_vertices)
 
     def rebase(self):
         """Make the live tets the original ones of a fresh cut state (blade out); see :func:`.rebase.rebase`.

@@ -115,7 +115,7 @@ def rebase(cm):
     ids = cm.store.rebase()  # the one renumbering: every holder of the store sees it
     fresh = type(cm).over(cm.store, blade_length=cm.blade_length, centre_nodes=cm.centre_nodes,
                           compact_splits=cm.compact_splits, snap_vertices=cm.snap_vertices,
-                          fair_nodes=cm.fair_nodes)
+                          fair_nodes=cm.fair_nodes, smooth_vertices=cm.smooth_vertices)
     fresh.cut_faces_before = cut_faces
     fresh.uncut_before, fresh.uncut_places_before = uncut, uncut_places
     fresh.step_count = cm.step_count

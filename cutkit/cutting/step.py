@@ -35,6 +35,7 @@ from cutkit.cutting import _kernels_step as KS
 from cutkit.cutting.contact import touches_only
 from cutkit.cutting.crumbs import remove_crumbs
 from cutkit.cutting.fairing import fair_cut_nodes
+from cutkit.cutting.smoothing import smooth_vertices_around
 from cutkit.cutting.snapping import new_crossings, recrossed, snap_away
 from cutkit.cutting.cutmesh import CutMesh
 from cutkit.tissue.delta import TopologyDelta, twins_of
@@ -197,11 +198,13 @@ def cut_step(cm: CutMesh, tip, a) -> StepResult:
     P1, Q1 = tip, tip - cm.blade_length * a
     if cm.prev_pose is None:
         P0, Q0 = P1, Q1
+        cm.stroke_swept = []  # a new stroke (smoothing.py keeps its moves off what it swept)
     else:
         P0, Q0 = cm.prev_pose
     # 1. seeds: the tip walk, then the surface entry
     seeds, tip_tet = _step_seeds(cm, P0, Q0, P1, Q1)
     swept = np.array([[P0, Q0, Q1], [P0, Q1, P1]])
+    cm.stroke_swept.append(swept)
     blade = np.array([Q1, P1])
     # 2. local traversal (numba); its events are replayed in visit order
     active, ev_id, ev_val = _sweep(cm, stamp, seeds, swept, blade, P0)
@@ -212,8 +215,13 @@ def cut_step(cm: CutMesh, tip, a) -> StepResult:
     for o in sorted(changed, key=lambda o: (not cm.completely_split(o), o)):
         cm.resubdivide(o)
     # 4. cut nodes around slivers re-placed within their simplex, but for those the blade placed (fairing.py)
+    held = None
     if cm.fair_nodes and (changed or cm.fair_pending):
-        fair_cut_nodes(cm, changed, _blade_placed_nodes(cm, tip_tet, ev_id))
+        held = _blade_placed_nodes(cm, tip_tet, ev_id)
+        fair_cut_nodes(cm, changed, held)
+    # 5. a vertex of a sliver's original tet moved where that lifts it (smoothing.py)
+    if cm.smooth_vertices and (changed or cm.smooth_pending):
+        smooth_vertices_around(cm, changed, _blade_placed_nodes(cm, tip_tet, ev_id) if held is None else held)
     cm.previous_active_tets = cm.active_tets
     cm.active_tets = np.unique(active)
     cm.prev_pose = (P1, Q1)

@@ -103,7 +103,10 @@ class Session:
         self.rebase_runner = None
         self.material_model = opt.material_model or model.materials.material_model
         self.store = TissueStore.from_model(model)
-        self.cut_mesh = CutMesh.over(self.store, blade_length=self.blade_length, centre_nodes=opt.centre_nodes)
+        # the paper's springs re-interpolate moved nodes from their defining nodes, which a mesh
+        # vertex has none of: a vertex is smoothed around slivers for the element model only
+        self.cut_mesh = CutMesh.over(self.store, blade_length=self.blade_length, centre_nodes=opt.centre_nodes,
+                                     smooth_vertices=self.material_model != "springs")
         self.tis = make_tissue(model, self.store, self.material_model, opt)
         if not self.tis.fixed.any():
             self.warnings.append("the model has no fixed node: nothing holds it, it may drift (add [boundary] "

@@ -1,0 +1,276 @@
+"""Vertex smoothing: a mesh vertex moved where a cut-made tetrahedron around it is a sliver.
+
+What fairing (:mod:`cutkit.cutting.fairing`) cannot lift is led by the corner
+a cut cuts off near a vertex: the sliver's other corners are the vertices of
+its original tetrahedron, which fairing never moves, and its cut nodes are
+held within ``FAIR_MOVE_MAX`` of the crossing.  After fairing, each live
+sub-tetrahedron of the step's original tetrahedra below
+:data:`SMOOTH_BELOW_DEG` has the four vertices of its original tetrahedron
+looked at; the one whose move gains most moves (optimisation-based smoothing:
+Freitag & Ollivier-Gooch 1997, "Tetrahedral mesh improvement using swapping
+and smoothing", the smallest dihedral angle of the vertex's star maximised;
+the node snapping of Nienhuys & van der Stappen 2001 and Steinemann et al.
+2006 moves a vertex for the cut's sake in the same way).  The cut nodes
+defined on the vertex follow it by their weights, so inside each original
+tetrahedron the move is affine: the subdivision stays conforming, and a
+sub-tetrahedron stays positive where its original does.
+
+What a move keeps:
+
+* **the model's volume and surface**: an interior vertex moves inside its
+  star, whose boundary does not move; a boundary vertex moves only within
+  its flat surface (its one face plane, or the crease line of two) and not
+  at all on a curved surface or at a corner;
+* **the cut where the blade made it, to within the move**: a vertex moves at
+  most :data:`SMOOTH_MOVE_MAX` of its shortest edge from where the cut
+  state found it (all its moves together), and a cut node on one of its
+  edges, faces or tetrahedra by its weight on it times that;
+* **every contact**: no uncut edge of the vertex comes to cross a triangle
+  the stroke's blade has swept (so no crossing the cut missed appears);
+* **the tets**: every tetrahedron of the star stays positive and its
+  smallest angle rises by at least :data:`SMOOTH_MIN_GAIN_DEG`;
+* **an earlier stroke's cut closed**: a vertex on an earlier stroke's cut
+  surface moves with its coincident copies (the other sides'), by the same
+  move, within the cut surface's plane where that is flat (the faces of the
+  two sides count as one plane);
+* **what else holds**: a vertex held by the boundary conditions (any copy),
+  or with a cut node the blade placed this step (looked at again at the
+  next step), stays.
+
+The move is carried to the rest configuration and the texture through the
+deformation of the star's tetrahedron that holds the vertex's new place; the
+vertex and its cut nodes are the step's moved nodes
+(``StepResult.moved_nodes``), which the element tissue places through the
+old shape of the tetrahedra around them.  The paper's springs cannot take a
+moved vertex (they re-interpolate moved nodes from their defining nodes), so
+a run with them turns smoothing off.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from cutkit.cutting import _kernels_fair as KF
+from cutkit.cutting.snapping import COPLANAR_TOL, _dependants, _rest_move, _star, _surface_direction
+from cutkit.mesh.quality import min_dihedral_angles
+
+#: A cut-made tetrahedron below this smallest dihedral angle (degrees) has its original's vertices
+#: looked at (the bound the cut keeps, docs/cutting.md, "Quality").
+SMOOTH_BELOW_DEG = 5.0
+#: A vertex moves at most this fraction of its shortest edge from where the cut state found it.
+SMOOTH_MOVE_MAX = 0.3
+#: Steps of the compass search, as fractions of the vertex's shortest edge, largest first.
+SMOOTH_STEPS = np.array([0.1, 0.05, 0.02, 0.01])
+#: A vertex moves only when the smallest angle of its star rises by at least this (degrees): a move
+#: costs the physics a re-placement of the star.
+SMOOTH_MIN_GAIN_DEG = 0.5
+#: The face opposite each local vertex of a tet (its other three, in order).
+_OPPOSITE = np.array([[1, 2, 3], [0, 2, 3], [0, 1, 3], [0, 1, 2]])
+#: Directions of an interior vertex: the axes and the cube diagonals, both ways.
+_SPACE = np.vstack([np.eye(3), -np.eye(3),
+                    np.array([[i, j, k] for i in (1, -1) for j in (1, -1) for k in (1, -1)]) / np.sqrt(3.0)])
+
+
+def init_smoothing(cm, enabled: bool) -> None:
+    """Smoothing state of a new cut state (a :class:`~cutkit.cutting.cutmesh.CutMesh`, or a rebase's)."""
+    cm.smooth_vertices = bool(enabled)
+    cm.smoothed_from = {}  # vertex -> (3,) where the cut state found it (its moves' budget)
+    cm.smooth_pending = set()  # original tets looked at again at the next step (a cut node the blade holds)
+    cm.stroke_swept = []  # (2, 3, 3) the swept triangles of each step of the stroke
+    cm.smooth_counts = {"moved": 0, "no gain": 0, "held": 0, "fixed": 0}
+    if not hasattr(cm, "crack_nodes"):
+        cm.crack_nodes = None
+
+
+def smooth_vertices_around(cm, originals, held) -> int:
+    """Move vertices of the originals ``originals`` (set of int, re-subdivided this step) and of those
+    an earlier step left pending, where a live sub-tet of theirs is below :data:`SMOOTH_BELOW_DEG`;
+    the poorest first, each the best of its original's four vertices.  ``held`` (set of int): cut
+    nodes the blade placed this step.  Returns the vertices moved."""
+    fresh = set(originals) | cm.smooth_pending
+    cm.smooth_pending = set()
+    if not fresh:
+        return 0
+    mesh = KF.FairMesh(cm._x, cm._tets, cm._alive, cm.sub_start, cm.sub_count)
+    tets, owner = KF.poor_tets(mesh, np.array(sorted(fresh), np.int64), SMOOTH_BELOW_DEG)
+    if not tets.size:
+        return 0
+    order = np.argsort(min_dihedral_angles(cm._x, cm._tets[tets]), kind="stable")
+    moved = 0
+    for t, o in zip(tets[order].tolist(), owner[order].tolist()):
+        if not cm._alive[t] or min_dihedral_angles(cm._x, cm._tets[t:t + 1]).min() >= SMOOTH_BELOW_DEG:
+            continue  # a move before lifted it
+        if held and not held.isdisjoint(cm._tets[t].tolist()):
+            cm.smooth_pending.add(o)  # the blade is at it: it may change again at the next step
+            cm.smooth_counts["held"] += 1
+            continue
+        best = None
+        for v in cm.orig_tets[o].tolist():
+            option = _best_move(cm, int(v), held, o)
+            if option is not None and (best is None or option[-1] > best[-1]):
+                best = option
+        if best is not None:
+            _apply(cm, *best[:-1])
+            moved += 1
+    cm.smooth_counts["moved"] += moved
+    return moved
+
+
+def _copies(cm, v) -> np.ndarray:
+    """(c,) int64 ``v`` and its coincident copies along an earlier stroke's cut (equal ``node_rep``)."""
+    if cm.crack_nodes is None:
+        cm.crack_nodes = {i for f in cm.cut_faces_before for i in f}
+    if v not in cm.crack_nodes:
+        return np.array([v], np.int64)
+    reps = cm.node_rep[:cm.n_orig_points]
+    others = np.flatnonzero(reps == reps[v])
+    others = others[(others != v) & (np.diff(cm.node_tet_off)[others] > 0)]  # a copy with tets around it
+    return np.concatenate([[v], others]).astype(np.int64)
+
+
+def _directions(cm, group, stars):
+    """(d, 3) unit directions the vertex copies ``group`` may move along together (within their flat
+    surface where they are on the boundary, an earlier cut's surface included), or None (a corner, a
+    curved surface)."""
+    normals = []
+    for n in np.concatenate([_boundary_normals(cm, v, star) for v, star in zip(group.tolist(), stars)]):
+        if all(abs(abs(float(n @ m)) - 1.0) > COPLANAR_TOL for m in normals):
+            normals.append(n)  # a crack's faces seen from its two sides are one plane
+    if len(normals) == 0:
+        return _SPACE
+    if len(normals) == 1:
+        u = np.cross(normals[0], np.eye(3)[int(np.argmin(np.abs(normals[0])))])
+        u /= np.linalg.norm(u)
+        w = np.cross(normals[0], u)
+        d = np.array([u, w, (u + w) / np.sqrt(2.0), (u - w) / np.sqrt(2.0)])
+        return np.vstack([d, -d])
+    if len(normals) > 2:
+        return None
+    line = _surface_direction(np.array(normals), np.cross(normals[0], normals[1]))  # the crease, or None
+    if line is None:
+        return None
+    line = line / np.linalg.norm(line)
+    return np.array([line, -line])
+
+
+def _boundary_normals(cm, v, star) -> np.ndarray:
+    """(k, 3) float64 unit normals of the boundary faces of the original tets ``star`` that hold ``v``
+    (one per face, repeats and all)."""
+    t = cm.orig_tets[star]
+    on = (cm.neighbors[star] < 0) & (t != v)  # face opposite local vertex lf is on the boundary, holds v
+    f = t[:, _OPPOSITE][on]  # (q, 3)
+    x = cm._x
+    n = np.cross(x[f[:, 1]] - x[f[:, 0]], x[f[:, 2]] - x[f[:, 0]])
+    return n / np.linalg.norm(n, axis=1, keepdims=True)
+
+
+def _live_tets(cm, star) -> np.ndarray:
+    """(k,) int64 the live tets of the original tets ``star``: their sub-tets, or themselves uncut."""
+    ids = [np.arange(cm.sub_start[o], cm.sub_start[o] + cm.sub_count[o]) if cm.sub_count[o] else np.array([o])
+           for o in star.tolist()]
+    ids = np.concatenate(ids).astype(np.int64) if ids else np.zeros(0, np.int64)
+    return ids[cm._alive[ids]]
+
+
+def _followers(cm, group):
+    """(ids (k,) int64, weights (k,) float64): the cut nodes defined on a node of ``group`` and their
+    weight on it."""
+    ids = np.concatenate([_dependants(cm, v) for v in group.tolist()])
+    w = np.isin(cm._def_nodes[ids], group) * cm._def_w[ids]
+    return ids, w.sum(axis=1)
+
+
+def _far_ends(cm, group, stars):
+    """(all (k,) int64, uncut (u,) int64): the far ends of the edges of the copies ``group`` in their
+    stars, and of those not cut."""
+    far, uncut = [], []
+    for v, star in zip(group.tolist(), stars):
+        edges = np.unique(cm.tet_edges[star].ravel())
+        edges = edges[(cm.edges[edges] == v).any(axis=1)]
+        ends = np.where(cm.edges[edges, 0] == v, cm.edges[edges, 1], cm.edges[edges, 0])
+        far.append(ends)
+        uncut.append(ends[~np.isfinite(cm.edge_t[edges])])
+    return np.concatenate(far), np.concatenate(uncut)
+
+
+def _best_move(cm, v, held, o):
+    """(copies, their stars, dx (3,), follower ids, angle after) of the best move of vertex ``v`` (with
+    its coincident copies), or None."""
+    group = _copies(cm, v)
+    if cm.store.held[group].any():
+        cm.smooth_counts["fixed"] += 1
+        return None
+    stars = [_star(cm, g) for g in group.tolist()]
+    directions = _directions(cm, group, stars)
+    if directions is None:
+        cm.smooth_counts["fixed"] += 1
+        return None
+    ids, weights = _followers(cm, group)
+    if held and not held.isdisjoint(ids.tolist()):
+        cm.smooth_pending.add(o)
+        cm.smooth_counts["held"] += 1
+        return None
+    x = cm._x
+    far, uncut = _far_ends(cm, group, stars)
+    h = float(np.linalg.norm(x[far] - x[v], axis=1).min())
+    budget = SMOOTH_MOVE_MAX * h - float(np.linalg.norm(x[v] - cm.smoothed_from.get(v, x[v])))
+    if not budget > 0.0:
+        cm.smooth_counts["fixed"] += 1
+        return None
+    nodes, local = np.unique(cm._tets[np.concatenate([_live_tets(cm, star) for star in stars])], return_inverse=True)
+    share = np.zeros(nodes.size)
+    share[np.searchsorted(nodes, group)] = 1.0
+    inside = np.isin(ids, nodes)
+    share[np.searchsorted(nodes, ids[inside])] = weights[inside]
+    problem = KF.VertexStar(np.ascontiguousarray(x[nodes]), local.reshape(-1, 4).astype(np.int64), share,
+                            int(np.searchsorted(nodes, v)), np.ascontiguousarray(x[uncut]),
+                            _swept_near(cm, x[nodes]))
+    dx, angle, start = KF.vertex_place(problem, directions, SMOOTH_STEPS * h, budget)
+    if not angle >= start + SMOOTH_MIN_GAIN_DEG:
+        cm.smooth_counts["no gain"] += 1
+        return None
+    return group, stars, dx, ids, angle
+
+
+def _swept_near(cm, points) -> np.ndarray:
+    """(h, 3, 3) float64 the stroke's swept triangles whose box meets the box of ``points`` (k, 3)."""
+    if not cm.stroke_swept:
+        return np.zeros((0, 3, 3))
+    tris = np.concatenate(cm.stroke_swept)
+    lo, hi = points.min(axis=0), points.max(axis=0)
+    near = (tris.max(axis=1) >= lo).all(axis=1) & (tris.min(axis=1) <= hi).all(axis=1)
+    return np.ascontiguousarray(tris[near])
+
+
+def _apply(cm, group, stars, dx, followers) -> None:
+    """Move the vertex copies ``group`` by ``dx`` (3,), each at rest and in texture through the tet of
+    its star that holds its new place, and their cut nodes by their weights; all recorded as the
+    step's moved nodes."""
+    for v, star in zip(group.tolist(), stars):
+        cm.smoothed_from.setdefault(v, cm._x[v].copy())
+        dX, duvw = _rest_move(cm, _holder(cm, star, cm._x[v] + dx), dx)
+        cm.move_original_node(v, dx, dX, duvw)
+    for i in followers.tolist():
+        k = cm._def_nodes[i] >= 0
+        cm.reinterpolate_node(i, cm._def_nodes[i, k], cm._def_w[i, k])
+
+
+def _holder(cm, star, p) -> int:
+    """The original tet of ``star`` whose smallest barycentric coordinate of ``p`` (3,) is largest."""
+    t = cm.orig_tets[star]
+    x = cm._x
+    T = np.transpose(x[t[:, 1:]] - x[t[:, :1]], (0, 2, 1))
+    b = np.linalg.solve(T, (p - x[t[:, 0]])[:, :, None])[:, :, 0]
+    bary = np.column_stack([1.0 - b.sum(axis=1), b])
+    return int(star[int(np.argmax(bary.min(axis=1)))])
+
+
+def load_smooth_kernels() -> float:
+    """Load (or compile) the smoothing's search kernel with the argument types a cut step passes, on
+    one unit tetrahedron whose vertex 0 moves (no swept triangle); a live session calls it before its
+    clock starts (its warm-up cut may leave no sliver).  Returns the angle the search reaches, degrees."""
+    x = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+    problem = KF.VertexStar(x, np.array([[0, 1, 2, 3]], np.int64), np.array([1.0, 0.0, 0.0, 0.0]), 0,
+                            np.ascontiguousarray(x[1:]), np.zeros((0, 3, 3)))
+    _, angle, _ = KF.vertex_place(problem, _SPACE, SMOOTH_STEPS, SMOOTH_MOVE_MAX)
+    return float(angle)

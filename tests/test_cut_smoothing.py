@@ -1,0 +1,129 @@
+"""Vertex smoothing around slivers (cutkit.cutting.smoothing): what it lifts and what it keeps.
+
+The paths are the thousand paths' (tests/test_cut_thousand_paths.py), whose
+``cut_path`` checks at every stroke's end that ``cutkit check`` passes, that
+the volume plus the crumbs removed is the model's to 1e-12, that no crumb is
+left and that every edge the stroke crossed is cut or counted.
+"""
+
+import numpy as np
+import pytest
+
+from test_cut_thousand_paths import MESHES, _path, cut_path
+
+from cutkit.cutting import smoothing as SM
+
+
+@pytest.mark.parametrize("name,i", [("decimated", 48), ("decimated", 144), ("gmsh", 104), ("decimated", 8)])
+def test_smoothing_lifts_the_slivers_fairing_leaves(name, i):
+    """Paths whose cut leaves a tet below 5 degrees after fairing: with smoothing the worst cut-made
+    angle rises to 5 degrees or by 2, the mesh stays sound and every crossed edge is cut or counted."""
+    p, t = MESHES[name]
+    missed_off, off = cut_path(p, t, *_path(name, i), smooth_vertices=False)
+    missed_on, on = cut_path(p, t, *_path(name, i))
+    assert off < SM.SMOOTH_BELOW_DEG
+    assert on >= min(SM.SMOOTH_BELOW_DEG, off + 2.0), (off, on)
+    assert not missed_on and not missed_off
+
+
+def _moves(monkeypatch):
+    """Record every smoothing move: (copies, dx)."""
+    log = []
+    apply = SM._apply
+
+    def recorded(cm, group, stars, dx, followers):
+        log.append((group.copy(), dx.copy()))
+        return apply(cm, group, stars, dx, followers)
+
+    monkeypatch.setattr(SM, "_apply", recorded)
+    return log
+
+
+@pytest.mark.parametrize("name,i", [("kuhn", 14), ("kuhn", 65), ("kuhn", 284), ("gmsh", 52), ("gmsh", 110),
+                                    ("gmsh", 170)])
+def test_a_smoothed_vertex_keeps_the_surface_its_copies_and_its_reach(name, i, monkeypatch):
+    """On the box meshes (faces at 0 and L): a vertex on a box face stays on it (moves within the face
+    plane, or along the crease of two), a vertex on an earlier stroke's cut moves with its coincident
+    copies, which stay coincident, and no vertex ends farther than SMOOTH_MOVE_MAX of its shortest
+    edge in the uncut mesh from where it was (x1.25: its neighbours may move too)."""
+    from cutkit.cutting import CutMesh, cut_step
+    from cutkit.cutting.rebase import blade_in_tissue, rebase_if_left
+
+    from _cut_paths import lift
+
+    log = _moves(monkeypatch)
+    p, t = MESHES[name]
+    poses, blade_length, _ = _path(name, i)
+    cm = CutMesh(p, t, blade_length=blade_length)
+    for pose in poses:
+        if pose is None:
+            lift(cm)
+            continue
+        cut_step(cm, *pose)
+        if not blade_in_tissue(cm) and cm.prev_pose is not None:
+            rebase_if_left(cm)
+    assert log
+    x, L = cm.points, p.max(axis=0)
+    n0 = len(p)
+    on_face = (np.abs(p) < 1e-12) | (np.abs(p - L) < 1e-12)
+    np.testing.assert_allclose(np.where(on_face, x[:n0], 0.0), np.where(on_face, p, 0.0), atol=1e-12)
+    edges = np.concatenate([t[:, [a, b]] for a in range(4) for b in range(a + 1, 4)])
+    length = np.linalg.norm(p[edges[:, 0]] - p[edges[:, 1]], axis=1)
+    shortest = np.full(n0, np.inf)
+    np.minimum.at(shortest, edges.ravel(), np.repeat(length, 2))
+    for group, _ in log:
+        assert np.ptp(x[group], axis=0).max() <= 1e-12  # copies stay coincident
+        v = int(group[0])
+        if v < n0:
+            assert np.linalg.norm(x[v] - p[v]) <= 1.25 * SM.SMOOTH_MOVE_MAX * shortest[v]
+
+
+def test_the_element_tissue_places_a_smoothed_vertex_through_the_old_shape():
+    """A deformed, prestressed model of the decimated mesh cut by a path that smooths a vertex: after
+    the hand-over, the vertex's current place is the tissue before the step (piecewise affine over
+    the tets around it, at their rest places before the step) at its new rest place."""
+    from _tissues import with_cut_mesh
+    from test_cut_snapping import _old_map
+
+    from cutkit.cutting import cut_step
+    from cutkit.model.tetmodel import Materials, Prestress, TetModel
+    from cutkit.relax.elastic_tissue import ElasticTissue
+
+    row = dict(label=1, name="m", E=30e3, poisson_ratio=0.45, density=1090.0, damping=8.0, F_enter=0.8,
+               mu_static=1e-6, mu_dynamic=1e-6, rho_dynamic=1e-8, alpha_static=0.1, alpha_dynamic=0.1,
+               c_edge=1.0, c_shape=1.0)
+    p, t = MESHES["decimated"]
+    poses, blade_length, _ = _path("decimated", 9)
+    ps = Prestress(label=np.array([1], np.int32), fibre_direction=np.array([[0.0, 1.0, 0.0]]),
+                   prestrain=np.array([0.1]))
+    tis = with_cut_mesh(ElasticTissue(TetModel.from_arrays(p, t, materials=Materials.from_rows([row]), prestress=ps),
+                                      step_s=0.02), blade_length)
+    assert tis.cm.smooth_vertices
+    X = tis.cm.rest_points
+    tis.state.positions[:] = X + 0.1 * np.sin(X[:, [1, 2, 0]])  # a smooth deformation: current != rest
+    checked = 0
+    for pose in poses:
+        X_old, x_old, live = tis.cm.rest_points.copy(), tis.positions.copy(), tis.cm.tets
+        res = cut_step(tis.cm, *pose)
+        tis.apply_cut(res)
+        for v in [k for k in res.moved_nodes.tolist() if k < len(p)]:
+            X_before = X_old.copy()
+            old = res.moved_nodes < len(X_old)
+            X_before[res.moved_nodes[old]] = res.moved_from[old]
+            ref = _old_map(X_before, x_old, live[(live == v).any(axis=1)], tis.cm.rest_points[v])
+            assert np.allclose(tis.positions[v], ref, atol=1e-9)
+            checked += 1
+    assert checked and np.isfinite(tis.positions).all()
+
+
+def test_a_run_with_the_papers_springs_does_not_smooth():
+    """The springs re-interpolate moved nodes from their defining nodes, which a vertex has none of:
+    a session with them cuts without smoothing, one with the element model with it."""
+    from cutkit.simulate import SimulateOptions
+    from cutkit.simulate.session import Session
+    from cutkit.simulate.warmup import warm_up_model
+
+    model = warm_up_model()
+    springs = Session(model, SimulateOptions(material_model="springs"), blade_length=10.0, blade_breadth=1.0)
+    elements = Session(model, SimulateOptions(), blade_length=10.0, blade_breadth=1.0)
+    assert not springs.cut_mesh.smooth_vertices and elements.cut_mesh.smooth_vertices
