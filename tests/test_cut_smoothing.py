@@ -83,9 +83,8 @@ def test_the_element_tissue_places_a_smoothed_vertex_through_the_old_shape():
     the hand-over, the vertex's current place is the tissue before the step (piecewise affine over
     the tets around it, at their rest places before the step) at its new rest place."""
     from _tissues import with_cut_mesh
-    from test_cut_snapping import _old_map
+    from test_cut_snapping import cut_and_check_moved_vertices
 
-    from cutkit.cutting import cut_step
     from cutkit.model.tetmodel import Materials, Prestress, TetModel
     from cutkit.relax.elastic_tissue import ElasticTissue
 
@@ -101,18 +100,7 @@ def test_the_element_tissue_places_a_smoothed_vertex_through_the_old_shape():
     assert tis.cm.smooth_vertices
     X = tis.cm.rest_points
     tis.state.positions[:] = X + 0.1 * np.sin(X[:, [1, 2, 0]])  # a smooth deformation: current != rest
-    checked = 0
-    for pose in poses:
-        X_old, x_old, live = tis.cm.rest_points.copy(), tis.positions.copy(), tis.cm.tets
-        res = cut_step(tis.cm, *pose)
-        tis.apply_cut(res)
-        for v in [k for k in res.moved_nodes.tolist() if k < len(p)]:
-            X_before = X_old.copy()
-            old = res.moved_nodes < len(X_old)
-            X_before[res.moved_nodes[old]] = res.moved_from[old]
-            ref = _old_map(X_before, x_old, live[(live == v).any(axis=1)], tis.cm.rest_points[v])
-            assert np.allclose(tis.positions[v], ref, atol=1e-9)
-            checked += 1
+    checked = cut_and_check_moved_vertices(tis, poses, len(p))
     assert checked and np.isfinite(tis.positions).all()
 
 

@@ -158,6 +158,25 @@ def _old_map(X_old, x_old, tets, point):
     raise AssertionError("point outside the star")
 
 
+def cut_and_check_moved_vertices(tis, poses, n0: int) -> int:
+    """Cut ``poses`` on ``tis.cm`` and hand each step to ``tis``; every original vertex (id < ``n0``) a
+    step moved must then sit where the tissue before the step (its live tets around the vertex, over
+    their rest places before the step) puts its new rest place.  Returns the vertices checked."""
+    checked = 0
+    for pose in poses:
+        X_old, x_old, live = tis.cm.rest_points.copy(), tis.positions.copy(), tis.cm.tets
+        res = cut_step(tis.cm, *pose)
+        tis.apply_cut(res)
+        for v in [k for k in res.moved_nodes.tolist() if k < n0]:
+            X_before = X_old.copy()
+            old = res.moved_nodes < len(X_old)
+            X_before[res.moved_nodes[old]] = res.moved_from[old]
+            ref = _old_map(X_before, x_old, live[(live == v).any(axis=1)], tis.cm.rest_points[v])
+            assert np.allclose(tis.positions[v], ref, atol=1e-9)
+            checked += 1
+    return checked
+
+
 def test_the_element_tissue_places_a_snapped_vertex_through_the_old_shape():
     from _fem_reference import kuhn_box
     from cutkit.model.tetmodel import Materials, Prestress, TetModel
@@ -177,18 +196,7 @@ def test_the_element_tissue_places_a_snapped_vertex_through_the_old_shape():
     tis.cm.snap_vertices = True
     X = tis.cm.rest_points
     tis.state.positions[:] = X + 0.1 * np.sin(X[:, [1, 2, 0]])  # a smooth deformation: current != rest
-    checked = 0
-    for xb in np.linspace(-0.5, 6.5, 15):
-        X_old, x_old, live = tis.cm.rest_points.copy(), tis.positions.copy(), tis.cm.tets
-        res = cut_step(tis.cm, [xb, 1.03, 3.5], [0.0, 0.0, 1.0])
-        tis.apply_cut(res)
-        for v in [k for k in res.moved_nodes.tolist() if k < len(p)]:
-            # the tissue before the step: its live tets around v, over their rest places before the step
-            X_before = X_old.copy()
-            old = res.moved_nodes < len(X_old)
-            X_before[res.moved_nodes[old]] = res.moved_from[old]
-            ref = _old_map(X_before, x_old, live[(live == v).any(axis=1)], tis.cm.rest_points[v])
-            assert np.allclose(tis.positions[v], ref, atol=1e-9)
-            checked += 1
+    checked = cut_and_check_moved_vertices(tis, [([xb, 1.03, 3.5], [0.0, 0.0, 1.0])
+                                                 for xb in np.linspace(-0.5, 6.5, 15)], len(p))
     assert checked and np.isfinite(tis.positions).all()
-    assert np.abs(x_old - X_old).max() > 0.05
+    assert np.abs(tis.positions - tis.cm.rest_points).max() > 0.05
