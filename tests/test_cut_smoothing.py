@@ -9,9 +9,10 @@ left and that every edge the stroke crossed is cut or counted.
 import numpy as np
 import pytest
 
-from test_cut_thousand_paths import MESHES, _path, cut_path
+from test_cut_thousand_paths import MESHES, _path, _sound, cut_path
 
 from cutkit.cutting import smoothing as SM
+from cutkit.mesh.quality import signed_volumes
 
 
 @pytest.mark.parametrize("name,i", [("decimated", 48), ("decimated", 144), ("gmsh", 104), ("decimated", 8)])
@@ -44,8 +45,9 @@ def _moves(monkeypatch):
 def test_a_smoothed_vertex_keeps_the_surface_its_copies_and_its_reach(name, i, monkeypatch):
     """On the box meshes (faces at 0 and L): a vertex on a box face stays on it (moves within the face
     plane, or along the crease of two), a vertex on an earlier stroke's cut moves with its coincident
-    copies, which stay coincident, and no vertex ends farther than SMOOTH_MOVE_MAX of its shortest
-    edge in the uncut mesh from where it was (x1.25: its neighbours may move too)."""
+    copies, which stay coincident, no vertex ends farther than SMOOTH_MOVE_MAX of its shortest
+    edge in the uncut mesh from where it was (x1.25: its neighbours may move too), and the mesh stays
+    sound with its volume (the copies' faces of an earlier cut bend with them, closed)."""
     from cutkit.cutting import CutMesh, cut_step
     from cutkit.cutting.rebase import blade_in_tissue, rebase_if_left
 
@@ -53,7 +55,7 @@ def test_a_smoothed_vertex_keeps_the_surface_its_copies_and_its_reach(name, i, m
 
     log = _moves(monkeypatch)
     p, t = MESHES[name]
-    poses, blade_length, _ = _path(name, i)
+    poses, blade_length, where = _path(name, i)
     cm = CutMesh(p, t, blade_length=blade_length)
     for pose in poses:
         if pose is None:
@@ -63,6 +65,7 @@ def test_a_smoothed_vertex_keeps_the_surface_its_copies_and_its_reach(name, i, m
         if not blade_in_tissue(cm) and cm.prev_pose is not None:
             rebase_if_left(cm)
     assert log
+    _sound(cm, float(signed_volumes(p, t).sum()), where)
     x, L = cm.points, p.max(axis=0)
     n0 = len(p)
     on_face = (np.abs(p) < 1e-12) | (np.abs(p - L) < 1e-12)
