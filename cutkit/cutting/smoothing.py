@@ -51,7 +51,8 @@ from __future__ import annotations
 import numpy as np
 
 from cutkit.cutting import _kernels_fair as KF
-from cutkit.cutting.snapping import COPLANAR_TOL, _dependants, _rest_move, _star, _surface_direction
+from cutkit.cutting.snapping import (COPLANAR_TOL, _dependants, _rest_move, _star, _surface_direction,
+                                     boundary_face_normals, crack_nodes)
 from cutkit.mesh.quality import min_dihedral_angles
 
 #: A cut-made tetrahedron below this smallest dihedral angle (degrees) has its original's vertices
@@ -64,8 +65,6 @@ SMOOTH_STEPS = np.array([0.1, 0.05, 0.02, 0.01])
 #: A vertex moves only when the smallest angle of its star rises by at least this (degrees): a move
 #: costs the physics a re-placement of the star.
 SMOOTH_MIN_GAIN_DEG = 0.5
-#: The face opposite each local vertex of a tet (its other three, in order).
-_OPPOSITE = np.array([[1, 2, 3], [0, 2, 3], [0, 1, 3], [0, 1, 2]])
 #: Directions of an interior vertex: the axes and the cube diagonals, both ways.
 _SPACE = np.vstack([np.eye(3), -np.eye(3),
                     np.array([[i, j, k] for i in (1, -1) for j in (1, -1) for k in (1, -1)]) / np.sqrt(3.0)])
@@ -77,9 +76,6 @@ def init_smoothing(cm, enabled: bool) -> None:
     cm.smoothed_from = {}  # vertex -> (3,) where the cut state found it (its moves' budget)
     cm.smooth_pending = set()  # original tets looked at again at the next step (a cut node the blade holds)
     cm.stroke_swept = []  # (2, 3, 3) the swept triangles of each step of the stroke
-    cm.smooth_counts = {"moved": 0, "no gain": 0, "held": 0, "fixed": 0}
-    if not hasattr(cm, "crack_nodes"):
-        cm.crack_nodes = None
 
 
 def smooth_vertices_around(cm, originals, held) -> int:
@@ -102,7 +98,6 @@ def smooth_vertices_around(cm, originals, held) -> int:
             continue  # a move before lifted it
         if held and not held.isdisjoint(cm._tets[t].tolist()):
             cm.smooth_pending.add(o)  # the blade is at it: it may change again at the next step
-            cm.smooth_counts["held"] += 1
             continue
         best = None
         for v in cm.orig_tets[o].tolist():
@@ -112,15 +107,12 @@ def smooth_vertices_around(cm, originals, held) -> int:
         if best is not None:
             _apply(cm, *best[:-1])
             moved += 1
-    cm.smooth_counts["moved"] += moved
     return moved
 
 
 def _copies(cm, v) -> np.ndarray:
     """(c,) int64 ``v`` and its coincident copies along an earlier stroke's cut (equal ``node_rep``)."""
-    if cm.crack_nodes is None:
-        cm.crack_nodes = {i for f in cm.cut_faces_before for i in f}
-    if v not in cm.crack_nodes:
+    if v not in crack_nodes(cm):
         return np.array([v], np.int64)
     reps = cm.node_rep[:cm.n_orig_points]
     others = np.flatnonzero(reps == reps[v])
@@ -133,7 +125,7 @@ def _directions(cm, group, stars):
     surface where they are on the boundary, an earlier cut's surface included), or None (a corner, a
     curved surface)."""
     normals = []
-    for n in np.concatenate([_boundary_normals(cm, v, star) for v, star in zip(group.tolist(), stars)]):
+    for n in np.concatenate([boundary_face_normals(cm, v, star) for v, star in zip(group.tolist(), stars)]):
         if all(abs(abs(float(n @ m)) - 1.0) > COPLANAR_TOL for m in normals):
             normals.append(n)  # a crack's faces seen from its two sides are one plane
     if len(normals) == 0:
@@ -151,17 +143,6 @@ def _directions(cm, group, stars):
         return None
     line = line / np.linalg.norm(line)
     return np.array([line, -line])
-
-
-def _boundary_normals(cm, v, star) -> np.ndarray:
-    """(k, 3) float64 unit normals of the boundary faces of the original tets ``star`` that hold ``v``
-    (one per face, repeats and all)."""
-    t = cm.orig_tets[star]
-    on = (cm.neighbors[star] < 0) & (t != v)  # face opposite local vertex lf is on the boundary, holds v
-    f = t[:, _OPPOSITE][on]  # (q, 3)
-    x = cm._x
-    n = np.cross(x[f[:, 1]] - x[f[:, 0]], x[f[:, 2]] - x[f[:, 0]])
-    return n / np.linalg.norm(n, axis=1, keepdims=True)
 
 
 def _live_tets(cm, star) -> np.ndarray:
@@ -198,24 +179,20 @@ def _best_move(cm, v, held, o):
     its coincident copies), or None."""
     group = _copies(cm, v)
     if cm.store.held[group].any():
-        cm.smooth_counts["fixed"] += 1
         return None
     stars = [_star(cm, g) for g in group.tolist()]
     directions = _directions(cm, group, stars)
     if directions is None:
-        cm.smooth_counts["fixed"] += 1
         return None
     ids, weights = _followers(cm, group)
     if held and not held.isdisjoint(ids.tolist()):
         cm.smooth_pending.add(o)
-        cm.smooth_counts["held"] += 1
         return None
     x = cm._x
     far, uncut = _far_ends(cm, group, stars)
     h = float(np.linalg.norm(x[far] - x[v], axis=1).min())
     budget = SMOOTH_MOVE_MAX * h - float(np.linalg.norm(x[v] - cm.smoothed_from.get(v, x[v])))
     if not budget > 0.0:
-        cm.smooth_counts["fixed"] += 1
         return None
     nodes, local = np.unique(cm._tets[np.concatenate([_live_tets(cm, star) for star in stars])], return_inverse=True)
     share = np.zeros(nodes.size)
@@ -227,7 +204,6 @@ def _best_move(cm, v, held, o):
                             _swept_near(cm, x[nodes]))
     dx, angle, start = KF.vertex_place(problem, directions, SMOOTH_STEPS * h, budget)
     if not angle >= start + SMOOTH_MIN_GAIN_DEG:
-        cm.smooth_counts["no gain"] += 1
         return None
     return group, stars, dx, ids, angle
 

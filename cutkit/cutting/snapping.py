@@ -52,7 +52,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from cutkit.mesh.geometry import EDGE_END_EPS, edge_triangle_crossing
+from cutkit.mesh.geometry import EDGE_END_EPS, TET_FACES, edge_triangle_crossing
 from cutkit.mesh.quality import min_dihedral_angles
 
 #: Only a crossing within this fraction of its edge's length from a vertex moves the vertex
@@ -94,9 +94,7 @@ def _why_fixed(cm, v):
         return "moved before"
     if v >= cm.n_orig_points:
         return "cut node"
-    if cm.crack_nodes is None:
-        cm.crack_nodes = {i for f in cm.cut_faces_before for i in f}
-    if v in cm.crack_nodes:
+    if v in crack_nodes(cm):
         return "on an earlier cut"
     # no earlier step of this stroke visited its star: no swept triangle of the stroke but this step's
     # met it, so the move (inside the star, whose region it keeps) changes no earlier crossing
@@ -119,21 +117,32 @@ def _sub_tets(cm, star):
     return ids[cm._alive[ids]] if ids.size else ids
 
 
-def _boundary_normals(cm, v, star):
-    """(k, 3) float64 the distinct unit normals of ``v``'s boundary faces (k = 0 for an interior node)."""
-    normals = []
+def boundary_face_normals(cm, v, star) -> np.ndarray:
+    """(k, 3) float64 the outward unit normals of the boundary faces that hold ``v`` of the original
+    tets ``star`` (one per face, repeats and all; k = 0 for an interior node)."""
+    t = cm.orig_tets[star]
+    on = (cm.neighbors[star] < 0) & (t != v)  # the face opposite local vertex i is on the boundary, holds v
+    f = t[:, TET_FACES][on]  # (k, 3), outward
     x = cm._x
-    for o in star.tolist():
-        t = cm.orig_tets[o]
-        for lf in range(4):
-            if cm.neighbors[o, lf] >= 0 or t[lf] == v:
-                continue
-            f = np.delete(t, lf)
-            n = np.cross(x[f[1]] - x[f[0]], x[f[2]] - x[f[0]])
-            n /= np.linalg.norm(n)
-            if all(abs(float(n @ m) - 1.0) > COPLANAR_TOL for m in normals):
-                normals.append(n)
+    n = np.cross(x[f[:, 1]] - x[f[:, 0]], x[f[:, 2]] - x[f[:, 0]])
+    return n / np.linalg.norm(n, axis=1, keepdims=True)
+
+
+def _boundary_normals(cm, v, star):
+    """(k, 3) float64 the distinct outward unit normals of ``v``'s boundary faces (k = 0 for an interior
+    node)."""
+    normals = []
+    for n in boundary_face_normals(cm, v, star):
+        if all(abs(float(n @ m) - 1.0) > COPLANAR_TOL for m in normals):
+            normals.append(n)
     return np.array(normals).reshape(-1, 3)
+
+
+def crack_nodes(cm) -> set:
+    """The nodes on an earlier stroke's cut surface (``cm.cut_faces_before``), built on first use."""
+    if cm.crack_nodes is None:
+        cm.crack_nodes = {i for f in cm.cut_faces_before for i in f}
+    return cm.crack_nodes
 
 
 def _surface_direction(normals, direction):
