@@ -68,7 +68,7 @@ def bench(shape, steps):
 
 
 def bench_model(path, trajectory):
-    from cutkit.cutting import CutMesh, cut_step, to_model
+    from cutkit.cutting import CutMesh, cut_step, finish_stroke, to_model
     from cutkit.cutting.rebase import find_twins, rebase
     from cutkit.cutting.trajectory import read_trajectory
     from cutkit.io.model_h5 import read_model
@@ -83,6 +83,7 @@ def bench_model(path, trajectory):
         t1 = time.perf_counter()
         cut_step(cm, traj.tip[i], traj.a[i])
         times.append(time.perf_counter() - t1)
+    finish_stroke(cm)  # the trajectory's end, as `cutkit cut` does
     w = to_model(cm, m)
     new = w.tets[w.cell_data["new_tet"] == 1]
     angles = min_dihedral_angles(w.points, new) if len(new) else np.full(1, np.nan)

@@ -69,7 +69,7 @@ def measure(p, t, poses, blade_length=10.0):
     """
     from _cut_paths import crossed_edges
     from cutkit.cutting import CutMesh, cut_step, to_model
-    from cutkit.cutting.rebase import blade_in_tissue, rebase_if_left
+    from cutkit.cutting.step import blade_in_tissue, finish_stroke, rebase_if_left
     from cutkit.cutting.subdivision import CLASSIFY_TABLE
     from cutkit.mesh.quality import min_dihedral_angles, signed_volumes
 
@@ -78,6 +78,7 @@ def measure(p, t, poses, blade_length=10.0):
 
     def end_stroke():
         nonlocal crossed, n_crossed, cut, new, general
+        finish_stroke(cm)  # as `cutkit cut`: what the blade held looked at once more
         lost[:] += _stroke_losses(cm, crossed)
         n_crossed += len(crossed)
         cut, new = cut + len(cm.subtets), new + sum(len(v) for v in cm.subtets.values())

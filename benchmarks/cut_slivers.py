@@ -74,7 +74,7 @@ def run(every, snap, smooth=True):
     from _cut_paths import make_path
     from cutkit.cutting import CutMesh, cut_step
     from cutkit.cutting import cutmesh as CM
-    from cutkit.cutting.rebase import blade_in_tissue, rebase_if_left
+    from cutkit.cutting.step import blade_in_tissue, finish_stroke, rebase_if_left
 
     orig_cut = CM.CutMesh._cut_edge
 
@@ -95,7 +95,8 @@ def run(every, snap, smooth=True):
             cm = CutMesh(p, t, blade_length=2.5 if i % 2 else 10.0, **kw)
             cm.raw_edge_t, tips, worst = {}, set(), []
 
-            def end():
+            def end():  # the stroke ends (as `cutkit cut`: what the blade held looked at once more)
+                finish_stroke(cm)
                 r = worst_of_stroke(cm, tips)
                 if r is not None:
                     worst.append(r)

@@ -24,7 +24,7 @@ def command(model, trajectory, out_dir, overwrite, blade_length, centre_nodes):
     from cutkit.io.atomic import check_output_folder, clear_outputs
     from cutkit.cutting import CutMesh, cut_step, cut_surface_faces, to_model
     from cutkit.cutting.contact import uncut_edges_line
-    from cutkit.cutting.rebase import rebase_if_left
+    from cutkit.cutting.step import finish_stroke, rebase_if_left
     from cutkit.cutting.trajectory import read_trajectory
     from cutkit.errors import InputError
     from cutkit.io.model_h5 import read_model, write_model
@@ -58,6 +58,8 @@ def command(model, trajectory, out_dir, overwrite, blade_length, centre_nodes):
                 cut_step(cm, traj.tip[i], traj.a[i])
                 # the blade out of the tissue after a stroke that cut: the next stroke may cross it
                 strokes += rebase_if_left(cm)
+                if i == len(traj.t) - 1:
+                    finish_stroke(cm)  # the trajectory ends with the blade inside: its slivers looked at
                 m, pd, cd = frame_data()
                 series.write(float(traj.t[i]), m.points, m.tets, point_data=pd, cell_data=cd)
                 bar.update(task, advance=1)

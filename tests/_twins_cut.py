@@ -634,10 +634,11 @@ def vertex_place_twin(x, tets, share, vertex, ends, swept, directions, steps, mo
     """The compass search of ``_kernels_fair.vertex_place`` by plain loops: from dx = 0, every move
     dx + s d of each step within ``move_max``, the best of each sweep taken while it gains; a
     candidate counts only where every tet stays positive and no edge from the vertex to one of
-    ``ends`` that misses every triangle of ``swept`` now comes to cross one."""
+    ``ends`` that misses every triangle of ``swept`` now comes to cross one (strictly between its ends: one
+    crossed at an end is not cut, so it counts as missing)."""
 
     def crossing(p):
-        return np.array([any(edge_crosses_triangle(p, q, tri) >= 0.0 for tri in swept) for q in ends], bool)
+        return np.array([any(0.0 < edge_crosses_triangle(p, q, tri) < 1.0 for tri in swept) for q in ends], bool)
 
     def worst(dx):
         y = x + share[:, None] * dx

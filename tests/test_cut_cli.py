@@ -69,7 +69,7 @@ def test_cut_cli_reports_the_edges_the_blade_left_uncut(tmp_path):
     from _cut_paths import make_path
 
     from cutkit.cutting import CutMesh, cut_step
-    from cutkit.cutting.rebase import rebase_if_left
+    from cutkit.cutting.step import rebase_if_left
     from cutkit.cutting.trajectory import Trajectory
 
     p, t = box_mesh((6, 3, 3))

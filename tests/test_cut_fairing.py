@@ -15,7 +15,7 @@ from test_cut_thousand_paths import MESHES, _path
 from cutkit.cutting import CutMesh, cut_step, to_model
 from cutkit.cutting import cutmesh as CM
 from cutkit.cutting import fairing as FA
-from cutkit.cutting.rebase import blade_in_tissue, rebase_if_left
+from cutkit.cutting.step import blade_in_tissue, rebase_if_left
 from cutkit.mesh.check import check_mesh
 from cutkit.mesh.quality import min_dihedral_angles, signed_volumes
 

@@ -502,8 +502,9 @@ def test_vertex_place_matches_twin():
     """vertex_place (the smoothing's search) against its twin on random stars: a vertex, a cut node
     halfway along one of its edges following it by half its move, tets around both, the vertex's
     uncut edges and swept triangles near them.  Same move and angles; the move within reach; every
-    tet positive after it; no uncut edge that missed the triangles crosses one after it; the input
-    left as it was; and where a triangle blocks the unconstrained best move, a shorter or other one."""
+    tet positive after it; no uncut edge that missed the triangles (or met one at the vertex only)
+    crosses one inside after it; the input left as it was; and where a triangle blocks the
+    unconstrained best move, a shorter or other one."""
     from _twins_cut import edge_crosses_triangle, vertex_place_twin
 
     from cutkit.cutting import _kernels_fair as KF
@@ -527,12 +528,15 @@ def test_vertex_place_matches_twin():
         ends = x[2:6].copy()
         swept = rng.uniform(-1.0, 1.0, (trial % 3, 3, 3))
         free, _, _ = KF.vertex_place(KF.VertexStar(x, tets, share, 0, ends, np.zeros((0, 3, 3))), SM._SPACE, steps, 0.3)
-        if trial % 2 and free.any():  # a large triangle across the free move, halfway along it
+        if (trial % 2 or trial % 5 == 4) and free.any():
+            # a large triangle across the free move: halfway along it, or (every fifth) through the
+            # vertex, whose edges to ends behind it then cross it at the vertex only (not cut) and
+            # would cross it inside after the move
             u = free / np.linalg.norm(free)
             e1 = np.cross(u, [1.0, 0.0, 0.0] if abs(u[0]) < 0.9 else [0.0, 1.0, 0.0])
             e1 /= np.linalg.norm(e1)
             e2 = np.cross(u, e1)
-            c = x[0] + 0.5 * free
+            c = x[0] + (0.0 if trial % 5 == 4 else 0.5) * free
             swept = np.array([[c - 10 * e1 - 10 * e2, c + 20 * e1 - 10 * e2, c - 10 * e1 + 20 * e2]])
         before = x.copy()
         star = KF.VertexStar(x, tets, share, 0, ends, swept)
@@ -544,9 +548,9 @@ def test_vertex_place_matches_twin():
         assert np.linalg.norm(dx) <= 0.3 + 1e-12 and angle >= start
         y = x + share[:, None] * dx
         assert all(np.dot(np.cross(y[b] - y[a], y[c] - y[a]), y[d] - y[a]) > 0 for a, b, c, d in tets)
-        for q in ends:
-            was = any(edge_crosses_triangle(x[0], q, tri) >= 0.0 for tri in swept)
-            assert was or not any(edge_crosses_triangle(y[0], q, tri) >= 0.0 for tri in swept)
+        for q in ends:  # crossed strictly inside the edge after only where it was before
+            was = any(0.0 < edge_crosses_triangle(x[0], q, tri) < 1.0 for tri in swept)
+            assert was or not any(0.0 < edge_crosses_triangle(y[0], q, tri) < 1.0 for tri in swept)
         moved += angle > start + 1e-9
         blocked += not np.allclose(free, dx)
     assert moved >= 20 and blocked >= 3  # the search moves most vertices; triangles block some moves

@@ -22,7 +22,7 @@ from cutkit.cutting import CutMesh, cut_step, to_model
 from cutkit.cutting import subdivision as S
 from cutkit.cutting import crumbs as CRUMBS
 from cutkit.cutting.crumbs import crumb_volume, loose_pieces
-from cutkit.cutting.rebase import blade_in_tissue, rebase_if_left
+from cutkit.cutting.step import blade_in_tissue, finish_stroke, rebase_if_left
 from cutkit.mesh.check import check_mesh
 from cutkit.mesh.generate import box_mesh
 from cutkit.mesh.quality import signed_volumes
@@ -77,13 +77,14 @@ def run_path(cm, poses, v0, check=True, end_strokes=False, on_stroke_end=None):
 
     ``None`` lifts the blade (the mesh is rebased).  With ``end_strokes``
     the stroke also ends wherever the blade has left the tissue
-    (:func:`~cutkit.cutting.rebase.rebase_if_left`, as ``cutkit cut`` does).
+    (:func:`~cutkit.cutting.step.rebase_if_left`, as ``cutkit cut`` does).
     ``on_stroke_end(cm, swept)`` is called with each stroke's swept
     triangles before its rebase and after the last step.
     """
     swept, stroke = [], []
 
     def end():
+        finish_stroke(cm)  # what the blade held at the stroke's last steps (as rebase_if_left does)
         if on_stroke_end is not None:
             on_stroke_end(cm, stroke)
         stroke.clear()

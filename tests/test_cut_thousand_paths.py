@@ -29,7 +29,7 @@ from _cut_paths import KINDS, MORE_KINDS, crossed_edges, lift, make_path
 
 from cutkit.cutting import CutMesh, cut_step, to_model
 from cutkit.cutting.crumbs import CRUMB_VOLUME_FRACTION, crumb_volume, loose_pieces
-from cutkit.cutting.rebase import blade_in_tissue, rebase_if_left
+from cutkit.cutting.step import blade_in_tissue, finish_stroke, rebase_if_left
 from cutkit.mesh.check import check_mesh
 from cutkit.mesh.generate import box_mesh
 from cutkit.mesh.quality import min_dihedral_angles, signed_volumes
@@ -43,7 +43,7 @@ TREMORS = (0.0, 0.1, 0.3, 1.0)
 #: Every cut-made tetrahedron's smallest dihedral angle should be at least this (issue 30).
 MIN_CUT_DIHEDRAL_DEG = 5.0
 #: The bound's test takes every this-many-th path of each mesh.
-BOUND_EVERY = 8
+BOUND_EVERY = 4
 
 
 def _meshes():
@@ -82,7 +82,8 @@ def cut_path(p, t, poses, blade_length, where, **options):
     cm = CutMesh(p, t, blade_length=blade_length, **options)
     stroke, missed, worst = [], [], [180.0]
 
-    def end():
+    def end():  # the stroke ends: what the blade held is looked at once more, then the checks
+        finish_stroke(cm)
         missed.extend(_unreported(cm, stroke))
         worst.append(_sound(cm, v0, where))
         stroke.clear()

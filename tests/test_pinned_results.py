@@ -65,12 +65,13 @@ def _knee(tmp):
 def _cut(model, traj) -> dict:
     """A kinematic cut as ``cutkit cut`` makes it: the rest positions and tets of the cut mesh."""
     from cutkit.cutting import CutMesh, cut_step, to_model
-    from cutkit.cutting.rebase import rebase_if_left
+    from cutkit.cutting.step import finish_stroke, rebase_if_left
 
     cm = CutMesh.from_model(model, blade_length=traj.blade_length)
     for i in range(len(traj.t)):
         cut_step(cm, traj.tip[i], traj.a[i])
         rebase_if_left(cm)
+    finish_stroke(cm)  # the trajectory's end
     m = to_model(cm, model)
     return {"counts": {"tets": int(m.tets.shape[0]), "new_tets": int(m.cell_data["new_tet"].sum())},
             "positions": m.points, "tets": m.tets}

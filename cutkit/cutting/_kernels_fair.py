@@ -226,11 +226,16 @@ def _shifted(x0, share, dx, y):
 
 @njit(cache=True, nogil=True)
 def _edges_crossing(p, ends, swept, out):
-    """out[j]: whether the edge from p to ends[j] crosses one of the triangles ``swept``."""
+    """out[j]: whether the edge from p to ends[j] crosses one of the triangles ``swept`` strictly
+    between its ends.  A crossing at an end (p on the triangle's plane, the edge going up: s = 0)
+    does not count: the cut leaves such an edge whole, so a move that turns it into a crossing
+    inside the edge would leave a crossed edge uncut (a vertex on an earlier cut that a stroke
+    retraces lies in the swept plane)."""
     for j in range(ends.shape[0]):
         out[j] = False
         for t in range(swept.shape[0]):
-            if edge_triangle_crossing(p, ends[j], swept[t]) >= 0.0:
+            s = edge_triangle_crossing(p, ends[j], swept[t])
+            if 0.0 < s < 1.0:
                 out[j] = True
                 break
 

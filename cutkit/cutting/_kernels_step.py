@@ -419,3 +419,35 @@ def cut_nodes_centroid(ct, o, mask):
                         break
             n += 1
     return acc / n
+
+
+@njit(cache=True, nogil=True)
+def originals_holding(node_tet_off, node_tet_idx, tets, parents, out):
+    """The original tets that hold each node's defining simplex; returns how many were written.
+
+    Parameters
+    ----------
+    node_tet_off, node_tet_idx : (n + 1,) int64, (s,) int64
+        The original tets around each original node (CSR).
+    tets : (m, 4) int64
+        The original tets' corners.
+    parents : (q, 4) int64
+        Each node's defining original nodes, -1 padded (an original node: itself, then -1).
+    out : (r,) int64
+        Room for the tets (at most the stars of the first parents together), repeats and all.
+    """
+    k = 0
+    for i in range(parents.shape[0]):
+        p0 = parents[i, 0]
+        for j in range(node_tet_off[p0], node_tet_off[p0 + 1]):
+            o = node_tet_idx[j]
+            holds = True
+            for c in range(1, 4):
+                q = parents[i, c]
+                if q >= 0 and tets[o, 0] != q and tets[o, 1] != q and tets[o, 2] != q and tets[o, 3] != q:
+                    holds = False
+                    break
+            if holds:
+                out[k] = o
+                k += 1
+    return k

@@ -132,48 +132,6 @@ def rebase(cm):
     return ids
 
 
-def blade_in_tissue(cm):
-    """Whether the blade at its last pose meets one of the last step's active tets (current positions).
-
-    The active tets are those the swept quad met, whose last edge is the
-    blade at its new pose: a tet the blade is in now is among them, so the
-    test is local.
-    """
-    from cutkit.mesh.geometry import segment_meets_any_tet
-
-    if cm.prev_pose is None:
-        return False
-    if cm.tip_tet >= 0:
-        return True
-    tip, back = cm.prev_pose
-    corners = np.ascontiguousarray(cm.orig_tets[cm.active_tets])
-    return bool(segment_meets_any_tet(np.asarray(back, np.float64), np.asarray(tip, np.float64), cm._x, corners))
-
-
-def rebase_if_left(cm):
-    """End the stroke when the blade has left the tissue after it cut: rebase, keeping the blade's pose.
-
-    Call it after each :func:`~cutkit.cutting.step.cut_step` of a kinematic
-    cut (``cutkit cut``).  The next step then sweeps from the pose outside
-    the tissue into it, and may cut the sub-tetrahedra of this stroke (a
-    second stroke crossing the first).  The runtime decides the end of a
-    stroke itself (the hand's tip leaving the entry plane) and calls
-    :func:`rebase` through its session.
-
-    Returns
-    -------
-    rebased : bool
-    """
-    if cm.prev_pose is None or blade_in_tissue(cm):
-        return False
-    if not cm.subtets and cm.n_points == cm.n_orig_points:
-        return False  # the stroke cut nothing
-    pose = cm.prev_pose
-    rebase(cm)
-    cm.prev_pose = pose
-    return True
-
-
 def _node_reps(cm):
     """(n_points,) int64 the lowest id among each node's coincident copies (the two sides of a cut).
 

@@ -32,7 +32,10 @@ What a move keeps:
 * **an earlier stroke's cut closed**: a vertex on an earlier stroke's cut
   surface moves with its coincident copies (the other sides'), by the same
   move, within the cut surface's plane where that is flat (the faces of the
-  two sides count as one plane);
+  two sides count as one plane); where the cut is bent and the copies lie
+  inside the model, in space (the cut's faces bend with them, both sides
+  alike), unless the stroke swept near them nearly in one of those faces'
+  planes (:data:`RETRACE_DEG`);
 * **what else holds**: a vertex held by the boundary conditions (any copy),
   or with a cut node the blade placed this step (looked at again at the
   next step), stays.
@@ -53,6 +56,7 @@ import numpy as np
 from cutkit.cutting import _kernels_fair as KF
 from cutkit.cutting.snapping import (COPLANAR_TOL, _dependants, _rest_move, _star, _surface_direction,
                                      boundary_face_normals, crack_nodes)
+from cutkit.mesh.geometry import TET_FACES
 from cutkit.mesh.quality import min_dihedral_angles
 
 #: A cut-made tetrahedron below this smallest dihedral angle (degrees) has its original's vertices
@@ -65,6 +69,10 @@ SMOOTH_STEPS = np.array([0.1, 0.05, 0.02, 0.01])
 #: A vertex moves only when the smallest angle of its star rises by at least this (degrees): a move
 #: costs the physics a re-placement of the star.
 SMOOTH_MIN_GAIN_DEG = 0.5
+#: A vertex inside the model on a bent earlier cut moves in space with its copies unless a triangle
+#: the stroke swept near it lies within this angle (degrees) of the plane of one of its cut faces:
+#: a blade drawn back along the earlier cut sweeps in its plane (below, :func:`_directions`).
+RETRACE_DEG = 5.0
 #: Directions of an interior vertex: the axes and the cube diagonals, both ways.
 _SPACE = np.vstack([np.eye(3), -np.eye(3),
                     np.array([[i, j, k] for i in (1, -1) for j in (1, -1) for k in (1, -1)]) / np.sqrt(3.0)])
@@ -122,7 +130,8 @@ def _copies(cm, v) -> np.ndarray:
 
 def _directions(cm, group, stars):
     """(d, 3) unit directions the vertex copies ``group`` may move along together (within their flat
-    surface where they are on the boundary, an earlier cut's surface included), or None (a corner, a
+    surface where they are on the boundary, an earlier cut's surface included; in space where they
+    are inside the model on a bent earlier cut, :func:`_inside_a_bent_cut`), or None (a corner, a
     curved surface)."""
     normals = []
     for n in np.concatenate([boundary_face_normals(cm, v, star) for v, star in zip(group.tolist(), stars)]):
@@ -136,13 +145,39 @@ def _directions(cm, group, stars):
         w = np.cross(normals[0], u)
         d = np.array([u, w, (u + w) / np.sqrt(2.0), (u - w) / np.sqrt(2.0)])
         return np.vstack([d, -d])
-    if len(normals) > 2:
-        return None
-    line = _surface_direction(np.array(normals), np.cross(normals[0], normals[1]))  # the crease, or None
-    if line is None:
-        return None
-    line = line / np.linalg.norm(line)
-    return np.array([line, -line])
+    line = None
+    if len(normals) == 2:
+        line = _surface_direction(np.array(normals), np.cross(normals[0], normals[1]))  # the crease, or None
+    if line is not None:
+        line = line / np.linalg.norm(line)
+        return np.array([line, -line])
+    return _SPACE if _inside_a_bent_cut(cm, group, stars) else None
+
+
+def _inside_a_bent_cut(cm, group, stars) -> bool:
+    """Whether the copies ``group`` (c > 1) lie inside the model on an earlier stroke's bent cut and
+    may move in space together: every boundary face of their stars is a face of the earlier cut
+    (``cm.cut_faces_before``), so the copies' stars together fill a closed ball whose boundary does
+    not move (the volume is kept, the cut's two sides stay coincident at rest), and no triangle the
+    stroke swept near them lies within :data:`RETRACE_DEG` of one of those faces' planes (a blade
+    drawn back along the earlier cut sweeps in its plane, where a bent face would come to cross it)."""
+    if len(group) < 2:
+        return False
+    faces = np.concatenate([cm.orig_tets[star][:, TET_FACES][(cm.neighbors[star] < 0) & (cm.orig_tets[star] != v)]
+                            for v, star in zip(group.tolist(), stars)])
+    if not len(faces) or not all(tuple(f) in cm.cut_faces_before for f in np.sort(faces, axis=1).tolist()):
+        return False
+    # each face met from both sides: the same corners (by their coincident copies) twice
+    _, count = np.unique(np.sort(cm.node_rep[faces], axis=1), axis=0, return_counts=True)
+    if (count != 2).any():
+        return False
+    x = cm._x
+    normals = np.cross(x[faces[:, 1]] - x[faces[:, 0]], x[faces[:, 2]] - x[faces[:, 0]])
+    tris = _swept_near(cm, x[np.unique(cm.orig_tets[np.concatenate(stars)])])
+    swept = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
+    swept = swept[np.linalg.norm(swept, axis=1) > 0.0]  # a blade that stood still swept no plane
+    cos = np.abs(swept @ normals.T) / np.outer(np.linalg.norm(swept, axis=1), np.linalg.norm(normals, axis=1))
+    return not (cos > np.cos(np.radians(RETRACE_DEG))).any()
 
 
 def _live_tets(cm, star) -> np.ndarray:
@@ -195,8 +230,11 @@ def _best_move(cm, v, held, o):
     if not budget > 0.0:
         return None
     nodes, local = np.unique(cm._tets[np.concatenate([_live_tets(cm, star) for star in stars])], return_inverse=True)
+    present = np.isin(group, nodes)  # a copy whose corner a crumb took is a corner of no live tet
+    if not present[0]:
+        return None
     share = np.zeros(nodes.size)
-    share[np.searchsorted(nodes, group)] = 1.0
+    share[np.searchsorted(nodes, group[present])] = 1.0
     inside = np.isin(ids, nodes)
     share[np.searchsorted(nodes, ids[inside])] = weights[inside]
     problem = KF.VertexStar(np.ascontiguousarray(x[nodes]), local.reshape(-1, 4).astype(np.int64), share,

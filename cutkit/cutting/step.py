@@ -219,13 +219,36 @@ def cut_step(cm: CutMesh, tip, a) -> StepResult:
     if cm.fair_nodes and (changed or cm.fair_pending):
         held = _blade_placed_nodes(cm, tip_tet, ev_id)
         fair_cut_nodes(cm, changed, held)
-    # 5. a vertex of a sliver's original tet moved where that lifts it (smoothing.py)
-    if cm.smooth_vertices and (changed or cm.smooth_pending):
-        smooth_vertices_around(cm, changed, _blade_placed_nodes(cm, tip_tet, ev_id) if held is None else held)
+    # 5. a vertex of a sliver's original tet moved where that lifts it (smoothing.py), in the
+    # originals re-subdivided and in those whose sub-tets changed shape without it: around a node the
+    # step moved (the blade's notch nodes, fairing's moves: a cut node is a corner in every tet
+    # around its edge or face)
+    if cm.smooth_vertices:
+        reshaped = changed | originals_holding(cm, cm.store.step_log.moved_nodes)
+        if reshaped or cm.smooth_pending:
+            held = _blade_placed_nodes(cm, tip_tet, ev_id) if held is None else held
+            smooth_vertices_around(cm, reshaped, held)
     cm.previous_active_tets = cm.active_tets
     cm.active_tets = np.unique(active)
     cm.prev_pose = (P1, Q1)
     return _step_result(cm, n_nodes_before, cut_edges, tip_tet)
+
+
+def originals_holding(cm: CutMesh, nodes) -> set:
+    """The original tets (set of int) that hold one of ``nodes`` (iterable of int): an original node
+    in its star, a cut node in its defining simplex (every tet around its edge, the two at its face,
+    its tet); kernel ``_kernels_step.originals_holding``."""
+    nodes = np.unique(np.fromiter(nodes, np.int64))
+    if not nodes.size:
+        return set()
+    parents = np.full((nodes.size, 4), -1, np.int64)
+    cut = nodes >= cm.n_orig_points
+    parents[~cut, 0] = nodes[~cut]
+    parents[cut] = cm._def_nodes[nodes[cut]]
+    room = int((cm.node_tet_off[parents[:, 0] + 1] - cm.node_tet_off[parents[:, 0]]).sum())
+    out = np.empty(room, np.int64)
+    k = KS.originals_holding(cm.node_tet_off, cm.node_tet_idx, cm.orig_tets, parents, out)
+    return set(out[:k].tolist())
 
 
 def _blade_pose(tip, a):
@@ -410,3 +433,78 @@ def topology_delta(cm: CutMesh, n_nodes_before: int, moved, moved_from, removed,
         removed_tets=removed, removed_tet_corners=tets[removed],
         added_tets=added, added_tet_corners=tets[added], added_tet_origin=origin[added],
         n_tets_total=int(cm.n_tets_total))
+
+
+def finish_stroke(cm: CutMesh) -> StepResult | None:
+    """The stroke has ended: look at the slivers the blade held once more, with nothing held.
+
+    Fairing and vertex smoothing leave a sliver alone while the blade placed
+    one of its nodes (``cm.fair_pending``, ``cm.smooth_pending``: the blade's
+    next step may move it again).  When the blade has left the tissue, or the
+    run ends with it inside, no later step comes to them: this looks at them
+    with the same rules and nothing held (the moves stay off the stroke's
+    swept surface, ``cm.stroke_swept``).  Call it before a rebase, which
+    forgets what is pending.
+
+    Returns
+    -------
+    StepResult or None
+        The nodes moved (``delta.moved_nodes``; no tet made or removed), or
+        None when nothing was pending.
+    """
+    if not (cm.fair_nodes and cm.fair_pending) and not (cm.smooth_vertices and cm.smooth_pending):
+        return None
+    cm.store.begin_step()
+    n_nodes_before = cm.n_points
+    if cm.fair_nodes and cm.fair_pending:
+        fair_cut_nodes(cm, set(), set())
+    cm.fair_pending = {}
+    reshaped = originals_holding(cm, cm.store.step_log.moved_nodes)
+    if cm.smooth_vertices and (cm.smooth_pending or reshaped):
+        smooth_vertices_around(cm, reshaped, set())
+    cm.smooth_pending = set()
+    return _step_result(cm, n_nodes_before, [], cm.tip_tet)
+
+
+def blade_in_tissue(cm):
+    """Whether the blade at its last pose meets one of the last step's active tets (current positions).
+
+    The active tets are those the swept quad met, whose last edge is the
+    blade at its new pose: a tet the blade is in now is among them, so the
+    test is local.
+    """
+    from cutkit.mesh.geometry import segment_meets_any_tet
+
+    if cm.prev_pose is None:
+        return False
+    if cm.tip_tet >= 0:
+        return True
+    tip, back = cm.prev_pose
+    corners = np.ascontiguousarray(cm.orig_tets[cm.active_tets])
+    return bool(segment_meets_any_tet(np.asarray(back, np.float64), np.asarray(tip, np.float64), cm._x, corners))
+
+
+def rebase_if_left(cm):
+    """End the stroke when the blade has left the tissue after it cut: rebase, keeping the blade's pose.
+
+    Call it after each :func:`cut_step` of a kinematic
+    cut (``cutkit cut``).  The next step then sweeps from the pose outside
+    the tissue into it, and may cut the sub-tetrahedra of this stroke (a
+    second stroke crossing the first).  The runtime decides the end of a
+    stroke itself (the hand's tip leaving the entry plane) and calls
+    :func:`~cutkit.cutting.rebase.rebase` through its session.
+
+    Returns
+    -------
+    rebased : bool
+    """
+    if cm.prev_pose is None or blade_in_tissue(cm):
+        return False
+    if not cm.subtets and cm.n_points == cm.n_orig_points:
+        return False  # the stroke cut nothing
+    pose = cm.prev_pose
+    finish_stroke(cm)  # what the blade held at its last steps, looked at once more
+    cm.rebase()
+    cm.prev_pose = pose
+    return True
+

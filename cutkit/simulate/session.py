@@ -118,6 +118,8 @@ class Session:
         self.scalpel = scalpel if scalpel is not None else InProcessScalpel(blade_breadth=self.blade_breadth,
                                                                                  **scalpel_blade(opt.scalpel))
         self.states_seen: list[str] = []
+        self.hand = (np.zeros(3), np.zeros(3))  # the hand's last pose (tip, axis), mm (haptic_tick)
+        self.still_pose = None  # the hand's pose at the last geometry update (finish_if_still)
         self.out = self.scalpel.out
         self.task_s["setup"] = time.perf_counter() - wall0
         t1 = time.perf_counter()
@@ -133,6 +135,7 @@ class Session:
     def haptic_tick(self, tip, a, n) -> np.ndarray:
         """One 1 kHz tick for the hand's pose: entry test, force model, leave test; returns ``out``."""
         th = time.perf_counter()
+        self.hand = (tip, a)
         sc = self.scalpel
         if sc.code == FREE:
             hit = self.contact.entry(tip, a, n)
@@ -169,9 +172,22 @@ class Session:
             self.leave()  # out through the far side: the entry plane's test would never see it
             f_ext[:] = 0.0
         self.rebase_if_left()
+        self.finish_if_still()
         self.counts["geometry_updates"] += 1
         self.task_s["collision_and_cut"] += time.perf_counter() - tg
         return f_ext
+
+    def finish_if_still(self) -> None:
+        """Where the hand has not moved since the last geometry update, the slivers the blade holds are
+        looked at now (:meth:`CutTask.finish <cutkit.simulate.tasks.CutTask.finish>`): no next pose
+        moves what it placed (offline: from the trajectory's end on).  The blade's place in the rest
+        configuration still drifts as the tissue settles around it, and a cut step it makes holds
+        its own nodes again."""
+        tip, a = (np.array(v, np.float64) for v in self.hand)
+        if self.still_pose is not None and np.array_equal(tip, self.still_pose[0]) \
+                and np.array_equal(a, self.still_pose[1]):
+            self.cut.finish()
+        self.still_pose = (tip, a)
 
     def relax_to(self, f_ext, until: float) -> int:
         """Relax to ``until`` (tissue time, s), then refit the surface hierarchy while the blade is out."""
@@ -202,6 +218,7 @@ class Session:
         if not cm.subtets and cm.n_points == cm.n_orig_points:
             self.rebase_due = False  # the stroke cut nothing: nothing to rebase
             return False
+        self.cut.finish()  # what the blade held at the stroke's last steps, looked at once more
         if self.rebase_runner is not None:
             self.rebase_due = False
             self.rebase_runner()

@@ -218,13 +218,22 @@ class CutTask:
         return (segment_meets_any_tet(blade_tip - length * axis, blade_tip, cm.points, corners),
                 segment_meets_any_tet(proxy - length * axis, proxy, self.tis.positions, corners))
 
-    def _apply(self, result) -> None:
-        """Hand a cut step's topology change over to the tissue."""
+    def _apply(self, result, counted: str = "cut_steps") -> None:
+        """Hand a cut step's topology change over to the tissue; ``counted``: the count it adds to."""
         with self.lock.urgent():
             added = self.tis.apply_delta(result.delta)
         for key, value in added.items():
             self.counts[key] = self.counts.get(key, 0) + value
-        self.counts["cut_steps"] += 1
+        self.counts[counted] = self.counts.get(counted, 0) + 1
+
+    def finish(self) -> None:
+        """The stroke ended (the blade left, or the trajectory ends with it inside): the slivers the blade
+        held are looked at once more (:func:`cutkit.cutting.finish_stroke`), their moves handed over."""
+        from cutkit.cutting import finish_stroke
+
+        result = finish_stroke(self.cm)
+        if result is not None and result.moved_nodes.size:
+            self._apply(result, "strokes_finished")
 
     def note(self, code: int) -> None:
         """Record one haptic tick's scalpel state."""
