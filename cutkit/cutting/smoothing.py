@@ -157,10 +157,11 @@ def _directions(cm, group, stars):
 def _inside_a_bent_cut(cm, group, stars) -> bool:
     """Whether the copies ``group`` (c > 1) lie inside the model on an earlier stroke's bent cut and
     may move in space together: every boundary face of their stars is a face of the earlier cut
-    (``cm.cut_faces_before``), so the copies' stars together fill a closed ball whose boundary does
-    not move (the volume is kept, the cut's two sides stay coincident at rest), and no triangle the
-    stroke swept near them lies within :data:`RETRACE_DEG` of one of those faces' planes (a blade
-    drawn back along the earlier cut sweeps in its plane, where a bent face would come to cross it)."""
+    (``cm.cut_faces_before``) met from both sides (its corners' coincident copies twice), so the
+    copies' stars together fill a ball whose boundary does not move (the volume is kept, the cut's
+    two sides stay coincident at rest), and no triangle the stroke swept near them lies within
+    :data:`RETRACE_DEG` of one of those faces' planes (a blade drawn back along the earlier cut
+    sweeps in its plane, where a bent face would come to cross it)."""
     if len(group) < 2:
         return False
     faces = np.concatenate([cm.orig_tets[star][:, TET_FACES][(cm.neighbors[star] < 0) & (cm.orig_tets[star] != v)]
@@ -230,7 +231,7 @@ def _best_move(cm, v, held, o):
     if not budget > 0.0:
         return None
     nodes, local = np.unique(cm._tets[np.concatenate([_live_tets(cm, star) for star in stars])], return_inverse=True)
-    present = np.isin(group, nodes)  # a copy whose corner a crumb took is a corner of no live tet
+    present = np.isin(group, nodes)  # a copy can be a corner of none of its star's live tets (a crumb took it)
     if not present[0]:
         return None
     share = np.zeros(nodes.size)

@@ -440,8 +440,9 @@ def finish_stroke(cm: CutMesh) -> StepResult | None:
 
     Fairing and vertex smoothing leave a sliver alone while the blade placed
     one of its nodes (``cm.fair_pending``, ``cm.smooth_pending``: the blade's
-    next step may move it again).  When the blade has left the tissue, or the
-    run ends with it inside, no later step comes to them: this looks at them
+    next step may move it again).  When the blade has left the tissue, the
+    trajectory ends with it inside or the hand holds still, no later step
+    moves them: this looks at them
     with the same rules and nothing held (the moves stay off the stroke's
     swept surface, ``cm.stroke_swept``).  Call it before a rebase, which
     forgets what is pending.
@@ -507,4 +508,3 @@ def rebase_if_left(cm):
     cm.rebase()
     cm.prev_pose = pose
     return True
-
