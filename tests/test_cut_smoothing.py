@@ -186,15 +186,13 @@ def test_a_vertex_on_a_bent_earlier_cut_moves_in_space_with_its_copies(name, i, 
     p, t = MESHES[name]
     rule, seen, retraced = SM._inside_a_bent_cut, [], []
 
-    def recorded(cm, group, stars):
-        ok = rule(cm, group, stars)
+    def recorded(cm, group, stars, faces, normals):
+        ok = rule(cm, group, stars, faces, normals)
         if ok and not retraced:  # once: the same copies with a triangle swept in a cut face's plane
-            star = stars[0]
-            k = np.argwhere((cm.neighbors[star] < 0) & (cm.orig_tets[star] != group[0]))[0]
-            a, b, c = cm._x[cm.orig_tets[star[k[0]]][SM.TET_FACES[k[1]]]]
+            a, b, c = cm._x[faces[0]]
             kept = cm.stroke_swept
             cm.stroke_swept = kept + [np.array([[a + 2 * (a - b), b + 2 * (b - c), c + 2 * (c - a)]])]
-            retraced.append(rule(cm, group, stars))
+            retraced.append(rule(cm, group, stars, faces, normals))
             cm.stroke_swept = kept
         if ok:
             seen.append((cm, group.copy()))
@@ -205,7 +203,7 @@ def test_a_vertex_on_a_bent_earlier_cut_moves_in_space_with_its_copies(name, i, 
     assert seen and retraced == [False]
     for cm, group in seen:  # node ids outlive the rebases: the copies coincide at the end
         assert np.ptp(cm.points[group], axis=0).max() <= 1e-12
-    monkeypatch.setattr(SM, "_inside_a_bent_cut", lambda cm, group, stars: False)
+    monkeypatch.setattr(SM, "_inside_a_bent_cut", lambda cm, group, stars, faces, normals: False)
     missed_off, off = cut_path(p, t, *_path(name, i))
     assert off < SM.SMOOTH_BELOW_DEG <= on, (off, on)
     assert not missed_on and not missed_off

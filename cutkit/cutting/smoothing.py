@@ -55,8 +55,7 @@ import numpy as np
 
 from cutkit.cutting import _kernels_fair as KF
 from cutkit.cutting.snapping import (COPLANAR_TOL, _dependants, _rest_move, _star, _surface_direction,
-                                     boundary_face_normals, crack_nodes)
-from cutkit.mesh.geometry import TET_FACES
+                                     boundary_faces, crack_nodes, face_normals)
 from cutkit.mesh.quality import min_dihedral_angles
 
 #: A cut-made tetrahedron below this smallest dihedral angle (degrees) has its original's vertices
@@ -133,8 +132,9 @@ def _directions(cm, group, stars):
     surface where they are on the boundary, an earlier cut's surface included; in space where they
     are inside the model on a bent earlier cut, :func:`_inside_a_bent_cut`), or None (a corner, a
     curved surface)."""
-    normals = []
-    for n in np.concatenate([boundary_face_normals(cm, v, star) for v, star in zip(group.tolist(), stars)]):
+    faces = np.concatenate([boundary_faces(cm, v, star) for v, star in zip(group.tolist(), stars)])
+    face_n, normals = face_normals(cm, faces), []
+    for n in face_n:
         if all(abs(abs(float(n @ m)) - 1.0) > COPLANAR_TOL for m in normals):
             normals.append(n)  # a crack's faces seen from its two sides are one plane
     if len(normals) == 0:
@@ -151,34 +151,32 @@ def _directions(cm, group, stars):
     if line is not None:
         line = line / np.linalg.norm(line)
         return np.array([line, -line])
-    return _SPACE if _inside_a_bent_cut(cm, group, stars) else None
+    return _SPACE if _inside_a_bent_cut(cm, group, stars, faces, face_n) else None
 
 
-def _inside_a_bent_cut(cm, group, stars) -> bool:
+def _inside_a_bent_cut(cm, group, stars, faces, normals) -> bool:
     """Whether the copies ``group`` (c > 1) lie inside the model on an earlier stroke's bent cut and
     may move in space together: every boundary face of their stars is a face of the earlier cut
     (``cm.cut_faces_before``) met from both sides (its corners' coincident copies twice), so the
     copies' stars together fill a ball whose boundary does not move (the volume is kept, the cut's
     two sides stay coincident at rest), and no triangle the stroke swept near them lies within
     :data:`RETRACE_DEG` of one of those faces' planes (a blade drawn back along the earlier cut
-    sweeps in its plane, where a bent face would come to cross it)."""
-    if len(group) < 2:
+    sweeps in its plane, where a bent face would come to cross it).  ``faces`` (k, 3) int64: the
+    boundary faces of the copies' stars, ``normals`` (k, 3) float64 their unit normals."""
+    if len(group) < 2 or not len(faces):
         return False
-    faces = np.concatenate([cm.orig_tets[star][:, TET_FACES][(cm.neighbors[star] < 0) & (cm.orig_tets[star] != v)]
-                            for v, star in zip(group.tolist(), stars)])
-    if not len(faces) or not all(tuple(f) in cm.cut_faces_before for f in np.sort(faces, axis=1).tolist()):
+    if not all(tuple(f) in cm.cut_faces_before for f in np.sort(faces, axis=1).tolist()):
         return False
     # each face met from both sides: the same corners (by their coincident copies) twice
     _, count = np.unique(np.sort(cm.node_rep[faces], axis=1), axis=0, return_counts=True)
     if (count != 2).any():
         return False
     x = cm._x
-    normals = np.cross(x[faces[:, 1]] - x[faces[:, 0]], x[faces[:, 2]] - x[faces[:, 0]])
     tris = _swept_near(cm, x[np.unique(cm.orig_tets[np.concatenate(stars)])])
     swept = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
-    swept = swept[np.linalg.norm(swept, axis=1) > 0.0]  # a blade that stood still swept no plane
-    cos = np.abs(swept @ normals.T) / np.outer(np.linalg.norm(swept, axis=1), np.linalg.norm(normals, axis=1))
-    return not (cos > np.cos(np.radians(RETRACE_DEG))).any()
+    length = np.linalg.norm(swept, axis=1)
+    swept = swept[length > 0.0] / length[length > 0.0, None]  # a blade that stood still swept no plane
+    return not (np.abs(swept @ normals.T) > np.cos(np.radians(RETRACE_DEG))).any()
 
 
 def _live_tets(cm, star) -> np.ndarray:

@@ -117,15 +117,24 @@ def _sub_tets(cm, star):
     return ids[cm._alive[ids]] if ids.size else ids
 
 
-def boundary_face_normals(cm, v, star) -> np.ndarray:
-    """(k, 3) float64 the outward unit normals of the boundary faces that hold ``v`` of the original
-    tets ``star`` (one per face, repeats and all; k = 0 for an interior node)."""
+def boundary_faces(cm, v, star) -> np.ndarray:
+    """(k, 3) int64 the boundary faces that hold ``v`` of the original tets ``star``, outward (one per
+    face, repeats and all; k = 0 for an interior node)."""
     t = cm.orig_tets[star]
     on = (cm.neighbors[star] < 0) & (t != v)  # the face opposite local vertex i is on the boundary, holds v
-    f = t[:, TET_FACES][on]  # (k, 3), outward
+    return t[:, TET_FACES][on]
+
+
+def face_normals(cm, faces) -> np.ndarray:
+    """(k, 3) float64 the unit normals of ``faces`` (k, 3) int64 (right-handed order) at ``cm._x``."""
     x = cm._x
-    n = np.cross(x[f[:, 1]] - x[f[:, 0]], x[f[:, 2]] - x[f[:, 0]])
+    n = np.cross(x[faces[:, 1]] - x[faces[:, 0]], x[faces[:, 2]] - x[faces[:, 0]])
     return n / np.linalg.norm(n, axis=1, keepdims=True)
+
+
+def boundary_face_normals(cm, v, star) -> np.ndarray:
+    """(k, 3) float64 the outward unit normals of :func:`boundary_faces`."""
+    return face_normals(cm, boundary_faces(cm, v, star))
 
 
 def _boundary_normals(cm, v, star):

@@ -453,11 +453,12 @@ def finish_stroke(cm: CutMesh) -> StepResult | None:
         The nodes moved (``delta.moved_nodes``; no tet made or removed), or
         None when nothing was pending.
     """
-    if not (cm.fair_nodes and cm.fair_pending) and not (cm.smooth_vertices and cm.smooth_pending):
+    fair = cm.fair_nodes and bool(cm.fair_pending)
+    if not fair and not (cm.smooth_vertices and cm.smooth_pending):
         return None
     cm.store.begin_step()
     n_nodes_before = cm.n_points
-    if cm.fair_nodes and cm.fair_pending:
+    if fair:
         fair_cut_nodes(cm, set(), set())
     cm.fair_pending = {}
     reshaped = originals_holding(cm, cm.store.step_log.moved_nodes)
