@@ -176,7 +176,7 @@ def test_finish_stroke_moves_only_what_was_pending_and_hands_the_moves_over():
     assert results
 
 
-@pytest.mark.parametrize("name,i", [("kuhn", 164), ("kuhn", 209), ("gmsh", 35)])
+@pytest.mark.parametrize("name,i", [("kuhn", 209), ("gmsh", 215), ("decimated", 289)])
 def test_a_vertex_on_a_bent_earlier_cut_moves_in_space_with_its_copies(name, i, monkeypatch):
     """Paths of several strokes whose sliver has its vertices on an earlier stroke's bent cut inside
     the model: moved in space with their copies (the cut's faces bend, both sides alike), the worst
@@ -235,3 +235,92 @@ def test_originals_holding_matches_a_search_over_every_original():
         assert originals_holding(cm, nodes) == search(cm, nodes)
         steps += cm.n_points > cm.n_orig_points
     assert steps >= 5 and originals_holding(cm, []) == set()
+
+
+def test_tet_volume_gradients_give_the_exact_change_of_a_moved_corner():
+    """tet_volume_gradients against the volume itself: a corner (or several corners along one vector,
+    by weights) moved changes the signed volume by the weighted gradients dotted with the move, the
+    volume being linear in such a move; the four gradients sum to zero (a translation)."""
+    from cutkit.mesh.geometry import tet_volume_gradients, tet_volumes
+
+    rng = np.random.default_rng(7)
+    points = rng.normal(size=(40, 3))
+    tets = np.array([rng.choice(40, 4, replace=False) for _ in range(60)])
+    g = tet_volume_gradients(points, tets)
+    np.testing.assert_allclose(g.sum(axis=1), 0.0, atol=1e-14)
+    v0 = tet_volumes(points, tets)
+    for _ in range(5):
+        weights, dx = rng.uniform(0.0, 1.0, size=40), rng.normal(size=3)
+        moved = points + weights[:, None] * dx
+        expected = v0 + np.einsum("mkc,mk,c->m", g, weights[tets], dx)
+        np.testing.assert_allclose(tet_volumes(moved, tets), expected, rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize("i", [161, 329, 334])
+def test_a_vertex_on_a_gently_curved_surface_moves_in_the_plane_that_keeps_the_volume(i, monkeypatch):
+    """Paths on the decimated ellipsoid whose sliver has a vertex on the curved outer surface: moved
+    within the plane that keeps the volume, the worst cut-made angle reaches 5 degrees (below it
+    without), each such move keeps the volume of the originals around the vertex to 1e-12 (the
+    model's volume with the crumbs', cut_path's checks), the outer faces around the vertex bend by at
+    most SURFACE_BEND_DEG, and every crossed edge is cut or counted."""
+    from cutkit.mesh.quality import signed_volumes as volumes
+
+    p, t = MESHES["decimated"]
+    rule, apply, seen, checked = SM._on_a_gentle_surface, SM._apply, set(), []
+
+    def recorded_rule(cm, group, stars, faces, normals):
+        ok = rule(cm, group, stars, faces, normals)
+        if ok:
+            seen.add(tuple(group.tolist()))
+        return ok
+
+    def recorded_apply(cm, group, stars, dx, followers):
+        if tuple(group.tolist()) in seen:
+            star = np.unique(np.concatenate(stars))
+            before = float(volumes(cm._x, cm.orig_tets[star]).sum())
+            apply(cm, group, stars, dx, followers)
+            after = float(volumes(cm._x, cm.orig_tets[star]).sum())
+            assert abs(after - before) <= 1e-12 * abs(before), (before, after)
+            checked.append(float(np.linalg.norm(dx)))
+            return None
+        return apply(cm, group, stars, dx, followers)
+
+    monkeypatch.setattr(SM, "_on_a_gentle_surface", recorded_rule)
+    monkeypatch.setattr(SM, "_apply", recorded_apply)
+    missed_on, on = cut_path(p, t, *_path("decimated", i))
+    assert checked and max(checked) > 0.0
+    monkeypatch.setattr(SM, "_on_a_gentle_surface", lambda cm, group, stars, faces, normals: False)
+    missed_off, off = cut_path(p, t, *_path("decimated", i))
+    assert off < SM.SMOOTH_BELOW_DEG <= on, (off, on)
+    assert not missed_on and not missed_off
+
+
+def test_a_gentle_surface_is_one_whose_faces_bend_less_than_the_bound():
+    """_on_a_gentle_surface against the normals' spread computed here: on the decimated ellipsoid every
+    surface vertex whose outer faces' normals lie within SURFACE_BEND_DEG of their area-weighted mean
+    qualifies, the others do not; a box corner (three faces at right angles) never does."""
+    from cutkit.cutting import CutMesh
+    from cutkit.cutting.snapping import _star, boundary_faces, face_normals
+
+    for name in ("decimated", "kuhn"):
+        p, t = MESHES[name]
+        cm = CutMesh(p, t, blade_length=1.0)
+        verdicts = []
+        for v in range(len(p)):
+            star = _star(cm, v)
+            faces = boundary_faces(cm, v, star)
+            if not len(faces):
+                continue
+            normals = face_normals(cm, faces)
+            area = np.linalg.norm(np.cross(p[faces[:, 1]] - p[faces[:, 0]], p[faces[:, 2]] - p[faces[:, 0]]), axis=1)
+            mean = area @ normals
+            spread = np.degrees(np.arccos(np.clip(normals @ (mean / np.linalg.norm(mean)), -1, 1))).max()
+            ok = SM._on_a_gentle_surface(cm, np.array([v]), [star], faces, normals)
+            assert ok == (spread <= SM.SURFACE_BEND_DEG + 1e-9), (name, v, spread)
+            verdicts.append(ok)
+        assert any(verdicts) and not all(verdicts)
+        if name == "kuhn":
+            corner = int(np.flatnonzero((p == 0).all(axis=1))[0])
+            star = _star(cm, corner)
+            faces = boundary_faces(cm, corner, star)
+            assert not SM._on_a_gentle_surface(cm, np.array([corner]), [star], faces, face_normals(cm, faces))

@@ -149,13 +149,22 @@ def test_snapping_is_off_by_default():
 
 
 def _old_map(X_old, x_old, tets, point):
-    """The tissue before a step, piecewise affine over ``tets``: the current place of rest ``point``."""
+    """The tissue before a step, piecewise affine over ``tets``: the current place of rest ``point``.
+    A point outside them all (a vertex on a curved surface moved within the plane that keeps the
+    volume) takes the map of the tet it is nearest, by its smallest barycentric weight, extended,
+    if that weight is within the tissue's reach (``PLACE_REACH``)."""
+    from cutkit.relax.elastic_tissue import PLACE_REACH
+
+    best, place = -np.inf, None
     for tv in tets:
         T = (X_old[tv[1:]] - X_old[tv[0]]).T
         b = np.linalg.solve(T, point - X_old[tv[0]])
-        if b.min() >= -1e-9 and b.sum() <= 1 + 1e-9:
-            return x_old[tv[0]] + (x_old[tv[1:]] - x_old[tv[0]]).T @ b
-    raise AssertionError("point outside the star")
+        worst = min(b.min(), 1.0 - b.sum())
+        if worst > best:
+            best, place = worst, x_old[tv[0]] + (x_old[tv[1:]] - x_old[tv[0]]).T @ b
+    if best < -min(PLACE_REACH, 0.25):
+        raise AssertionError(f"point outside the star (barycentric weight {best})")
+    return place
 
 
 def cut_and_check_moved_vertices(tis, poses, n0: int) -> int:

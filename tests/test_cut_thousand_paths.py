@@ -124,7 +124,7 @@ def test_a_thousand_paths_stay_sound(name, chunk):
 
 
 @pytest.mark.xfail(strict=True, reason="after fairing and vertex smoothing: corners cut off near a vertex that may "
-                   "not move (a curved surface or earlier cut) and later strokes over earlier ones "
+                   "not move (a corner, a sharp bend, a retraced earlier cut) and later strokes over earlier ones "
                    "(docs/cutting.md, Angles; benchmarks/cut_slivers.py)")
 @pytest.mark.parametrize("name", sorted(MESHES))
 def test_cut_made_tets_keep_the_dihedral_bound(name):

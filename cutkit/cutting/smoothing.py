@@ -17,10 +17,14 @@ sub-tetrahedron stays positive where its original does.
 
 What a move keeps:
 
-* **the model's volume and surface**: an interior vertex moves inside its
-  star, whose boundary does not move; a boundary vertex moves only within
-  its flat surface (its one face plane, or the crease line of two) and not
-  at all on a curved surface or at a corner;
+* **the model's volume, and its surface to within the move**: an interior
+  vertex moves inside its star, whose boundary does not move; a boundary
+  vertex moves within its flat surface (its one face plane, or the crease
+  line of two); on a gently curved surface (its outer faces' normals within
+  :data:`SURFACE_BEND_DEG` of their mean) within the plane that keeps the
+  volume of its star exactly (the volume is linear in the move), so the
+  surface moves by at most the move; at a corner or a sharper bend not at
+  all;
 * **the cut where the blade made it, to within the move**: a vertex moves at
   most :data:`SMOOTH_MOVE_MAX` of its shortest edge from where the cut
   state found it (all its moves together), and a cut node on one of its
@@ -56,6 +60,7 @@ import numpy as np
 from cutkit.cutting import _kernels_fair as KF
 from cutkit.cutting.snapping import (COPLANAR_TOL, _dependants, _rest_move, _star, _surface_direction,
                                      boundary_faces, crack_nodes, face_normals)
+from cutkit.mesh.geometry import tet_volume_gradients
 from cutkit.mesh.quality import min_dihedral_angles
 
 #: A cut-made tetrahedron below this smallest dihedral angle (degrees) has its original's vertices
@@ -72,6 +77,10 @@ SMOOTH_MIN_GAIN_DEG = 0.5
 #: the stroke swept near it lies within this angle (degrees) of the plane of one of its cut faces:
 #: a blade drawn back along the earlier cut sweeps in its plane (below, :func:`_directions`).
 RETRACE_DEG = 5.0
+#: A vertex on the model's outer surface where the normals of its boundary faces are all within this
+#: angle (degrees) of their area-weighted mean moves in the plane that keeps the volume
+#: (:func:`_on_a_gentle_surface`); the surface then moves by at most the move.
+SURFACE_BEND_DEG = 30.0
 #: Directions of an interior vertex: the axes and the cube diagonals, both ways.
 _SPACE = np.vstack([np.eye(3), -np.eye(3),
                     np.array([[i, j, k] for i in (1, -1) for j in (1, -1) for k in (1, -1)]) / np.sqrt(3.0)])
@@ -130,8 +139,9 @@ def _copies(cm, v) -> np.ndarray:
 def _directions(cm, group, stars):
     """(d, 3) unit directions the vertex copies ``group`` may move along together (within their flat
     surface where they are on the boundary, an earlier cut's surface included; in space where they
-    are inside the model on a bent earlier cut, :func:`_inside_a_bent_cut`), or None (a corner, a
-    curved surface)."""
+    are inside the model on a bent earlier cut, :func:`_inside_a_bent_cut`; in the plane that keeps
+    the volume where they are on a gently curved surface, :func:`_on_a_gentle_surface`), or None (a
+    corner, a sharply bent surface)."""
     faces = np.concatenate([boundary_faces(cm, v, star) for v, star in zip(group.tolist(), stars)])
     face_n, normals = face_normals(cm, faces), []
     for n in face_n:
@@ -140,18 +150,25 @@ def _directions(cm, group, stars):
     if len(normals) == 0:
         return _SPACE
     if len(normals) == 1:
-        u = np.cross(normals[0], np.eye(3)[int(np.argmin(np.abs(normals[0])))])
-        u /= np.linalg.norm(u)
-        w = np.cross(normals[0], u)
-        d = np.array([u, w, (u + w) / np.sqrt(2.0), (u - w) / np.sqrt(2.0)])
-        return np.vstack([d, -d])
+        return _plane_directions(normals[0])
     line = None
     if len(normals) == 2:
         line = _surface_direction(np.array(normals), np.cross(normals[0], normals[1]))  # the crease, or None
     if line is not None:
         line = line / np.linalg.norm(line)
         return np.array([line, -line])
-    return _SPACE if _inside_a_bent_cut(cm, group, stars, faces, face_n) else None
+    if _inside_a_bent_cut(cm, group, stars, faces, face_n):
+        return _SPACE
+    return _volume_plane(cm, group, stars) if _on_a_gentle_surface(cm, group, stars, faces, face_n) else None
+
+
+def _plane_directions(normal) -> np.ndarray:
+    """(8, 3) unit directions in the plane of unit ``normal`` (3,): two axes and their diagonals, both ways."""
+    u = np.cross(normal, np.eye(3)[int(np.argmin(np.abs(normal)))])
+    u /= np.linalg.norm(u)
+    w = np.cross(normal, u)
+    d = np.array([u, w, (u + w) / np.sqrt(2.0), (u - w) / np.sqrt(2.0)])
+    return np.vstack([d, -d])
 
 
 def _inside_a_bent_cut(cm, group, stars, faces, normals) -> bool:
@@ -159,10 +176,9 @@ def _inside_a_bent_cut(cm, group, stars, faces, normals) -> bool:
     may move in space together: every boundary face of their stars is a face of the earlier cut
     (``cm.cut_faces_before``) met from both sides (its corners' coincident copies twice), so the
     copies' stars together fill a ball whose boundary does not move (the volume is kept, the cut's
-    two sides stay coincident at rest), and no triangle the stroke swept near them lies within
-    :data:`RETRACE_DEG` of one of those faces' planes (a blade drawn back along the earlier cut
-    sweeps in its plane, where a bent face would come to cross it).  ``faces`` (k, 3) int64: the
-    boundary faces of the copies' stars, ``normals`` (k, 3) float64 their unit normals."""
+    two sides stay coincident at rest), and the stroke did not retrace the cut there
+    (:func:`_retraced`).  ``faces`` (k, 3) int64: the boundary faces of the copies' stars,
+    ``normals`` (k, 3) float64 their unit normals."""
     if len(group) < 2 or not len(faces):
         return False
     if not all(tuple(f) in cm.cut_faces_before for f in np.sort(faces, axis=1).tolist()):
@@ -171,12 +187,59 @@ def _inside_a_bent_cut(cm, group, stars, faces, normals) -> bool:
     _, count = np.unique(np.sort(cm.node_rep[faces], axis=1), axis=0, return_counts=True)
     if (count != 2).any():
         return False
+    return not _retraced(cm, stars, normals)
+
+
+def _on_a_gentle_surface(cm, group, stars, faces, normals) -> bool:
+    """Whether the copies ``group`` lie on the model's outer surface where it bends gently: the
+    boundary faces of their stars that are not an earlier cut met from both sides (the outer
+    surface) have unit normals within :data:`SURFACE_BEND_DEG` of their area-weighted mean, and the
+    faces of an earlier cut among them are met from both sides and not retraced by the stroke
+    (:func:`_retraced`).  Such copies move in the plane that keeps the model's volume
+    (:func:`_volume_plane`); the outer surface then moves by at most the move."""
+    key = np.sort(cm.node_rep[faces], axis=1)
+    _, inverse, count = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    if (count > 2).any():
+        return False
+    paired = count[inverse.ravel()] == 2
+    earlier = np.array([tuple(f) in cm.cut_faces_before for f in np.sort(faces, axis=1).tolist()], bool)
+    if (paired != earlier).any() or paired.all():  # half of a cut, or no outer surface (the bent cut's case)
+        return False
+    if paired.any() and _retraced(cm, stars, normals[paired]):
+        return False
+    x, outer = cm._x, faces[~paired]
+    area = np.linalg.norm(np.cross(x[outer[:, 1]] - x[outer[:, 0]], x[outer[:, 2]] - x[outer[:, 0]]), axis=1)
+    mean = area @ normals[~paired]
+    size = float(np.linalg.norm(mean))
+    return size > 0.0 and bool((normals[~paired] @ (mean / size) >= np.cos(np.radians(SURFACE_BEND_DEG))).all())
+
+
+def _retraced(cm, stars, normals) -> bool:
+    """Whether a triangle the stroke swept near the original tets ``stars`` lies within
+    :data:`RETRACE_DEG` of the plane of one of the unit ``normals`` (k, 3) of an earlier cut's faces: a
+    blade drawn back along the earlier cut sweeps in its plane, where a bent face would come to
+    cross it."""
     x = cm._x
     tris = _swept_near(cm, x[np.unique(cm.orig_tets[np.concatenate(stars)])])
     swept = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
     length = np.linalg.norm(swept, axis=1)
     swept = swept[length > 0.0] / length[length > 0.0, None]  # a blade that stood still swept no plane
-    return not (np.abs(swept @ normals.T) > np.cos(np.radians(RETRACE_DEG))).any()
+    return bool((np.abs(swept @ normals.T) > np.cos(np.radians(RETRACE_DEG))).any())
+
+
+def _volume_plane(cm, group, stars):
+    """(8, 3) unit directions in the plane in which moving the copies ``group`` together (their cut
+    nodes by their weights) keeps the volume of their stars' original tets exactly, or None where
+    that volume does not change.  Inside each original the move is affine, so its live sub-tets
+    and crumbs still fill it: the model's volume plus the crumbs' is kept.  An original's volume is
+    linear in the move (:func:`~cutkit.mesh.geometry.tet_volume_gradients`), so the plane is the
+    same after any move within it."""
+    g = np.zeros(3)
+    for v, star in zip(group.tolist(), stars):
+        t = cm.orig_tets[star]
+        g += tet_volume_gradients(cm._x, t)[t == v].sum(axis=0)
+    size = float(np.linalg.norm(g))
+    return _plane_directions(g / size) if size > 0.0 else None
 
 
 def _live_tets(cm, star) -> np.ndarray:

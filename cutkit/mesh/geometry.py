@@ -41,6 +41,7 @@ __all__ = [
     "tet_volumes6",
     "tet_signed_volume",
     "tet_volumes",
+    "tet_volume_gradients",
     "signed_volumes_serial",
     "min_volume",
     "tet_dihedrals",
@@ -193,6 +194,35 @@ def tet_volumes(points, tets):
     """
     p = points[tets]
     return np.einsum("ij,ij->i", np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), p[:, 3] - p[:, 0]) / 6.0
+
+
+def tet_volume_gradients(points, tets):
+    """The gradient of every tet's signed volume with respect to each of its corners, in NumPy.
+
+    ``6 V = (p1 - p0) . ((p2 - p0) x (p3 - p0))`` is linear in each corner:
+    its gradient at p1 is ``(p2 - p0) x (p3 - p0) / 6``, at p2
+    ``(p3 - p0) x (p1 - p0) / 6``, at p3 ``(p1 - p0) x (p2 - p0) / 6`` and at
+    p0 minus their sum.  Corners moved along one vector change V by exactly
+    the sum of their moves dotted with these (the terms with two moved
+    columns are determinants with two parallel columns).
+
+    Parameters
+    ----------
+    points : (n, 3) float64
+    tets : (m, 4) int
+
+    Returns
+    -------
+    (m, 4, 3) float64
+    """
+    p = points[tets]
+    a, b, c = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0], p[:, 3] - p[:, 0]
+    g = np.empty((len(tets), 4, 3))
+    g[:, 1] = np.cross(b, c) / 6.0
+    g[:, 2] = np.cross(c, a) / 6.0
+    g[:, 3] = np.cross(a, b) / 6.0
+    g[:, 0] = -(g[:, 1] + g[:, 2] + g[:, 3])
+    return g
 
 
 @njit(cache=True, nogil=True)
