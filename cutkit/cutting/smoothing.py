@@ -38,8 +38,8 @@ What a move keeps:
   move, within the cut surface's plane where that is flat (the faces of the
   two sides count as one plane); where the cut is bent and the copies lie
   inside the model, in space (the cut's faces bend with them, both sides
-  alike), unless the stroke swept near them nearly in one of those faces'
-  planes (:data:`RETRACE_DEG`);
+  alike; a stroke retracing the cut sweeps through the copies, so the
+  contact rule above keeps each edge of theirs on its side);
 * **what else holds**: a vertex held by the boundary conditions (any copy),
   or with a cut node the blade placed this step (looked at again at the
   next step), stays.
@@ -73,10 +73,6 @@ SMOOTH_STEPS = np.array([0.1, 0.05, 0.02, 0.01])
 #: A vertex moves only when the smallest angle of its star rises by at least this (degrees): a move
 #: costs the physics a re-placement of the star.
 SMOOTH_MIN_GAIN_DEG = 0.5
-#: A vertex inside the model on a bent earlier cut moves in space with its copies unless a triangle
-#: the stroke swept near it lies within this angle (degrees) of the plane of one of its cut faces:
-#: a blade drawn back along the earlier cut sweeps in its plane (below, :func:`_directions`).
-RETRACE_DEG = 5.0
 #: A vertex on the model's outer surface where the normals of its boundary faces are all within this
 #: angle (degrees) of their area-weighted mean moves in the plane that keeps the volume
 #: (:func:`_on_a_gentle_surface`); the surface then moves by at most the move.
@@ -92,19 +88,38 @@ def init_smoothing(cm, enabled: bool) -> None:
     cm.smoothed_from = {}  # vertex -> (3,) where the cut state found it (its moves' budget)
     cm.smooth_pending = set()  # original tets looked at again at the next step (a cut node the blade holds)
     cm.stroke_swept = []  # (2, 3, 3) the swept triangles of each step of the stroke
+    cm.whole_look_due = False  # a step changed the cut since the last look at every cut-made tet
+
+
+def pend_every_cut_made_tet(cm) -> None:
+    """A stroke's end (:func:`~cutkit.cutting.step.finish_stroke`): every original tet the cut
+    subdivided, and every tet an earlier stroke made (an original of this cut state since the
+    rebase), is looked at by the next :func:`smooth_vertices_around`, once after each change to the
+    cut (``cm.whole_look_due``): a sliver a step left where no later step of the stroke re-subdivided
+    its original, or an earlier stroke's, is looked at with nothing held."""
+    if not (cm.smooth_vertices and cm.whole_look_due):
+        return
+    m0 = cm.store.n_orig_tets
+    made = np.flatnonzero(cm.store.orig_made_by_cut[:m0] | (cm.sub_count[:m0] > 0))
+    cm.smooth_pending |= set(made.tolist())
+    cm.whole_look_due = False
 
 
 def smooth_vertices_around(cm, originals, held) -> int:
     """Move vertices of the originals ``originals`` (set of int, re-subdivided this step) and of those
-    an earlier step left pending, where a live sub-tet of theirs is below :data:`SMOOTH_BELOW_DEG`;
-    the poorest first, each the best of its original's four vertices.  ``held`` (set of int): cut
+    an earlier step left pending, where a live sub-tet of theirs (or the original itself, uncut) is
+    below :data:`SMOOTH_BELOW_DEG`; the poorest first, each the best of its original's four vertices.  ``held`` (set of int): cut
     nodes the blade placed this step.  Returns the vertices moved."""
     fresh = set(originals) | cm.smooth_pending
     cm.smooth_pending = set()
     if not fresh:
         return 0
     mesh = KF.FairMesh(cm._x, cm._tets, cm._alive, cm.sub_start, cm.sub_count)
-    tets, owner = KF.poor_tets(mesh, np.array(sorted(fresh), np.int64), SMOOTH_BELOW_DEG)
+    fresh = np.array(sorted(fresh), np.int64)
+    tets, owner = KF.poor_tets(mesh, fresh, SMOOTH_BELOW_DEG)
+    whole = fresh[(cm.sub_count[fresh] == 0) & cm._alive[fresh]]  # an earlier stroke's tet, uncut since
+    whole = whole[min_dihedral_angles(cm._x, cm._tets[whole]) < SMOOTH_BELOW_DEG] if whole.size else whole
+    tets, owner = np.concatenate([tets, whole]), np.concatenate([owner, whole])
     if not tets.size:
         return 0
     order = np.argsort(min_dihedral_angles(cm._x, cm._tets[tets]), kind="stable")
@@ -157,9 +172,9 @@ def _directions(cm, group, stars):
     if line is not None:
         line = line / np.linalg.norm(line)
         return np.array([line, -line])
-    if _inside_a_bent_cut(cm, group, stars, faces, face_n):
+    if _inside_a_bent_cut(cm, faces):
         return _SPACE
-    return _volume_plane(cm, group, stars) if _on_a_gentle_surface(cm, group, stars, faces, face_n) else None
+    return _volume_plane(cm, group, stars) if _on_a_gentle_surface(cm, faces, face_n) else None
 
 
 def _plane_directions(normal) -> np.ndarray:
@@ -171,31 +186,28 @@ def _plane_directions(normal) -> np.ndarray:
     return np.vstack([d, -d])
 
 
-def _inside_a_bent_cut(cm, group, stars, faces, normals) -> bool:
-    """Whether the copies ``group`` (c > 1) lie inside the model on an earlier stroke's bent cut and
-    may move in space together: every boundary face of their stars is a face of the earlier cut
-    (``cm.cut_faces_before``) met from both sides (its corners' coincident copies twice), so the
-    copies' stars together fill a ball whose boundary does not move (the volume is kept, the cut's
-    two sides stay coincident at rest), and the stroke did not retrace the cut there
-    (:func:`_retraced`).  ``faces`` (k, 3) int64: the boundary faces of the copies' stars,
-    ``normals`` (k, 3) float64 their unit normals."""
-    if len(group) < 2 or not len(faces):
+def _inside_a_bent_cut(cm, faces) -> bool:
+    """Whether vertex copies whose stars' boundary faces are ``faces`` (k, 3) int64 lie inside the
+    model on an earlier stroke's bent cut and may move in space together: every one of those faces
+    is a face of the earlier cut (``cm.cut_faces_before``) met from both sides (its corners'
+    coincident copies twice), so the stars together fill a ball whose boundary does not move (the
+    volume is kept, the cut's two sides stay coincident at rest).  A single vertex qualifies too:
+    on the cut's front line inside the model its star holds both sides."""
+    if not len(faces):
         return False
     if not all(tuple(f) in cm.cut_faces_before for f in np.sort(faces, axis=1).tolist()):
         return False
     # each face met from both sides: the same corners (by their coincident copies) twice
     _, count = np.unique(np.sort(cm.node_rep[faces], axis=1), axis=0, return_counts=True)
-    if (count != 2).any():
-        return False
-    return not _retraced(cm, stars, normals)
+    return not (count != 2).any()
 
 
-def _on_a_gentle_surface(cm, group, stars, faces, normals) -> bool:
-    """Whether the copies ``group`` lie on the model's outer surface where it bends gently: the
-    boundary faces of their stars that are not an earlier cut met from both sides (the outer
-    surface) have unit normals within :data:`SURFACE_BEND_DEG` of their area-weighted mean, and the
-    faces of an earlier cut among them are met from both sides and not retraced by the stroke
-    (:func:`_retraced`).  Such copies move in the plane that keeps the model's volume
+def _on_a_gentle_surface(cm, faces, normals) -> bool:
+    """Whether vertex copies whose stars' boundary faces are ``faces`` (k, 3) int64, with unit
+    ``normals`` (k, 3) float64, lie on the model's outer surface where it bends gently: the faces
+    that are not an earlier cut met from both sides (the outer surface) have normals within
+    :data:`SURFACE_BEND_DEG` of their area-weighted mean, and the faces of an earlier cut among them
+    are met from both sides.  Such copies move in the plane that keeps the model's volume
     (:func:`_volume_plane`); the outer surface then moves by at most the move."""
     key = np.sort(cm.node_rep[faces], axis=1)
     _, inverse, count = np.unique(key, axis=0, return_inverse=True, return_counts=True)
@@ -205,26 +217,11 @@ def _on_a_gentle_surface(cm, group, stars, faces, normals) -> bool:
     earlier = np.array([tuple(f) in cm.cut_faces_before for f in np.sort(faces, axis=1).tolist()], bool)
     if (paired != earlier).any() or paired.all():  # half of a cut, or no outer surface (the bent cut's case)
         return False
-    if paired.any() and _retraced(cm, stars, normals[paired]):
-        return False
     x, outer = cm._x, faces[~paired]
     area = np.linalg.norm(np.cross(x[outer[:, 1]] - x[outer[:, 0]], x[outer[:, 2]] - x[outer[:, 0]]), axis=1)
     mean = area @ normals[~paired]
     size = float(np.linalg.norm(mean))
     return size > 0.0 and bool((normals[~paired] @ (mean / size) >= np.cos(np.radians(SURFACE_BEND_DEG))).all())
-
-
-def _retraced(cm, stars, normals) -> bool:
-    """Whether a triangle the stroke swept near the original tets ``stars`` lies within
-    :data:`RETRACE_DEG` of the plane of one of the unit ``normals`` (k, 3) of an earlier cut's faces: a
-    blade drawn back along the earlier cut sweeps in its plane, where a bent face would come to
-    cross it."""
-    x = cm._x
-    tris = _swept_near(cm, x[np.unique(cm.orig_tets[np.concatenate(stars)])])
-    swept = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
-    length = np.linalg.norm(swept, axis=1)
-    swept = swept[length > 0.0] / length[length > 0.0, None]  # a blade that stood still swept no plane
-    return bool((np.abs(swept @ normals.T) > np.cos(np.radians(RETRACE_DEG))).any())
 
 
 def _volume_plane(cm, group, stars):

@@ -35,7 +35,7 @@ from cutkit.cutting import _kernels_step as KS
 from cutkit.cutting.contact import touches_only
 from cutkit.cutting.crumbs import remove_crumbs
 from cutkit.cutting.fairing import fair_cut_nodes
-from cutkit.cutting.smoothing import smooth_vertices_around
+from cutkit.cutting.smoothing import pend_every_cut_made_tet, smooth_vertices_around
 from cutkit.cutting.snapping import new_crossings, recrossed, snap_away
 from cutkit.cutting.cutmesh import CutMesh
 from cutkit.tissue.delta import TopologyDelta, twins_of
@@ -224,6 +224,7 @@ def cut_step(cm: CutMesh, tip, a) -> StepResult:
     # step moved (the blade's notch nodes, fairing's moves: a cut node is a corner in every tet
     # around its edge or face)
     if cm.smooth_vertices:
+        cm.whole_look_due |= bool(changed) or len(cm.store.step_log.moved_nodes) > 0
         reshaped = changed | originals_holding(cm, cm.store.step_log.moved_nodes)
         if reshaped or cm.smooth_pending:
             held = _blade_placed_nodes(cm, tip_tet, ev_id) if held is None else held
@@ -435,8 +436,9 @@ def topology_delta(cm: CutMesh, n_nodes_before: int, moved, moved_from, removed,
         n_tets_total=int(cm.n_tets_total))
 
 
-def finish_stroke(cm: CutMesh) -> StepResult | None:
-    """The stroke has ended: look at the slivers the blade held once more, with nothing held.
+def finish_stroke(cm: CutMesh, every_cut_tet: bool = True) -> StepResult | None:
+    """The stroke has ended: look at the slivers the blade held once more, with nothing held, and at
+    every cut-made tet.
 
     Fairing and vertex smoothing leave a sliver alone while the blade placed
     one of its nodes (``cm.fair_pending``, ``cm.smooth_pending``: the blade's
@@ -444,16 +446,28 @@ def finish_stroke(cm: CutMesh) -> StepResult | None:
     trajectory ends with it inside or the hand holds still, no later step
     moves them: this looks at them
     with the same rules and nothing held (the moves stay off the stroke's
-    swept surface, ``cm.stroke_swept``).  Call it before a rebase, which
-    forgets what is pending.
+    swept surface, ``cm.stroke_swept``).  With ``every_cut_tet``, vertex
+    smoothing also looks at every tet a cut made, in any stroke, once after
+    each change to the cut
+    (:func:`~cutkit.cutting.smoothing.pend_every_cut_made_tet`): a sliver
+    whose original no later step re-subdivided is looked at too.  Call it
+    before a rebase, which forgets what is pending.
+
+    Parameters
+    ----------
+    cm : CutMesh
+    every_cut_tet : bool
+        Also look at every cut-made tet (False: only what was pending).
 
     Returns
     -------
     StepResult or None
         The nodes moved (``delta.moved_nodes``; no tet made or removed), or
-        None when nothing was pending.
+        None when nothing moved.
     """
     fair = cm.fair_nodes and bool(cm.fair_pending)
+    if every_cut_tet:
+        pend_every_cut_made_tet(cm)
     if not fair and not (cm.smooth_vertices and cm.smooth_pending):
         return None
     cm.store.begin_step()
@@ -465,6 +479,8 @@ def finish_stroke(cm: CutMesh) -> StepResult | None:
     if cm.smooth_vertices and (cm.smooth_pending or reshaped):
         smooth_vertices_around(cm, reshaped, set())
     cm.smooth_pending = set()
+    if not len(cm.store.step_log.moved_nodes):
+        return None
     return _step_result(cm, n_nodes_before, [], cm.tip_tet)
 
 

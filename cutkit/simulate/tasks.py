@@ -226,12 +226,13 @@ class CutTask:
             self.counts[key] = self.counts.get(key, 0) + value
         self.counts[counted] = self.counts.get(counted, 0) + 1
 
-    def finish(self) -> None:
+    def finish(self, every_cut_tet: bool = True) -> None:
         """The stroke ended (the blade left, or the trajectory ends with it inside): the slivers the blade
-        held are looked at once more (:func:`cutkit.cutting.finish_stroke`), their moves handed over."""
+        held are looked at once more (:func:`cutkit.cutting.finish_stroke`; with ``every_cut_tet`` every
+        cut-made tet too), their moves handed over."""
         from cutkit.cutting import finish_stroke
 
-        result = finish_stroke(self.cm)
+        result = finish_stroke(self.cm, every_cut_tet)
         if result is not None and result.moved_nodes.size:
             self._apply(result, "strokes_finished")
 
