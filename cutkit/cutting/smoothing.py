@@ -67,12 +67,12 @@ from cutkit.mesh.quality import min_dihedral_angles
 #: looked at (the bound the cut keeps, docs/cutting.md, "Quality").
 SMOOTH_BELOW_DEG = 5.0
 #: A vertex moves at most this fraction of its shortest edge from where the cut state found it.
-SMOOTH_MOVE_MAX = 0.3
+SMOOTH_MOVE_MAX = 0.4
 #: Steps of the compass search, as fractions of the vertex's shortest edge, largest first.
 SMOOTH_STEPS = np.array([0.1, 0.05, 0.02, 0.01])
 #: A vertex moves only when the smallest angle of its star rises by at least this (degrees): a move
 #: costs the physics a re-placement of the star.
-SMOOTH_MIN_GAIN_DEG = 0.5
+SMOOTH_MIN_GAIN_DEG = 0.2
 #: A vertex on the model's outer surface where the normals of its boundary faces are all within this
 #: angle (degrees) of their area-weighted mean moves in the plane that keeps the volume
 #: (:func:`_on_a_gentle_surface`); the surface then moves by at most the move.
@@ -239,8 +239,9 @@ def _volume_plane(cm, group, stars):
     return _plane_directions(g / size) if size > 0.0 else None
 
 
-def _live_tets(cm, star) -> np.ndarray:
-    """(k,) int64 the live tets of the original tets ``star``: their sub-tets, or themselves uncut."""
+def live_tets(cm, star) -> np.ndarray:
+    """(k,) int64 the live tets of the original tets ``star`` (q,) int64: their sub-tets, or themselves
+    uncut."""
     ids = [np.arange(cm.sub_start[o], cm.sub_start[o] + cm.sub_count[o]) if cm.sub_count[o] else np.array([o])
            for o in star.tolist()]
     ids = np.concatenate(ids).astype(np.int64) if ids else np.zeros(0, np.int64)
@@ -288,7 +289,7 @@ def _best_move(cm, v, held, o):
     budget = SMOOTH_MOVE_MAX * h - float(np.linalg.norm(x[v] - cm.smoothed_from.get(v, x[v])))
     if not budget > 0.0:
         return None
-    nodes, local = np.unique(cm._tets[np.concatenate([_live_tets(cm, star) for star in stars])], return_inverse=True)
+    nodes, local = np.unique(cm._tets[np.concatenate([live_tets(cm, star) for star in stars])], return_inverse=True)
     present = np.isin(group, nodes)  # a copy can be a corner of none of its star's live tets (a crumb took it)
     if not present[0]:
         return None

@@ -35,7 +35,7 @@ from cutkit.cutting import _kernels_step as KS
 from cutkit.cutting.contact import touches_only
 from cutkit.cutting.crumbs import remove_crumbs
 from cutkit.cutting.fairing import fair_cut_nodes
-from cutkit.cutting.smoothing import pend_every_cut_made_tet, smooth_vertices_around
+from cutkit.cutting.smoothing import live_tets, pend_every_cut_made_tet, smooth_vertices_around
 from cutkit.cutting.snapping import new_crossings, recrossed, snap_away
 from cutkit.cutting.cutmesh import CutMesh
 from cutkit.tissue.delta import TopologyDelta, twins_of
@@ -365,9 +365,16 @@ def _follow_tip(cm: CutMesh, tip_tet: int, P1, changed: set) -> None:
 
 def _step_result(cm: CutMesh, n_nodes_before: int, cut_edges: list, tip_tet: int) -> StepResult:
     """Remove the step's crumbs and gather its net change into a :class:`StepResult`."""
-    # a piece this step set loose below CRUMB_VOLUME_FRACTION of the model is removed (crumbs.py)
+    # a piece this step set loose below CRUMB_VOLUME_FRACTION of the model is removed (crumbs.py):
+    # one around a new tet, or one a moved vertex shrank (smoothing keeps its star's volume, not
+    # each piece's)
     made = np.array(cm.store.step_log.added_tets, np.int64)
-    remove_crumbs(cm, made[cm._alive[made]] if made.size else made)
+    seeds = made[cm._alive[made]] if made.size else made
+    vertices = [v for v in cm.store.step_log.moved_nodes if v < cm.n_orig_points]
+    if vertices:
+        stars = originals_holding(cm, vertices)
+        seeds = np.concatenate([seeds, live_tets(cm, np.array(sorted(stars), np.int64))])
+    remove_crumbs(cm, seeds)
     d = cm.store.step_log
     moved = np.unique(np.array(d.moved_nodes, np.int64))
     # net change: a tet made and unmade within the step (re-subdivided twice) is in neither
