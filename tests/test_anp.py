@@ -43,6 +43,21 @@ def hold_bottom(p, em):
     return em.fixed.all(axis=1)
 
 
+def cut_at_x1(p, t, em):
+    """Duplicate the nodes of the plane x = 1 as a cut does: the tets on its right side removed and
+    added again on new copies of those nodes.  Returns (rest positions (n + k, 3), the plane's
+    nodes (k,), their copies (k,))."""
+    right = np.flatnonzero(p[t].mean(axis=1)[:, 0] > 1.0)
+    plane = np.flatnonzero(np.abs(p[:, 0] - 1.0) < 1e-9)
+    new = em.add_nodes(plane.size)
+    remap = np.arange(p.shape[0])
+    remap[plane] = new
+    X = np.concatenate([p, p[plane]])
+    em.remove_elements(right)
+    em.add_elements(X, remap[t[right]], em.mu[right], em.lam[right], np.full(right.size, 1e-9))
+    return X, plane, new
+
+
 def stiffen_half(p, em, factor=30.0):
     """A second material: the elements with their centroid at x > 1 get ``factor`` times the Lame
     constants, so the nodes of x = 1 have a patch in each (``anp.material_patches``)."""
@@ -225,14 +240,7 @@ def test_a_cut_needs_nothing_special():
     side with new nodes) get the nodal volumes of the tets that now hold them, and the two
     sides no longer feel each other."""
     p, t, em = model(cells=(2, 2, 2), L=(2.0, 2.0, 2.0))
-    right = np.flatnonzero(p[t].mean(axis=1)[:, 0] > 1.0)
-    plane = np.flatnonzero(np.abs(p[:, 0] - 1.0) < 1e-9)
-    new = em.add_nodes(plane.size)
-    remap = np.arange(p.shape[0])
-    remap[plane] = new
-    X = np.concatenate([p, p[plane]])
-    em.remove_elements(right)
-    em.add_elements(X, remap[t[right]], em.mu[right], em.lam[right], np.full(right.size, 1e-9))
+    X, plane, new = cut_at_x1(p, t, em)
     nodal = anp.nodal_terms(em)
     el = anp.active_elements(em)
     live = el.volume > 0
@@ -476,14 +484,7 @@ def test_the_kept_nodal_terms_follow_every_change_of_the_elements():
     assert not np.array_equal(anp.anp_forces(em, x[:em.n_nodes]), first)
     hold_bottom(p, em)
     same()
-    right = np.flatnonzero(p[t].mean(axis=1)[:, 0] > 1.0)
-    plane = np.flatnonzero(np.abs(p[:, 0] - 1.0) < 1e-9)
-    new = em.add_nodes(plane.size)
-    remap = np.arange(p.shape[0])
-    remap[plane] = new
-    X = np.concatenate([p, p[plane]])
-    em.remove_elements(right)
-    em.add_elements(X, remap[t[right]], em.mu[right], em.lam[right], np.full(right.size, 1e-9))
+    cut_at_x1(p, t, em)
     same()
     other = model(cells=(2, 2, 1))[2]
     el = anp.active_elements(other)
