@@ -217,22 +217,25 @@ def test_a_vertex_on_a_bent_earlier_cut_moves_in_space_with_its_copies(name, i, 
     cut-made angle reaches 5 degrees (below it without), the mesh stays sound with its volume
     (cut_path's checks), the copies stay coincident, and every crossed edge is cut or counted."""
     p, t = MESHES[name]
-    rule, seen = SM._inside_a_bent_cut, []
+    rule, directions, seen, asked = SM._inside_a_bent_cut, SM._directions, [], []
 
-    def recorded(cm, faces):
-        ok = rule(cm, faces)
+    def asking(cm, group, stars):
+        asked[:] = [(cm, group.copy())]
+        return directions(cm, group, stars)
+
+    def recorded(sides):
+        ok = rule(sides)
         if ok:
-            seen.append((cm, np.unique(faces)))
+            seen.append(asked[0])
         return ok
 
+    monkeypatch.setattr(SM, "_directions", asking)
     monkeypatch.setattr(SM, "_inside_a_bent_cut", recorded)
     missed_on, on = cut_path(p, t, *_path(name, i))
     assert seen
-    for cm, nodes in seen:  # node ids outlive the rebases: each face's copies coincide at the end
-        reps = cm.node_rep[nodes]
-        for r in np.unique(reps):
-            assert np.ptp(cm.points[nodes[reps == r]], axis=0).max() <= 1e-12
-    monkeypatch.setattr(SM, "_inside_a_bent_cut", lambda cm, faces: False)
+    for cm, group in seen:  # node ids outlive the rebases: the copies coincide at the end
+        assert np.ptp(cm.points[group], axis=0).max() <= 1e-12
+    monkeypatch.setattr(SM, "_inside_a_bent_cut", lambda sides: False)
     missed_off, off = cut_path(p, t, *_path(name, i))
     assert off < SM.SMOOTH_BELOW_DEG <= on, (off, on)
     assert not missed_on and not missed_off
@@ -297,8 +300,8 @@ def test_a_vertex_on_a_gently_curved_surface_moves_in_the_plane_that_keeps_the_v
     p, t = MESHES["decimated"]
     rule, apply, seen, checked = SM._on_a_gentle_surface, SM._apply, set(), []
 
-    def recorded_rule(cm, faces, normals):
-        ok = rule(cm, faces, normals)
+    def recorded_rule(cm, faces, normals, sides):
+        ok = rule(cm, faces, normals, sides)
         if ok:
             seen.add(tuple(np.unique(faces).tolist()))
         return ok
@@ -318,7 +321,7 @@ def test_a_vertex_on_a_gently_curved_surface_moves_in_the_plane_that_keeps_the_v
     monkeypatch.setattr(SM, "_apply", recorded_apply)
     missed_on, on = cut_path(p, t, *_path("decimated", i))
     assert checked and max(checked) > 0.0
-    monkeypatch.setattr(SM, "_on_a_gentle_surface", lambda cm, faces, normals: False)
+    monkeypatch.setattr(SM, "_on_a_gentle_surface", lambda cm, faces, normals, sides: False)
     missed_off, off = cut_path(p, t, *_path("decimated", i))
     assert off < SM.SMOOTH_BELOW_DEG <= on, (off, on)
     assert not missed_on and not missed_off
@@ -344,7 +347,7 @@ def test_a_gentle_surface_is_one_whose_faces_bend_less_than_the_bound():
             area = np.linalg.norm(np.cross(p[faces[:, 1]] - p[faces[:, 0]], p[faces[:, 2]] - p[faces[:, 0]]), axis=1)
             mean = area @ normals
             spread = np.degrees(np.arccos(np.clip(normals @ (mean / np.linalg.norm(mean)), -1, 1))).max()
-            ok = SM._on_a_gentle_surface(cm, faces, normals)
+            ok = SM._on_a_gentle_surface(cm, faces, normals, SM._earlier_cut_sides(cm, faces))
             assert ok == (spread <= SM.SURFACE_BEND_DEG + 1e-9), (name, v, spread)
             verdicts.append(ok)
         assert any(verdicts) and not all(verdicts)
@@ -352,7 +355,7 @@ def test_a_gentle_surface_is_one_whose_faces_bend_less_than_the_bound():
             corner = int(np.flatnonzero((p == 0).all(axis=1))[0])
             star = _star(cm, corner)
             faces = boundary_faces(cm, corner, star)
-            assert not SM._on_a_gentle_surface(cm, faces, face_normals(cm, faces))
+            assert not SM._on_a_gentle_surface(cm, faces, face_normals(cm, faces), SM._earlier_cut_sides(cm, faces))
 
 
 def test_a_piece_a_vertex_move_shrinks_below_the_crumb_limit_is_removed(monkeypatch):

@@ -172,9 +172,10 @@ def _directions(cm, group, stars):
     if line is not None:
         line = line / np.linalg.norm(line)
         return np.array([line, -line])
-    if _inside_a_bent_cut(cm, faces):
+    sides = _earlier_cut_sides(cm, faces)
+    if _inside_a_bent_cut(sides):
         return _SPACE
-    return _volume_plane(cm, group, stars) if _on_a_gentle_surface(cm, faces, face_n) else None
+    return _volume_plane(cm, group, stars) if _on_a_gentle_surface(cm, faces, face_n, sides) else None
 
 
 def _plane_directions(normal) -> np.ndarray:
@@ -186,35 +187,43 @@ def _plane_directions(normal) -> np.ndarray:
     return np.vstack([d, -d])
 
 
-def _inside_a_bent_cut(cm, faces) -> bool:
-    """Whether vertex copies whose stars' boundary faces are ``faces`` (k, 3) int64 lie inside the
-    model on an earlier stroke's bent cut and may move in space together: every one of those faces
-    is a face of the earlier cut (``cm.cut_faces_before``) met from both sides (its corners'
-    coincident copies twice), so the stars together fill a ball whose boundary does not move (the
-    volume is kept, the cut's two sides stay coincident at rest).  A single vertex qualifies too:
-    on the cut's front line inside the model its star holds both sides."""
-    if not len(faces):
-        return False
-    if not all(tuple(f) in cm.cut_faces_before for f in np.sort(faces, axis=1).tolist()):
-        return False
-    # each face met from both sides: the same corners (by their coincident copies) twice
-    _, count = np.unique(np.sort(cm.node_rep[faces], axis=1), axis=0, return_counts=True)
-    return not (count != 2).any()
-
-
-def _on_a_gentle_surface(cm, faces, normals) -> bool:
-    """Whether vertex copies whose stars' boundary faces are ``faces`` (k, 3) int64, with unit
-    ``normals`` (k, 3) float64, lie on the model's outer surface where it bends gently: the faces
-    that are not an earlier cut met from both sides (the outer surface) have normals within
-    :data:`SURFACE_BEND_DEG` of their area-weighted mean, and the faces of an earlier cut among them
-    are met from both sides.  Such copies move in the plane that keeps the model's volume
-    (:func:`_volume_plane`); the outer surface then moves by at most the move."""
-    key = np.sort(cm.node_rep[faces], axis=1)
-    _, inverse, count = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+def _earlier_cut_sides(cm, faces):
+    """(paired, earlier) (k,) bool each for boundary faces ``faces`` (k, 3) int64 of vertex copies'
+    stars: a face met from both sides (its corners' coincident copies twice among ``faces``), a face
+    of an earlier stroke's cut (``cm.cut_faces_before``); None where some corners come more than
+    twice."""
+    _, inverse, count = np.unique(np.sort(cm.node_rep[faces], axis=1), axis=0, return_inverse=True,
+                                  return_counts=True)
     if (count > 2).any():
-        return False
-    paired = count[inverse.ravel()] == 2
+        return None
     earlier = np.array([tuple(f) in cm.cut_faces_before for f in np.sort(faces, axis=1).tolist()], bool)
+    return count[inverse.ravel()] == 2, earlier
+
+
+def _inside_a_bent_cut(sides) -> bool:
+    """Whether vertex copies whose stars' boundary faces have ``sides`` (:func:`_earlier_cut_sides`)
+    lie inside the model on an earlier stroke's bent cut and may move in space together: every one
+    of those faces is a face of the earlier cut met from both sides, so the stars together fill a
+    ball whose boundary does not move (the volume is kept, the cut's two sides stay coincident at
+    rest).  A single vertex qualifies too: on the cut's front line inside the model its star holds
+    both sides."""
+    if sides is None or not len(sides[0]):
+        return False
+    paired, earlier = sides
+    return bool(paired.all() and earlier.all())
+
+
+def _on_a_gentle_surface(cm, faces, normals, sides) -> bool:
+    """Whether vertex copies whose stars' boundary faces are ``faces`` (k, 3) int64, with unit
+    ``normals`` (k, 3) float64 and ``sides`` (:func:`_earlier_cut_sides`), lie on the model's outer
+    surface where it bends gently: the faces that are not an earlier cut met from both sides (the
+    outer surface) have normals within :data:`SURFACE_BEND_DEG` of their area-weighted mean, and the
+    faces of an earlier cut among them are met from both sides.  Such copies move in the plane that
+    keeps the model's volume (:func:`_volume_plane`); the outer surface then moves by at most the
+    move."""
+    if sides is None:
+        return False
+    paired, earlier = sides
     if (paired != earlier).any() or paired.all():  # half of a cut, or no outer surface (the bent cut's case)
         return False
     x, outer = cm._x, faces[~paired]
