@@ -23,6 +23,24 @@ def patches(tets, mu, lam, n):
     return tets * kinds + material.ravel()[:, None], n * kinds
 
 
+def material_patches(tets, volume, mu, lam, n):
+    """Twin of cutkit.relax.anp.material_patches, by sorting (node, material) keys: a node's
+    first material (smallest (mu, lam)) keeps the node's id, its others get n, n + 1, ... in the
+    order of (node, material); inactive rows keep their nodes."""
+    live = np.flatnonzero(volume > 0.0)
+    patch = np.array(tets, np.int64)
+    if live.size == 0:
+        return patch, n
+    _, material = np.unique(np.stack([mu[live], lam[live]], axis=1), axis=0, return_inverse=True)
+    kinds = int(material.max()) + 1
+    pairs, inverse = np.unique((patch[live] * kinds + material.ravel()[:, None]).ravel(), return_inverse=True)
+    node = pairs // kinds
+    first = np.r_[True, node[1:] != node[:-1]]
+    ids = np.where(first, node, n + np.cumsum(~first) - 1)
+    patch[live] = ids[inverse.ravel()].reshape(-1, 4)
+    return patch, n + int(np.count_nonzero(~first))
+
+
 def _nodal(x, tets, Dminv, volume, mu, lam, n, held=None):
     """Per patch: rest volumes V_a, bulk weights kv_a = sum w V K and volume ratios J_a, w the shares;
     and the corners' patches (m, 4)."""

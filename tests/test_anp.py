@@ -490,3 +490,69 @@ def test_the_kept_nodal_terms_follow_every_change_of_the_elements():
     el = anp.active_elements(other)
     np.testing.assert_array_equal(anp.cached_nodal_terms(other, el).volume, anp.nodal_terms(other, el).volume)
     same()
+
+
+def test_material_patches_match_their_numpy_twin():
+    """Random materials (up to 5 at a node, mu ties with different lam), inactive elements."""
+    rng = np.random.default_rng(4)
+    p, t = kuhn_box(np.array([3.0, 2.0, 2.0]), (3, 2, 2))
+    volume = np.where(rng.random(len(t)) < 0.1, 0.0, 1.0)
+    mu = rng.choice([1.0, 2.0, 2.0, 5.0], len(t))
+    lam = rng.choice([3.0, 4.0], len(t))
+    one = np.ones(len(t))
+    for m_, l_ in ((one, one), (mu, lam)):
+        got, want = anp.material_patches(t, volume, m_, l_, len(p)), T.material_patches(t, volume, m_, l_, len(p))
+        np.testing.assert_array_equal(got[0], want[0])
+        assert got[1] == want[1]
+    assert anp.material_patches(t, volume, one, one, len(p))[1] == len(p)
+    assert anp.material_patches(t, volume, mu, lam, len(p))[1] > len(p)
+    assert anp.material_patches(t, np.zeros(len(t)), mu, lam, len(p))[1] == len(p)
+
+
+def test_patch_members_match_their_numpy_twin():
+    """Each patch's members are its tets' distinct nodes in the order the tets meet them; each
+    node's row lists the members that are that node, in patch order (what forces and Hessian
+    rows gather); checked on two materials with held nodes and a cut."""
+    p, t, em = model(cells=(2, 2, 2), L=(2.0, 2.0, 2.0), smoothing=0.7)
+    hold_bottom(p, em)
+    X = cut_at_x1(p, t, em)[0]
+    el = anp.active_elements(em)
+    back = X[el.tets].mean(axis=1)[:, 1] > 1.0  # a second material across the cut
+    em.mu[:el.tets.shape[0]][back] *= 30.0
+    el = anp.active_elements(em)
+    nt = anp.nodal_terms(em, el)
+    assert nt.node_ptr.size - 1 > em.n_nodes  # the nodes of y = 1 have a second patch
+    members, slots = [], []
+    for a in range(nt.node_ptr.size - 1):
+        tets = el.tets[nt.node_tets[nt.node_ptr[a]:nt.node_ptr[a + 1]]]
+        nodes = list(dict.fromkeys(tets.ravel().tolist()))
+        members.append(nodes)
+        slots += [[nodes.index(i) for i in row] for row in tets]
+        assert nt.member_node[nt.member_ptr[a]:nt.member_ptr[a + 1]].tolist() == nodes
+        assert (nt.member_patch[nt.member_ptr[a]:nt.member_ptr[a + 1]] == a).all()
+    np.testing.assert_array_equal(nt.tet_slot, np.array(slots).reshape(-1, 4))
+    for i in range(em.n_nodes):
+        rows = nt.row_member[nt.row_ptr[i]:nt.row_ptr[i + 1]]
+        want = [(a, nodes.index(i)) for a, nodes in enumerate(members) if i in nodes]
+        assert [(nt.member_patch[s], s - nt.member_ptr[nt.member_patch[s]]) for s in rows] == want
+
+
+def test_forces_energy_and_hessian_are_the_same_on_any_thread_count():
+    """The patches' sums are made by one block each and gathered by node rows in patch order: one
+    and two threads give the same bits (forces, energy, the projected Hessian)."""
+    import numba
+
+    p, t, em = model(cells=(4, 3, 3), L=(2.0, 1.5, 1.5), smoothing=0.7)
+    stiffen_half(p, em)
+    x = wobbled(p, 0.03)
+    runs = []
+    before = numba.get_num_threads()
+    try:
+        for threads in sorted({1, min(2, numba.config.NUMBA_NUM_THREADS)}):
+            numba.set_num_threads(threads)
+            runs.append((anp.anp_forces(em, x), anp.anp_energy(em, x), anp.anp_hessian(em, x, project=1).data))
+    finally:
+        numba.set_num_threads(before)
+    for f, e, h in runs[1:]:
+        assert np.array_equal(f, runs[0][0]) and e == runs[0][1] and np.array_equal(h, runs[0][2])
+    assert np.abs(runs[0][2]).max() > 0

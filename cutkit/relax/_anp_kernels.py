@@ -33,11 +33,12 @@ from __future__ import annotations
 from collections import namedtuple
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 from cutkit.relax._elastic_kernels import barrier
 from cutkit.relax._eigen_kernels import _cofactor
-from cutkit.relax._newton_kernels import _deformation, add_det_hessian, project_hf
+from cutkit.relax._newton_kernels import (ASSEMBLY_CHUNK, _deformation, add_det_hessian, add_element_blocks,
+                                          gradient_operator, project_hf)
 
 #: Per patch (a node's tets of one material; P >= n patches, patch a < n is node a's first
 #: material's, ``cutkit.relax.anp.material_patches``): natural volume V_a (P,), bulk weight kv_a
@@ -49,8 +50,18 @@ from cutkit.relax._newton_kernels import _deformation, add_det_hessian, project_
 #: some are held, 0 on held corners), ``pressure_volume`` (P,) = sum share V_e, the V_a of the
 #: volumetric term (``bulk`` uses the same shares), and ``patch`` (m, 4) int64, the patch of each
 #: element's corner.  ``volume`` stays the quarter sums: the smoothed deformation's weights.
+#: The patches' members (:func:`patch_members`): ``member_ptr`` (P + 1,) int64 into
+#: ``member_node`` (S,) int64, the distinct nodes of each patch in the order its tets meet them,
+#: ``member_patch`` (S,) int64, ``tet_slot`` (4m, 4) int64, the member (from ``member_ptr[a]``) of
+#: each corner of each of the patch's tets (as ``node_tets``), and ``row_ptr`` (n + 1,) int64 into
+#: ``row_member`` (S,) int64, the members that are node i, by patch: what node i's row gathers.
 NodalTerms = namedtuple("NodalTerms", ["volume", "bulk", "node_ptr", "node_tets", "node_corner", "shear",
-                                       "smoothing", "share", "pressure_volume", "patch"])
+                                       "smoothing", "share", "pressure_volume", "patch", "member_ptr",
+                                       "member_node", "member_patch", "tet_slot", "row_ptr", "row_member"])
+
+#: Fixed count of parallel blocks of the patch and row kernels: every sum is made by one block in
+#: a fixed order, so no result depends on the number of threads.
+PATCH_BLOCKS = 64
 
 
 @njit(cache=True, nogil=True)
@@ -89,9 +100,18 @@ def nodal_pressures(el, J, nodal, pi):
     return energy
 
 
-@njit(cache=True, nogil=True)
 def energy(x, el, nodal):
-    """W (N mm): the elements' deviatoric energy and barrier plus the nodal volumetric energy."""
+    """W (N mm): the elements' deviatoric energy and barrier, the nodal volumetric energy and the
+    smoothed deviatoric energy."""
+    total = element_energy(x, el, nodal)
+    if nodal.smoothing > 0.0:
+        total += smoothed_energy(x, el, nodal)
+    return total
+
+
+@njit(cache=True, nogil=True)
+def element_energy(x, el, nodal):
+    """The elements' deviatoric energy and barrier plus the nodal volumetric energy (N mm)."""
     m = el.tets.shape[0]
     J = np.zeros(m)
     B = np.empty((4, 3))
@@ -115,8 +135,6 @@ def energy(x, el, nodal):
                       + barrier(Jt, el.lam[t] + mu)[0])
     pi = np.empty(nodal.volume.shape[0])
     total += nodal_pressures(el, J, nodal, pi)
-    if nodal.smoothing > 0.0:
-        total += smoothed_energy(x, el, nodal)
     return total
 
 
@@ -129,9 +147,16 @@ def _element_pressure(el, nodal, t, pi):
     return p
 
 
-@njit(cache=True, nogil=True)
 def forces(x, el, nodal, out):
     """-dW/dx (N) into out (n, 3) (zeroed here)."""
+    element_forces(x, el, nodal, out)
+    if nodal.smoothing > 0.0:
+        smoothed_forces(x, el, nodal, out)
+
+
+@njit(cache=True, nogil=True)
+def element_forces(x, el, nodal, out):
+    """-dW/dx (N) of the elements' and the nodal volumetric part into out (n, 3) (zeroed here)."""
     m = el.tets.shape[0]
     J = np.zeros(m)
     volume_ratios(x, el, J)
@@ -156,8 +181,6 @@ def forces(x, el, nodal, out):
                 for c in range(3):
                     acc += (mu * F[r, c] + s * C[r, c]) * B[j, c]
                 out[i, r] -= V * acc
-    if nodal.smoothing > 0.0:
-        smoothed_forces(x, el, nodal, out)
 
 
 @njit(cache=True, nogil=True)
@@ -192,104 +215,160 @@ def element_hessian(x, el, t, p_e, keep, project, H):
                     H[3 * j + s_, 3 * k + t_] = V * acc
 
 
+# ---------------------------------------------------------------- the patches and their members
 @njit(cache=True, nogil=True)
-def _add_block(pattern, i, j, H, data):
-    """data += the 3x3 H into the block (i, j) of the pattern (which must hold it)."""
-    ptr = pattern.node_ptr
-    lo = ptr[i]
-    deg = ptr[i + 1] - lo
-    k = lo + np.searchsorted(pattern.node_idx[lo:ptr[i + 1]], j)
-    base = 9 * lo + 3 * (k - lo)
-    for r in range(3):
-        for c in range(3):
-            data[base + 3 * r * deg + c] += H[r, c]
+def corner_patches(tets, live, material, n):
+    """The patch of every live element corner (see ``cutkit.relax.anp.material_patches``).
 
-
-@njit(cache=True, nogil=True, inline="always")
-def _patch_slot(local, patch, rows, i, k):
-    """Give node i of a patch its local slot if it has none: ``local[i] = k``, ``patch[k] = i`` and
-    ``rows[k]`` zeroed.  Returns the patch size (k, or k + 1 when i is new)."""
-    if local[i] < 0:
-        local[i] = k
-        patch[k] = i
-        rows[k, :] = 0.0
-        k += 1
-    return k
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _clear_slots(local, patch, k):
-    """Reset ``local`` to -1 on the patch's k nodes."""
-    for q in range(k):
-        local[patch[q]] = -1
-
-
-@njit(cache=True, nogil=True)
-def _nodal_gradients(x, el, nodal, a, local, patch, g):
-    """g_a = dv_a/dx over a's patch: fills patch (k,) and g (k, 3); returns k.
-    ``local`` (n,) is -1 on entry and on exit."""
-    B = np.empty((4, 3))
-    F = np.empty((3, 3))
-    C = np.empty((3, 3))
-    k = 0
-    for q in range(nodal.node_ptr[a], nodal.node_ptr[a + 1]):
-        t = nodal.node_tets[q]
-        _deformation(x, el, t, B, F)
-        _cofactor(F, C)
-        w = nodal.share[t, nodal.node_corner[q]] * el.volume[t]
+    ``live`` (k,) int64: the active elements; ``material`` (k,) int64 their materials, numbered in
+    the order of (mu, lam).  Returns patch (m, 4) int64 (inactive rows: their nodes) and the count
+    of patches."""
+    patch = tets.copy()
+    ptr = np.zeros(n + 1, np.int64)
+    for q in range(live.shape[0]):
         for j in range(4):
-            i = el.tets[t, j]
-            k = _patch_slot(local, patch, g, i, k)
-            for r in range(3):
-                acc = 0.0
-                for c in range(3):
-                    acc += C[r, c] * B[j, c]
-                g[local[i], r] += w * acc
-    _clear_slots(local, patch, k)
-    return k
+            ptr[tets[live[q], j] + 1] += 1
+    for i in range(n):
+        ptr[i + 1] += ptr[i]
+    fill = ptr[:n].copy()
+    kinds = np.empty(ptr[n], np.int64)  # each node's corners' materials, then its distinct ones
+    for q in range(live.shape[0]):
+        for j in range(4):
+            i = tets[live[q], j]
+            kinds[fill[i]] = material[q]
+            fill[i] += 1
+    ids = np.empty(ptr[n], np.int64)
+    count = n
+    for i in range(n):
+        lo, k = ptr[i], 0
+        for e in range(ptr[i], ptr[i + 1]):  # distinct materials, ascending (insertion)
+            mat = kinds[e]
+            pos = lo + k
+            while pos > lo and kinds[pos - 1] > mat:
+                pos -= 1
+            if pos > lo and kinds[pos - 1] == mat:
+                continue
+            for f in range(lo + k, pos, -1):
+                kinds[f] = kinds[f - 1]
+            kinds[pos] = mat
+            k += 1
+        fill[i] = k
+        for f in range(k):
+            ids[lo + f] = i if f == 0 else count + f - 1
+        count += max(k - 1, 0)
+    for q in range(live.shape[0]):
+        for j in range(4):
+            i = tets[live[q], j]
+            for f in range(ptr[i], ptr[i] + fill[i]):
+                if kinds[f] == material[q]:
+                    patch[live[q], j] = ids[f]
+                    break
+    return patch, count
 
 
 @njit(cache=True, nogil=True)
-def assemble_hessian(x, el, nodal, pattern, project, data):
-    """The ANP Hessian (element parts, projected where ``project``, and nodal rank-one parts)
-    into the CSR ``data`` (zeroed here) of a pattern that holds every patch pair."""
-    data[:] = 0.0
-    m = el.tets.shape[0]
-    n = nodal.volume.shape[0]
-    J = np.zeros(m)
-    volume_ratios(x, el, J)
-    pi = np.empty(n)
-    nodal_pressures(el, J, nodal, pi)
-    H = np.empty((12, 12))
-    Hb = np.empty((3, 3))
-    for t in range(m):
-        if el.volume[t] <= 0.0:
-            continue
-        element_hessian(x, el, t, _element_pressure(el, nodal, t, pi), 1.0 - nodal.smoothing, project, H)
-        for a in range(4):
-            for b in range(4):
-                Hb[:, :] = H[3 * a:3 * a + 3, 3 * b:3 * b + 3]
-                _add_block(pattern, el.tets[t, a], el.tets[t, b], Hb, data)
-    most = 0
-    for a in range(n):
-        most = max(most, nodal.node_ptr[a + 1] - nodal.node_ptr[a])
+def patch_tets(patch, live, count):
+    """Each patch's tets: ptr (count + 1,) int64 into node_tets (4k,) int64 with the patch's corner
+    in node_corner (4k,) int64, in the order of the live elements (a stable counting sort)."""
+    ptr = np.zeros(count + 1, np.int64)
+    for q in range(live.shape[0]):
+        for j in range(4):
+            ptr[patch[live[q], j] + 1] += 1
+    for a in range(count):
+        ptr[a + 1] += ptr[a]
+    fill = ptr[:count].copy()
+    node_tets = np.empty(ptr[count], np.int64)
+    node_corner = np.empty(ptr[count], np.int64)
+    for q in range(live.shape[0]):
+        for j in range(4):
+            a = patch[live[q], j]
+            node_tets[fill[a]] = live[q]
+            node_corner[fill[a]] = j
+            fill[a] += 1
+    return ptr, node_tets, node_corner
+
+
+# ---------------------------------------------------------------- the patches' members
+@njit(cache=True, nogil=True)
+def patch_members(tets, node_ptr, node_tets, n):
+    """The members of every patch and the rows that gather them (the layout ``NodalTerms`` keeps).
+
+    Returns member_ptr (P + 1,), member_node (S,), member_patch (S,), tet_slot (4m, 4),
+    row_ptr (n + 1,), row_member (S,), all int64 (see :data:`NodalTerms`)."""
+    P = node_ptr.shape[0] - 1
     local = np.full(n, -1, np.int64)
-    patch = np.empty(4 * most, np.int64)
-    g = np.empty((4 * most, 3))
-    for a in range(n):
-        Va = nodal.pressure_volume[a]
-        if Va <= 0.0:
-            continue
-        c = nodal.bulk[a] / (Va * Va)
-        k = _nodal_gradients(x, el, nodal, a, local, patch, g)
-        for p in range(k):
-            for q in range(k):
-                for r in range(3):
-                    for s in range(3):
-                        Hb[r, s] = c * g[p, r] * g[q, s]
-                _add_block(pattern, patch[p], patch[q], Hb, data)
-    if nodal.smoothing > 0.0:
-        smoothed_hessian(x, el, nodal, pattern, project, data)
+    member_ptr = np.zeros(P + 1, np.int64)
+    nodes = np.empty(4 * node_tets.shape[0], np.int64)
+    tet_slot = np.empty((node_tets.shape[0], 4), np.int64)
+    S = 0
+    for a in range(P):
+        k = 0
+        for q in range(node_ptr[a], node_ptr[a + 1]):
+            for j in range(4):
+                i = tets[node_tets[q], j]
+                if local[i] < 0:
+                    local[i] = k
+                    nodes[S + k] = i
+                    k += 1
+                tet_slot[q, j] = local[i]
+        for p in range(S, S + k):
+            local[nodes[p]] = -1
+        S += k
+        member_ptr[a + 1] = S
+    member_node = nodes[:S].copy()
+    member_patch = np.empty(S, np.int64)
+    row_ptr = np.zeros(n + 1, np.int64)
+    for a in range(P):
+        for s in range(member_ptr[a], member_ptr[a + 1]):
+            member_patch[s] = a
+            row_ptr[member_node[s] + 1] += 1
+    for i in range(n):
+        row_ptr[i + 1] += row_ptr[i]
+    fill = row_ptr[:n].copy()
+    row_member = np.empty(S, np.int64)
+    for s in range(S):  # by member, so each row's members are in patch order
+        i = member_node[s]
+        row_member[fill[i]] = s
+        fill[i] += 1
+    return member_ptr, member_node, member_patch, tet_slot, row_ptr, row_member
+
+
+@njit(cache=True, nogil=True, parallel=True)
+def tet_deformations(x, el, Fe):
+    """Fe (m, 3, 3) = F of every active element (inactive ones are not written)."""
+    m = el.tets.shape[0]
+    for b in prange(PATCH_BLOCKS):
+        B = np.empty((4, 3))
+        for t in range(m * b // PATCH_BLOCKS, m * (b + 1) // PATCH_BLOCKS):
+            if el.volume[t] > 0.0:
+                _deformation(x, el, t, B, Fe[t])
+
+
+@njit(cache=True, nogil=True, parallel=True)
+def nodal_gradients(el, nodal, Fe, g):
+    """g (S, 3): g_a = dv_a/dx = sum_{e ni a} share_ea V_e cof(F_e) b_j at each member of each
+    patch (zero without pressure volume), from Fe (m, 3, 3) (:func:`tet_deformations`)."""
+    P = nodal.volume.shape[0]
+    for b in prange(PATCH_BLOCKS):
+        B = np.empty((4, 3))
+        C = np.empty((3, 3))
+        for a in range(P * b // PATCH_BLOCKS, P * (b + 1) // PATCH_BLOCKS):
+            first = nodal.member_ptr[a]
+            g[first:nodal.member_ptr[a + 1]] = 0.0
+            if nodal.pressure_volume[a] <= 0.0:
+                continue
+            for q in range(nodal.node_ptr[a], nodal.node_ptr[a + 1]):
+                t = nodal.node_tets[q]
+                gradient_operator(el, t, B)
+                _cofactor(Fe[t], C)
+                w = nodal.share[t, nodal.node_corner[q]] * el.volume[t]
+                for j in range(4):
+                    s = first + nodal.tet_slot[q, j]
+                    for r in range(3):
+                        acc = 0.0
+                        for c in range(3):
+                            acc += C[r, c] * B[j, c]
+                        g[s, r] += w * acc
 
 
 # ---------------------------------------------------------------- the nodes' smoothed deviatoric part
@@ -303,32 +382,36 @@ def assemble_hessian(x, el, nodal, pattern, project, data):
 #     psi(F) = (|F|^2 - 3) / 2 - (J - 1) + (J - 1)^2 / 6,  G_a = sum_{e ni a} V_e mu_e / 4
 #
 # Fs_a is linear in x: dFs_a/dx_i = e_r w_i^T with w_i = sum_{e ni a, i} (V_e / 4 V_a) b_e,i,
-# so W_s has ANP's two-ring stencil.
+# so W_s has ANP's two-ring stencil.  Each patch's Fs_a and w are made by one block, and each
+# node's force and Hessian row gather its patches in patch order: the sums are those of a
+# serial loop over the patches, whatever the thread count.
 
 
-@njit(cache=True, nogil=True)
-def _smoothed_deformation(x, el, nodal, a, local, patch, w, F):
-    """Fs_a into F (3, 3), a's patch into patch (k,) and w (k, 3); returns k.
-    ``local`` (n,) is -1 on entry and on exit."""
-    B = np.empty((4, 3))
-    Fe = np.empty((3, 3))
-    F[:, :] = 0.0
-    k = 0
-    Va = nodal.volume[a]
-    for q in range(nodal.node_ptr[a], nodal.node_ptr[a + 1]):
-        t = nodal.node_tets[q]
-        _deformation(x, el, t, B, Fe)
-        c = 0.25 * el.volume[t] / Va
-        for r in range(3):
-            for cc in range(3):
-                F[r, cc] += c * Fe[r, cc]
-        for j in range(4):
-            i = el.tets[t, j]
-            k = _patch_slot(local, patch, w, i, k)
-            for cc in range(3):
-                w[local[i], cc] += c * B[j, cc]
-    _clear_slots(local, patch, k)
-    return k
+@njit(cache=True, nogil=True, parallel=True)
+def smoothed_deformations(el, nodal, Fe, Fs, w):
+    """Fs (P, 3, 3) = Fs_a and w (S, 3) the weights of its members, from Fe (m, 3, 3)
+    (:func:`tet_deformations`); patches without volume get zeros."""
+    P = nodal.volume.shape[0]
+    for b in prange(PATCH_BLOCKS):
+        B = np.empty((4, 3))
+        for a in range(P * b // PATCH_BLOCKS, P * (b + 1) // PATCH_BLOCKS):
+            first = nodal.member_ptr[a]
+            Fs[a] = 0.0
+            w[first:nodal.member_ptr[a + 1]] = 0.0
+            Va = nodal.volume[a]
+            if Va <= 0.0:
+                continue
+            for q in range(nodal.node_ptr[a], nodal.node_ptr[a + 1]):
+                t = nodal.node_tets[q]
+                c = 0.25 * el.volume[t] / Va
+                for r in range(3):
+                    for cc in range(3):
+                        Fs[a, r, cc] += c * Fe[t, r, cc]
+                gradient_operator(el, t, B)
+                for j in range(4):
+                    s = first + nodal.tet_slot[q, j]
+                    for cc in range(3):
+                        w[s, cc] += c * B[j, cc]
 
 
 @njit(cache=True, nogil=True)
@@ -342,47 +425,82 @@ def _unit_deviatoric(F, C):
     return 0.5 * (ic - 3.0) - (J - 1.0) + (J - 1.0) ** 2 / 6.0, (J - 1.0) / 3.0 - 1.0
 
 
-@njit(cache=True, nogil=True)
-def _scratch(nodal):
-    most = 0
-    for a in range(nodal.volume.shape[0]):
-        most = max(most, nodal.node_ptr[a + 1] - nodal.node_ptr[a])
-    return np.full(nodal.volume.shape[0], -1, np.int64), np.empty(4 * most, np.int64), np.empty((4 * most, 3))
+def _smoothed_state(x, el, nodal):
+    """(Fs (P, 3, 3), w (S, 3)) at x."""
+    Fe = np.empty((el.tets.shape[0], 3, 3))
+    tet_deformations(x, el, Fe)
+    Fs = np.empty((nodal.volume.shape[0], 3, 3))
+    w = np.empty((nodal.member_node.shape[0], 3))
+    smoothed_deformations(el, nodal, Fe, Fs, w)
+    return Fs, w
+
+
+@njit(cache=True, nogil=True, parallel=True)
+def _patch_psi(nodal, Fs, psi):
+    """psi (P,) = psi(Fs_a) (0 without volume)."""
+    P = nodal.volume.shape[0]
+    for b in prange(PATCH_BLOCKS):
+        C = np.empty((3, 3))
+        for a in range(P * b // PATCH_BLOCKS, P * (b + 1) // PATCH_BLOCKS):
+            psi[a] = _unit_deviatoric(Fs[a], C)[0] if nodal.volume[a] > 0.0 else 0.0
 
 
 @njit(cache=True, nogil=True)
-def smoothed_energy(x, el, nodal):
-    """W_s (N mm)."""
-    local, patch, w = _scratch(nodal)
-    F = np.empty((3, 3))
-    C = np.empty((3, 3))
+def _sum_smoothed_energy(nodal, psi):
     total = 0.0
     for a in range(nodal.volume.shape[0]):
-        if nodal.volume[a] <= 0.0:
-            continue
-        _smoothed_deformation(x, el, nodal, a, local, patch, w, F)
-        total += nodal.shear[a] * _unit_deviatoric(F, C)[0]
+        if nodal.volume[a] > 0.0:
+            total += nodal.shear[a] * psi[a]
     return nodal.smoothing * total
 
 
-@njit(cache=True, nogil=True)
+def smoothed_energy(x, el, nodal):
+    """W_s (N mm), summed over the patches in order."""
+    Fs, _ = _smoothed_state(x, el, nodal)
+    psi = np.empty(Fs.shape[0])
+    _patch_psi(nodal, Fs, psi)
+    return _sum_smoothed_energy(nodal, psi)
+
+
+@njit(cache=True, nogil=True, parallel=True)
+def _patch_stress(nodal, Fs):
+    """Fs (P, 3, 3) overwritten with the unit stress dpsi/dF = Fs + s cof Fs of each patch."""
+    P = nodal.volume.shape[0]
+    for b in prange(PATCH_BLOCKS):
+        C = np.empty((3, 3))
+        for a in range(P * b // PATCH_BLOCKS, P * (b + 1) // PATCH_BLOCKS):
+            if nodal.volume[a] <= 0.0:
+                continue
+            s = _unit_deviatoric(Fs[a], C)[1]
+            for r in range(3):
+                for c in range(3):
+                    Fs[a, r, c] = Fs[a, r, c] + s * C[r, c]
+
+
+@njit(cache=True, nogil=True, parallel=True)
+def _gather_smoothed_forces(nodal, stress, w, out):
+    """out (n, 3) -= dW_s/dx, each node gathering its patches in order."""
+    n = out.shape[0]
+    for b in prange(PATCH_BLOCKS):
+        for i in range(n * b // PATCH_BLOCKS, n * (b + 1) // PATCH_BLOCKS):
+            for e in range(nodal.row_ptr[i], nodal.row_ptr[i + 1]):
+                s = nodal.row_member[e]
+                a = nodal.member_patch[s]
+                if nodal.volume[a] <= 0.0:
+                    continue
+                g = nodal.smoothing * nodal.shear[a]
+                for r in range(3):
+                    acc = 0.0
+                    for c in range(3):
+                        acc += stress[a, r, c] * w[s, c]
+                    out[i, r] -= g * acc
+
+
 def smoothed_forces(x, el, nodal, out):
     """out (n, 3) -= dW_s/dx."""
-    local, patch, w = _scratch(nodal)
-    F = np.empty((3, 3))
-    C = np.empty((3, 3))
-    for a in range(nodal.volume.shape[0]):
-        if nodal.volume[a] <= 0.0:
-            continue
-        k = _smoothed_deformation(x, el, nodal, a, local, patch, w, F)
-        s = _unit_deviatoric(F, C)[1]
-        g = nodal.smoothing * nodal.shear[a]
-        for p in range(k):
-            for r in range(3):
-                acc = 0.0
-                for c in range(3):
-                    acc += (F[r, c] + s * C[r, c]) * w[p, c]
-                out[patch[p], r] -= g * acc
+    Fs, w = _smoothed_state(x, el, nodal)
+    _patch_stress(nodal, Fs)
+    _gather_smoothed_forces(nodal, Fs, w, out)
 
 
 @njit(cache=True, nogil=True)
@@ -395,30 +513,131 @@ def _unit_stress_hessian(F, C, s, HF):
     add_det_hessian(F, s, HF)
 
 
+@njit(cache=True, nogil=True, parallel=True)
+def smoothed_stress_hessians(nodal, Fs, project, HF):
+    """HF (P, 9, 9) = d2psi/dF2 at Fs_a, projected to positive semi-definite where ``project``
+    (zeros without volume or smoothing)."""
+    P = nodal.volume.shape[0]
+    for b in prange(PATCH_BLOCKS):
+        C = np.empty((3, 3))
+        for a in range(P * b // PATCH_BLOCKS, P * (b + 1) // PATCH_BLOCKS):
+            if nodal.volume[a] <= 0.0 or nodal.smoothing <= 0.0:
+                HF[a] = 0.0
+                continue
+            s = _unit_deviatoric(Fs[a], C)[1]
+            _unit_stress_hessian(Fs[a], C, s, HF[a])
+            project_hf(Fs[a], 1.0, 1.0 / 3.0, s, project, HF[a])
+
+
+PatchHessian = namedtuple("PatchHessian", ["bulk", "g", "HF", "w"])
+PatchHessian.__doc__ = """What the patches add to the Hessian: ``bulk`` (P,) kv_a / V_a^2 (0 without
+pressure volume), ``g`` (S, 3) the nodal gradients, ``HF`` (P, 9, 9) the smoothed stress
+Hessians and ``w`` (S, 3) the smoothed weights (:func:`smoothed_deformations`)."""
+
+
 @njit(cache=True, nogil=True)
-def smoothed_hessian(x, el, nodal, pattern, project, data):
-    """data += d2W_s/dx2 into the CSR values of the two-ring pattern; each node's 9x9 d2psi/dF2
-    projected to positive semi-definite where ``project``."""
-    local, patch, w = _scratch(nodal)
-    F = np.empty((3, 3))
-    C = np.empty((3, 3))
-    HF = np.empty((9, 9))
-    Hb = np.empty((3, 3))
+def _add_nodal_row(nodal, ph, s, col, base_row, deg, data):
+    """Add member s's block row kv_a/V_a^2 g_s g_q^T of its patch a (every member q) into its
+    node's CSR row (``col``: each column's block, ``base_row`` = 9 ptr[i], ``deg`` its blocks)."""
+    a = nodal.member_patch[s]
+    ca = ph.bulk[a]
+    for q in range(nodal.member_ptr[a], nodal.member_ptr[a + 1]):
+        base = base_row + 3 * col[nodal.member_node[q]]
+        for r in range(3):
+            for t in range(3):
+                data[base + 3 * r * deg + t] += ca * ph.g[s, r] * ph.g[q, t]
+
+
+@njit(cache=True, nogil=True)
+def _add_smoothed_row(nodal, ph, s, col, base_row, deg, Y, data):
+    """Add member s's block row alpha G_a w_s^T HF_a w_q of its patch a (every member q)."""
+    a = nodal.member_patch[s]
+    g = nodal.smoothing * nodal.shear[a]
+    for r in range(3):
+        for c in range(3):
+            for td in range(9):
+                Y[r, c, td] = ph.w[s, c] * ph.HF[a, 3 * r + c, td]
+    for q in range(nodal.member_ptr[a], nodal.member_ptr[a + 1]):
+        base = base_row + 3 * col[nodal.member_node[q]]
+        for r in range(3):
+            for t in range(3):
+                acc = 0.0
+                for c in range(3):
+                    for d in range(3):
+                        acc += Y[r, c, 3 * t + d] * ph.w[q, d]
+                data[base + 3 * r * deg + t] += g * acc
+
+
+@njit(cache=True, nogil=True, parallel=True)
+def add_patch_rows(nodal, ph, pattern, data):
+    """data += the patches' part of the Hessian, each node's row gathering its patches in order:
+    the nodal terms of every patch, then the smoothed terms (a serial loop's sums)."""
+    n = pattern.node_ptr.shape[0] - 1
+    for b in prange(PATCH_BLOCKS):
+        col = np.zeros(n, np.int64)
+        Y = np.empty((3, 3, 9))
+        for i in range(n * b // PATCH_BLOCKS, n * (b + 1) // PATCH_BLOCKS):
+            lo, hi = pattern.node_ptr[i], pattern.node_ptr[i + 1]
+            for k in range(lo, hi):
+                col[pattern.node_idx[k]] = k - lo
+            for e in range(nodal.row_ptr[i], nodal.row_ptr[i + 1]):
+                if nodal.pressure_volume[nodal.member_patch[nodal.row_member[e]]] > 0.0:
+                    _add_nodal_row(nodal, ph, nodal.row_member[e], col, 9 * lo, hi - lo, data)
+            if nodal.smoothing <= 0.0:
+                continue
+            for e in range(nodal.row_ptr[i], nodal.row_ptr[i + 1]):
+                if nodal.volume[nodal.member_patch[nodal.row_member[e]]] > 0.0:
+                    _add_smoothed_row(nodal, ph, nodal.row_member[e], col, 9 * lo, hi - lo, Y, data)
+
+
+@njit(cache=True, nogil=True)
+def _patch_bulk(nodal, bulk):
+    """bulk (P,) = kv_a / V_a^2, the weight of g_a g_a^T (0 without pressure volume)."""
     for a in range(nodal.volume.shape[0]):
-        if nodal.volume[a] <= 0.0:
-            continue
-        k = _smoothed_deformation(x, el, nodal, a, local, patch, w, F)
-        s = _unit_deviatoric(F, C)[1]
-        _unit_stress_hessian(F, C, s, HF)
-        project_hf(F, 1.0, 1.0 / 3.0, s, project, HF)
-        g = nodal.smoothing * nodal.shear[a]
-        for p in range(k):
-            for q in range(k):
-                for r in range(3):
-                    for t_ in range(3):
-                        acc = 0.0
-                        for c in range(3):
-                            for d in range(3):
-                                acc += w[p, c] * HF[3 * r + c, 3 * t_ + d] * w[q, d]
-                        Hb[r, t_] = g * acc
-                _add_block(pattern, patch[p], patch[q], Hb, data)
+        Va = nodal.pressure_volume[a]
+        bulk[a] = nodal.bulk[a] / (Va * Va) if Va > 0.0 else 0.0
+
+
+@njit(cache=True, nogil=True, parallel=True)
+def element_hessians(x, el, nodal, pi, first, project, H):
+    """H (k, 12, 12): the element parts of elements ``first .. first + k - 1`` (inactive ones are
+    not written), their average nodal pressures from pi (P,)."""
+    k = H.shape[0]
+    keep = 1.0 - nodal.smoothing
+    for b in prange(PATCH_BLOCKS):
+        for q in range(k * b // PATCH_BLOCKS, k * (b + 1) // PATCH_BLOCKS):
+            t = first + q
+            if el.volume[t] > 0.0:
+                element_hessian(x, el, t, _element_pressure(el, nodal, t, pi), keep, project, H[q])
+
+
+def assemble_hessian(x, el, nodal, pattern, project, data):
+    """The ANP Hessian (element parts, projected where ``project``, the nodal rank-one parts and the
+    smoothed deviatoric part) into the CSR ``data`` (zeroed here) of a pattern that holds every
+    patch pair (``cutkit.relax.anp.anp_pattern``).  The element parts are made in parallel and
+    added in element order (:func:`cutkit.relax._newton_kernels.add_element_blocks`), the
+    patches' parts by node rows (:func:`add_patch_rows`): the same sums on any thread count."""
+    data[:] = 0.0
+    m = el.tets.shape[0]
+    P = nodal.volume.shape[0]
+    J = np.zeros(m)
+    volume_ratios(x, el, J)
+    pi = np.empty(P)
+    nodal_pressures(el, J, nodal, pi)
+    H = np.empty((min(ASSEMBLY_CHUNK, m), 12, 12))
+    for first in range(0, m, ASSEMBLY_CHUNK):
+        part = H[:min(ASSEMBLY_CHUNK, m - first)]
+        element_hessians(x, el, nodal, pi, first, project, part)
+        add_element_blocks(el, pattern, first, part, data)
+    Fe = np.empty((m, 3, 3))
+    tet_deformations(x, el, Fe)
+    Fs = np.empty((P, 3, 3))
+    w = np.empty((nodal.member_node.shape[0], 3))
+    smoothed_deformations(el, nodal, Fe, Fs, w)
+    g = np.empty_like(w)
+    nodal_gradients(el, nodal, Fe, g)
+    HF = np.empty((P, 9, 9))
+    smoothed_stress_hessians(nodal, Fs, project, HF)
+    bulk = np.empty(P)
+    _patch_bulk(nodal, bulk)
+    add_patch_rows(nodal, PatchHessian(bulk, g, HF, w), pattern, data)

@@ -68,15 +68,21 @@ def add_det_hessian(F, s, HF):
                     HF[3 * i + a, 3 * j + b] += s * _levi(i, j) * _levi(a, b) * F[3 - i - j, 3 - a - b]
 
 
-@njit(cache=True, nogil=True)
-def _deformation(x, el, t, B, F):
-    """Fill B (4, 3) with the rows of the gradient operator of element t and F (3, 3) = sum x_j b_j^T."""
+@njit(cache=True, nogil=True, inline="always")
+def gradient_operator(el, t, B):
+    """Fill B (4, 3) with the rows b_j of the gradient operator of element t (F = sum x_j b_j^T)."""
     D = el.Dminv[t]
     for c in range(3):
         B[0, c] = -(D[0, c] + D[1, c] + D[2, c])
         B[1, c] = D[0, c]
         B[2, c] = D[1, c]
         B[3, c] = D[2, c]
+
+
+@njit(cache=True, nogil=True)
+def _deformation(x, el, t, B, F):
+    """Fill B (4, 3) with the rows of the gradient operator of element t and F (3, 3) = sum x_j b_j^T."""
+    gradient_operator(el, t, B)
     for r in range(3):
         for c in range(3):
             acc = 0.0

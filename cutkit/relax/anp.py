@@ -90,27 +90,25 @@ def nodal_terms(em, el: KE.Elements | None = None) -> KP.NodalTerms:
         = sum V_e / 4, ``bulk`` N mm = sum share V_e K_e with K = lam + 2 mu / 3, the patch-to-tet
         lists of the active tets, ``shear`` N mm = sum V_e mu_e / 4, ``pressure_volume`` mm^3 =
         sum share V_e; ``smoothing`` = ``em.deviatoric_smoothing``, ``share`` (m, 4)
-        (:func:`pressure_shares`) and ``patch`` (m, 4) int64, the patch of each corner.
+        (:func:`pressure_shares`), ``patch`` (m, 4) int64, the patch of each corner, and the
+        patches' members and the node rows that gather them (``_anp_kernels.patch_members``).
     """
     el = active_elements(em) if el is None else el
     n = em.n_nodes
     live = np.flatnonzero(el.volume > 0.0)
     patch, count = material_patches(el.tets, el.volume, el.mu, el.lam, n)
     corners = patch[live].ravel()
+    ptr, node_tets, node_corner = KP.patch_tets(patch, live, count)
     quarter = np.repeat(0.25 * el.volume[live], 4)
     share = pressure_shares(el.tets, el.volume, np.asarray(em.fixed, bool).reshape(n, -1).all(axis=1))
     shared = share[live].ravel() * np.repeat(el.volume[live], 4)
     bulk = np.repeat(el.lam[live] + 2.0 * el.mu[live] / 3.0, 4)
-    order = np.argsort(corners, kind="stable")
-    ptr = np.zeros(count + 1, np.int64)
-    ptr[1:] = np.cumsum(np.bincount(corners, minlength=count))
     shear = np.repeat(el.mu[live], 4)
     return KP.NodalTerms(np.bincount(corners, quarter, minlength=count),
-                         np.bincount(corners, shared * bulk, minlength=count),
-                         ptr, np.ascontiguousarray(np.repeat(live, 4)[order]),
-                         np.ascontiguousarray(np.tile(np.arange(4), live.size)[order]),
+                         np.bincount(corners, shared * bulk, minlength=count), ptr, node_tets, node_corner,
                          np.bincount(corners, quarter * shear, minlength=count), float(em.deviatoric_smoothing),
-                         share, np.bincount(corners, shared, minlength=count), patch)
+                         share, np.bincount(corners, shared, minlength=count), patch,
+                         *KP.patch_members(np.ascontiguousarray(el.tets, np.int64), ptr, node_tets, n))
 
 
 #: The last model's nodal terms: (weak reference to the model, digest of what they are made of,
@@ -170,24 +168,15 @@ def material_patches(tets, volume, mu, lam, n: int) -> tuple[np.ndarray, int]:
     count : int
         Patches, >= n.
     """
-    tets = np.asarray(tets, np.int64)
+    tets = np.ascontiguousarray(tets, np.int64)
     live = np.flatnonzero(np.asarray(volume) > 0.0)
-    patch = tets.copy()
     if live.size == 0:
-        return patch, n
-    _, material = np.unique(np.stack([mu[live], lam[live]], axis=1), axis=0, return_inverse=True)
-    material = material.ravel()
-    kinds = int(material.max()) + 1
-    key = tets[live] * kinds + material[:, None]
-    pairs, inverse = np.unique(key.ravel(), return_inverse=True)
-    node = pairs // kinds
-    first = np.ones(pairs.size, bool)
-    first[1:] = node[1:] != node[:-1]
-    ids = np.empty(pairs.size, np.int64)
-    ids[first] = node[first]
-    ids[~first] = n + np.arange(np.count_nonzero(~first))
-    patch[live] = ids[inverse.ravel()].reshape(-1, 4)
-    return patch, n + int(np.count_nonzero(~first))
+        return tets.copy(), n
+    _, in_mu = np.unique(np.asarray(mu)[live], return_inverse=True)  # (mu, lam) in lexicographic order
+    lams, in_lam = np.unique(np.asarray(lam)[live], return_inverse=True)
+    _, material = np.unique(in_mu.ravel() * lams.size + in_lam.ravel(), return_inverse=True)
+    patch, count = KP.corner_patches(tets, live, np.ascontiguousarray(material.ravel(), np.int64), int(n))
+    return patch, int(count)
 
 
 def pressure_shares(tets, volume, held) -> np.ndarray:
