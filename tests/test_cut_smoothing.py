@@ -176,7 +176,7 @@ def test_finish_stroke_moves_only_what_was_pending_and_hands_the_moves_over():
     assert results
 
 
-@pytest.mark.parametrize("i", [42, 194, 224])
+@pytest.mark.parametrize("i", [42, 254])
 def test_the_stroke_end_looks_at_every_cut_made_tet(i, monkeypatch):
     """Paths on the decimated ellipsoid whose worst sliver lies where no later step re-subdivided its
     original (or an earlier stroke made it): the stroke's end looking at every cut-made tet lifts the
@@ -360,14 +360,15 @@ def test_a_gentle_surface_is_one_whose_faces_bend_less_than_the_bound():
 
 def test_a_piece_a_vertex_move_shrinks_below_the_crumb_limit_is_removed(monkeypatch):
     """A retrace on the gmsh box (the thousand paths' generator, seed 424242, path 57) whose vertex
-    moves shrink a loose piece below the crumb limit: the crumb search starts from the tets around the
-    moved vertices too, so no piece below CRUMB_VOLUME_FRACTION is left at any stroke's end
-    (cut_path's checks); starting from the new tets alone leaves one."""
+    moves (one look per step) shrink a loose piece below the crumb limit: the crumb search starts
+    from the tets around the moved vertices too, so no piece below CRUMB_VOLUME_FRACTION is left at
+    any stroke's end (cut_path's checks); starting from the new tets alone leaves one."""
     from _cut_paths import make_path
     from test_cut_thousand_paths import ALL_KINDS, TREMORS
 
     from cutkit.cutting import step
 
+    monkeypatch.setattr(SM, "SMOOTH_PASSES", 1)  # the second look takes another way on this path
     p, t = MESHES["gmsh"]
     i = 57
     kind, tremor = ALL_KINDS[i % len(ALL_KINDS)], TREMORS[(i // len(ALL_KINDS)) % len(TREMORS)]

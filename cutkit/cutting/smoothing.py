@@ -77,6 +77,8 @@ SMOOTH_MIN_GAIN_DEG = 0.2
 #: angle (degrees) of their area-weighted mean moves in the plane that keeps the volume
 #: (:func:`_on_a_gentle_surface`); the surface then moves by at most the move.
 SURFACE_BEND_DEG = 30.0
+#: Looks at the poor tets per call: a move can open a move of another vertex that did not gain before.
+SMOOTH_PASSES = 2
 #: Directions of an interior vertex: the axes and the cube diagonals, both ways.
 _SPACE = np.vstack([np.eye(3), -np.eye(3),
                     np.array([[i, j, k] for i in (1, -1) for j in (1, -1) for k in (1, -1)]) / np.sqrt(3.0)])
@@ -114,8 +116,19 @@ def smooth_vertices_around(cm, originals, held) -> int:
     cm.smooth_pending = set()
     if not fresh:
         return 0
-    mesh = KF.FairMesh(cm._x, cm._tets, cm._alive, cm.sub_start, cm.sub_count)
     fresh = np.array(sorted(fresh), np.int64)
+    moved = 0
+    for _ in range(SMOOTH_PASSES):
+        now = _smooth_pass(cm, fresh, held)
+        moved += now
+        if not now:
+            break
+    return moved
+
+
+def _smooth_pass(cm, fresh, held) -> int:
+    """One look at the poor tets of the originals ``fresh`` (k,) int64, the poorest first."""
+    mesh = KF.FairMesh(cm._x, cm._tets, cm._alive, cm.sub_start, cm.sub_count)
     tets, owner = KF.poor_tets(mesh, fresh, SMOOTH_BELOW_DEG)
     whole = fresh[(cm.sub_count[fresh] == 0) & cm._alive[fresh]]  # an earlier stroke's tet, uncut since
     whole = whole[min_dihedral_angles(cm._x, cm._tets[whole]) < SMOOTH_BELOW_DEG] if whole.size else whole
