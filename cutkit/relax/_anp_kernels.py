@@ -344,31 +344,26 @@ def tet_deformations(x, el, Fe):
                 _deformation(x, el, t, B, Fe[t])
 
 
-@njit(cache=True, nogil=True, parallel=True)
-def nodal_gradients(el, nodal, Fe, g):
-    """g (S, 3): g_a = dv_a/dx = sum_{e ni a} share_ea V_e cof(F_e) b_j at each member of each
-    patch (zero without pressure volume), from Fe (m, 3, 3) (:func:`tet_deformations`)."""
-    P = nodal.volume.shape[0]
-    for b in prange(PATCH_BLOCKS):
-        B = np.empty((4, 3))
-        C = np.empty((3, 3))
-        for a in range(P * b // PATCH_BLOCKS, P * (b + 1) // PATCH_BLOCKS):
-            first = nodal.member_ptr[a]
-            g[first:nodal.member_ptr[a + 1]] = 0.0
-            if nodal.pressure_volume[a] <= 0.0:
-                continue
-            for q in range(nodal.node_ptr[a], nodal.node_ptr[a + 1]):
-                t = nodal.node_tets[q]
-                gradient_operator(el, t, B)
-                _cofactor(Fe[t], C)
-                w = nodal.share[t, nodal.node_corner[q]] * el.volume[t]
-                for j in range(4):
-                    s = first + nodal.tet_slot[q, j]
-                    for r in range(3):
-                        acc = 0.0
-                        for c in range(3):
-                            acc += C[r, c] * B[j, c]
-                        g[s, r] += w * acc
+@njit(cache=True, nogil=True)
+def _nodal_gradient(el, nodal, Fe, a, B, C, g):
+    """g (S, 3) at patch a's members: g_a = dv_a/dx = sum_{e ni a} share_ea V_e cof(F_e) b_j, from
+    Fe (m, 3, 3) (:func:`tet_deformations`); zero without pressure volume."""
+    first = nodal.member_ptr[a]
+    g[first:nodal.member_ptr[a + 1]] = 0.0
+    if nodal.pressure_volume[a] <= 0.0:
+        return
+    for q in range(nodal.node_ptr[a], nodal.node_ptr[a + 1]):
+        t = nodal.node_tets[q]
+        gradient_operator(el, t, B)
+        _cofactor(Fe[t], C)
+        w = nodal.share[t, nodal.node_corner[q]] * el.volume[t]
+        for j in range(4):
+            s = first + nodal.tet_slot[q, j]
+            for r in range(3):
+                acc = 0.0
+                for c in range(3):
+                    acc += C[r, c] * B[j, c]
+                g[s, r] += w * acc
 
 
 # ---------------------------------------------------------------- the nodes' smoothed deviatoric part
@@ -435,46 +430,33 @@ def _smoothed_state(x, el, nodal):
     return Fs, w
 
 
-@njit(cache=True, nogil=True, parallel=True)
-def _patch_psi(nodal, Fs, psi):
-    """psi (P,) = psi(Fs_a) (0 without volume)."""
-    P = nodal.volume.shape[0]
-    for b in prange(PATCH_BLOCKS):
-        C = np.empty((3, 3))
-        for a in range(P * b // PATCH_BLOCKS, P * (b + 1) // PATCH_BLOCKS):
-            psi[a] = _unit_deviatoric(Fs[a], C)[0] if nodal.volume[a] > 0.0 else 0.0
-
-
 @njit(cache=True, nogil=True)
-def _sum_smoothed_energy(nodal, psi):
+def _smoothed_energy_sum(nodal, Fs):
+    """alpha sum_a G_a psi(Fs_a), over the patches in order."""
+    C = np.empty((3, 3))
     total = 0.0
     for a in range(nodal.volume.shape[0]):
         if nodal.volume[a] > 0.0:
-            total += nodal.shear[a] * psi[a]
+            total += nodal.shear[a] * _unit_deviatoric(Fs[a], C)[0]
     return nodal.smoothing * total
 
 
 def smoothed_energy(x, el, nodal):
-    """W_s (N mm), summed over the patches in order."""
-    Fs, _ = _smoothed_state(x, el, nodal)
-    psi = np.empty(Fs.shape[0])
-    _patch_psi(nodal, Fs, psi)
-    return _sum_smoothed_energy(nodal, psi)
+    """W_s (N mm)."""
+    return _smoothed_energy_sum(nodal, _smoothed_state(x, el, nodal)[0])
 
 
-@njit(cache=True, nogil=True, parallel=True)
+@njit(cache=True, nogil=True)
 def _patch_stress(nodal, Fs):
     """Fs (P, 3, 3) overwritten with the unit stress dpsi/dF = Fs + s cof Fs of each patch."""
-    P = nodal.volume.shape[0]
-    for b in prange(PATCH_BLOCKS):
-        C = np.empty((3, 3))
-        for a in range(P * b // PATCH_BLOCKS, P * (b + 1) // PATCH_BLOCKS):
-            if nodal.volume[a] <= 0.0:
-                continue
-            s = _unit_deviatoric(Fs[a], C)[1]
-            for r in range(3):
-                for c in range(3):
-                    Fs[a, r, c] = Fs[a, r, c] + s * C[r, c]
+    C = np.empty((3, 3))
+    for a in range(nodal.volume.shape[0]):
+        if nodal.volume[a] <= 0.0:
+            continue
+        s = _unit_deviatoric(Fs[a], C)[1]
+        for r in range(3):
+            for c in range(3):
+                Fs[a, r, c] = Fs[a, r, c] + s * C[r, c]
 
 
 @njit(cache=True, nogil=True, parallel=True)
@@ -514,13 +496,16 @@ def _unit_stress_hessian(F, C, s, HF):
 
 
 @njit(cache=True, nogil=True, parallel=True)
-def smoothed_stress_hessians(nodal, Fs, project, HF):
-    """HF (P, 9, 9) = d2psi/dF2 at Fs_a, projected to positive semi-definite where ``project``
-    (zeros without volume or smoothing)."""
+def patch_hessian_terms(el, nodal, Fe, Fs, project, g, HF):
+    """Per patch, in :data:`PATCH_BLOCKS` parallel blocks: the nodal gradients g (S, 3)
+    (:func:`_nodal_gradient`) and HF (P, 9, 9) = d2psi/dF2 at Fs_a, projected to positive
+    semi-definite where ``project`` (zeros without volume or smoothing)."""
     P = nodal.volume.shape[0]
     for b in prange(PATCH_BLOCKS):
+        B = np.empty((4, 3))
         C = np.empty((3, 3))
         for a in range(P * b // PATCH_BLOCKS, P * (b + 1) // PATCH_BLOCKS):
+            _nodal_gradient(el, nodal, Fe, a, B, C, g)
             if nodal.volume[a] <= 0.0 or nodal.smoothing <= 0.0:
                 HF[a] = 0.0
                 continue
@@ -635,9 +620,8 @@ def assemble_hessian(x, el, nodal, pattern, project, data):
     w = np.empty((nodal.member_node.shape[0], 3))
     smoothed_deformations(el, nodal, Fe, Fs, w)
     g = np.empty_like(w)
-    nodal_gradients(el, nodal, Fe, g)
     HF = np.empty((P, 9, 9))
-    smoothed_stress_hessians(nodal, Fs, project, HF)
+    patch_hessian_terms(el, nodal, Fe, Fs, project, g, HF)
     bulk = np.empty(P)
     _patch_bulk(nodal, bulk)
     add_patch_rows(nodal, PatchHessian(bulk, g, HF, w), pattern, data)
