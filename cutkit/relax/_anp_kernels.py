@@ -217,6 +217,19 @@ def element_hessian(x, el, t, p_e, keep, project, H):
 
 # ---------------------------------------------------------------- the patches and their members
 @njit(cache=True, nogil=True)
+def _corner_ptr(table, live, count):
+    """(count + 1,) int64: where each key's corners start when the corners of the live elements
+    ``live`` (k,) are sorted by their key in ``table`` (m, 4) int64 (keys below ``count``)."""
+    ptr = np.zeros(count + 1, np.int64)
+    for q in range(live.shape[0]):
+        for j in range(4):
+            ptr[table[live[q], j] + 1] += 1
+    for a in range(count):
+        ptr[a + 1] += ptr[a]
+    return ptr
+
+
+@njit(cache=True, nogil=True)
 def corner_patches(tets, live, material, n):
     """The patch of every live element corner (see ``cutkit.relax.anp.material_patches``).
 
@@ -224,12 +237,7 @@ def corner_patches(tets, live, material, n):
     the order of (mu, lam).  Returns patch (m, 4) int64 (inactive rows: their nodes) and the count
     of patches."""
     patch = tets.copy()
-    ptr = np.zeros(n + 1, np.int64)
-    for q in range(live.shape[0]):
-        for j in range(4):
-            ptr[tets[live[q], j] + 1] += 1
-    for i in range(n):
-        ptr[i + 1] += ptr[i]
+    ptr = _corner_ptr(tets, live, n)
     fill = ptr[:n].copy()
     kinds = np.empty(ptr[n], np.int64)  # each node's corners' materials, then its distinct ones
     for q in range(live.shape[0]):
@@ -270,12 +278,7 @@ def corner_patches(tets, live, material, n):
 def patch_tets(patch, live, count):
     """Each patch's tets: ptr (count + 1,) int64 into node_tets (4k,) int64 with the patch's corner
     in node_corner (4k,) int64, in the order of the live elements (a stable counting sort)."""
-    ptr = np.zeros(count + 1, np.int64)
-    for q in range(live.shape[0]):
-        for j in range(4):
-            ptr[patch[live[q], j] + 1] += 1
-    for a in range(count):
-        ptr[a + 1] += ptr[a]
+    ptr = _corner_ptr(patch, live, count)
     fill = ptr[:count].copy()
     node_tets = np.empty(ptr[count], np.int64)
     node_corner = np.empty(ptr[count], np.int64)
