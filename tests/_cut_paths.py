@@ -8,6 +8,7 @@ amplitudes in mm are fractions of an edge.
 
 import numpy as np
 
+from cutkit.cutting.step import finish_stroke
 from cutkit.mesh.generate import box_mesh
 from cutkit.mesh.quality import signed_volumes
 
@@ -151,8 +152,10 @@ def crossing_strokes(rng, L, through=True, tremor=0.0):
 
 
 def lift(cm):
-    """The blade leaves the tissue: the next pose starts a new sweep, which may cross this one (rebase)."""
+    """The blade leaves the tissue: the next pose starts a new sweep, which may cross this one (rebase),
+    and every cut-made tet is looked at once more in the fresh cut state (as ``rebase_if_left``)."""
     cm.rebase()
+    finish_stroke(cm)
 
 
 def uncut_reason(cm, e):

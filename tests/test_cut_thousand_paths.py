@@ -5,7 +5,9 @@ with vertices, edges and faces), gmsh's Delaunay mesh of a box and a
 decimated isovolume ellipsoid (``tests/data/cut_path_meshes.npz``, made by
 ``tests/data/make_cut_path_meshes.py``).  Each path is cut as ``cutkit cut``
 cuts (a stroke ends where the blade leaves the tissue); at the end of every
-stroke and of the path:
+stroke (where the blade left, after the rebase and the look at every
+cut-made tet it opens, which the tissue gets before its next step) and of
+the path:
 
 * the written mesh passes ``cutkit check`` (orientation, manifold faces,
   edges and vertices, no hanging and no unused node);
@@ -16,8 +18,9 @@ stroke and of the path:
   ``edges_left_uncut`` (named in the warning line).
 
 The bound on the cut-made tetrahedra's smallest dihedral angle
-(``MIN_CUT_DIHEDRAL_DEG``) is not met yet: its test is an expected failure
-until it is (distribution and causes: ``benchmarks/cut_slivers.py``).
+(``MIN_CUT_DIHEDRAL_DEG``) holds on the Kuhn box and the gmsh mesh; on the
+decimated mesh it is not met yet, and that part of its test is an expected
+failure until it is (distribution and causes: ``benchmarks/cut_slivers.py``).
 """
 
 from pathlib import Path
@@ -82,16 +85,17 @@ def cut_path(p, t, poses, blade_length, where, **options):
     cm = CutMesh(p, t, blade_length=blade_length, **options)
     stroke, missed, worst = [], [], [180.0]
 
-    def end():  # the stroke ends: what the blade held is looked at once more, then the checks
+    def end(leave=None):  # the stroke ends: what the blade held is looked at once more, then the checks
         finish_stroke(cm)
         missed.extend(_unreported(cm, stroke))
+        if leave is not None:  # the blade left: the rebase and its look come before the tissue moves on
+            leave(cm)
         worst.append(_sound(cm, v0, where))
         stroke.clear()
 
     for pose in poses:
         if pose is None:
-            end()
-            lift(cm)
+            end(lift)
             continue
         prev = cm.prev_pose
         cut_step(cm, *pose)
@@ -99,8 +103,7 @@ def cut_path(p, t, poses, blade_length, where, **options):
             P1, Q1 = cm.prev_pose
             stroke.extend([(prev[0], prev[1], Q1), (prev[0], Q1, P1)])
         if not blade_in_tissue(cm) and cm.prev_pose is not None:
-            end()
-            rebase_if_left(cm)
+            end(rebase_if_left)
     end()
     return missed, min(worst)
 
@@ -123,10 +126,14 @@ def test_a_thousand_paths_stay_sound(name, chunk):
         assert not missed, (where, sorted(missed)[:10])
 
 
-@pytest.mark.xfail(strict=True, reason="after fairing and vertex smoothing: corners cut off near vertices that no "
-                   "single move lifts or that used their reach, in paths of several strokes over earlier ones "
-                   "(docs/cutting.md, Angles; benchmarks/cut_slivers.py)")
-@pytest.mark.parametrize("name", sorted(MESHES))
+#: On the decimated mesh the bound is not met yet: its part of the test is an expected failure.
+_BOUND_NOT_MET = pytest.mark.xfail(
+    strict=True, reason="decimated mesh, retraced strokes: corners cut off near vertices that no single move lifts "
+    "or that used their reach (docs/cutting.md, Angles; benchmarks/cut_slivers.py)")
+
+
+@pytest.mark.parametrize("name", [pytest.param(n, marks=_BOUND_NOT_MET) if n == "decimated" else n
+                                  for n in sorted(MESHES)])
 def test_cut_made_tets_keep_the_dihedral_bound(name):
     p, t = MESHES[name]
     worst = {i: cut_path(p, t, *_path(name, i))[1] for i in range(0, PATHS_PER_MESH, BOUND_EVERY)}

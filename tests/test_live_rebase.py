@@ -237,3 +237,41 @@ def test_a_stroke_begun_before_the_last_ones_rebase_goes_on_without_holding_a_po
     alone = stepped["cut_tets"] - stepped_seen["tets_before"]
     assert first >= 0.5 * alone and total - first >= 0.5 * alone, (first, total, alone)
     assert main(["check", str(seen["out"] / "model.h5")]) == 0
+
+
+@pytest.mark.parametrize("live", [False, True])
+def test_a_rebase_is_followed_by_a_look_at_every_cut_made_tet_before_the_tissue_moves(model, tmp_path, monkeypatch,
+                                                                                       live):
+    """The blade leaves after one stroke: offline (``Session.rebase_if_left``) and live (the rebase's
+    own thread, here on a stepped clock), the next thing after the rebase is ``finish_stroke`` in the
+    fresh cut state (the stroke's cut is an earlier one's, nothing is subdivided, a look at every
+    cut-made tet is due), before any relaxation step: vertex smoothing may move the cut's nodes
+    there (docs/cutting.md, "Vertex smoothing")."""
+    import cutkit.cutting as C
+    from cutkit.cutting.cutmesh import CutMesh
+    from cutkit.relax.elastic_tissue import ElasticTissue
+    from cutkit.simulate import SimulateOptions, simulate
+
+    events, finish, rebase, advance = [], C.finish_stroke, CutMesh.rebase, ElasticTissue.advance
+
+    def recorded_finish(cm, every_cut_tet=True):
+        events.append(("finish", bool(cm.cut_faces_before), len(cm.subtets), bool(cm.whole_look_due)))
+        return finish(cm, every_cut_tet)
+
+    def recorded_rebase(cm):
+        events.append(("rebase",))
+        return rebase(cm)
+
+    def recorded_advance(tis, *args, **kw):
+        events.append(("relax",))
+        return advance(tis, *args, **kw)
+
+    monkeypatch.setattr(C, "finish_stroke", recorded_finish)
+    monkeypatch.setattr(CutMesh, "rebase", recorded_rebase)
+    monkeypatch.setattr(ElasticTissue, "advance", recorded_advance)
+    if live:
+        _session(model, _stroke(4.3), tmp_path, stepped=True)
+    else:
+        simulate(model, _stroke(4.3), tmp_path, SimulateOptions(fps=5, hold_s=0.1, frames=False))
+    k = events.index(("rebase",))
+    assert events[k + 1] == ("finish", True, 0, True), events[k - 2:k + 4]

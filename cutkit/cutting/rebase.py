@@ -117,6 +117,9 @@ def rebase(cm):
                           compact_splits=cm.compact_splits, snap_vertices=cm.snap_vertices,
                           fair_nodes=cm.fair_nodes, smooth_vertices=cm.smooth_vertices)
     fresh.cut_faces_before = cut_faces
+    # the cut's nodes are vertices of original tets now, which vertex smoothing may move (it never
+    # moves a cut node of a subdivided original): the next stroke's end looks at every cut-made tet
+    fresh.whole_look_due = bool(cut_faces)
     fresh.uncut_before, fresh.uncut_places_before = uncut, uncut_places
     fresh.step_count = cm.step_count
     fresh.started_inside = cm.started_inside

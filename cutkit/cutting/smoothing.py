@@ -77,8 +77,9 @@ SMOOTH_MIN_GAIN_DEG = 0.2
 #: angle (degrees) of their area-weighted mean moves in the plane that keeps the volume
 #: (:func:`_on_a_gentle_surface`); the surface then moves by at most the move.
 SURFACE_BEND_DEG = 30.0
-#: Looks at the poor tets per call: a move can open a move of another vertex that did not gain before.
-SMOOTH_PASSES = 2
+#: Looks at the poor tets per call at most (another only after one that moved a vertex): a move can
+#: open a move of another vertex that did not gain before (docs/cutting.md, "Angles").
+SMOOTH_PASSES = 3
 #: Directions of an interior vertex: the axes and the cube diagonals, both ways.
 _SPACE = np.vstack([np.eye(3), -np.eye(3),
                     np.array([[i, j, k] for i in (1, -1) for j in (1, -1) for k in (1, -1)]) / np.sqrt(3.0)])

@@ -517,7 +517,11 @@ def rebase_if_left(cm):
     the tissue into it, and may cut the sub-tetrahedra of this stroke (a
     second stroke crossing the first).  The runtime decides the end of a
     stroke itself (the hand's tip leaving the entry plane) and calls
-    :func:`~cutkit.cutting.rebase.rebase` through its session.
+    :func:`~cutkit.cutting.rebase.rebase` through its session.  After the
+    rebase every cut-made tet is looked at once more (:func:`finish_stroke`):
+    the cut's nodes are vertices of original tets now, which vertex smoothing
+    may move where a sliver needs it (it never moves a cut node of a
+    subdivided original).
 
     Returns
     -------
@@ -530,5 +534,6 @@ def rebase_if_left(cm):
     pose = cm.prev_pose
     finish_stroke(cm)  # what the blade held at its last steps, looked at once more
     cm.rebase()
+    finish_stroke(cm)  # the look the rebase opens: the cut's nodes are vertices of original tets now
     cm.prev_pose = pose
     return True

@@ -98,6 +98,7 @@ class BackgroundRebase:
         try:
             with s.lock.urgent():
                 s.rebase()
+            s.cut.finish()  # the look the rebase opens (cutkit.cutting.step.rebase_if_left)
         except BaseException as err:  # handed to the main loop by done()
             self.error = err
         self.wall_s.append(time.perf_counter() - w0)

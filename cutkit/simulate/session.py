@@ -230,6 +230,7 @@ class Session:
             return True
         with self.lock.urgent():
             self.rebase()
+        self.cut.finish()  # the look the rebase opens (cutkit.cutting.step.rebase_if_left)
         self.rebase_due = False
         return True
 
