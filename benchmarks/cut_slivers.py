@@ -2,8 +2,10 @@
 
 Cuts the paths of ``tests/test_cut_thousand_paths.py`` (every kind, tremor
 0-1 mm, three meshes) and, at the end of each stroke (before the rebase),
-takes the cut-made tetrahedron with the smallest dihedral angle and names
-what made it:
+takes the stroke's own cut-made tetrahedron with the smallest dihedral
+angle and names what made it (the test checks every cut-made tetrahedron
+of the model after the rebase and the look at them it opens, where the
+blade left: ``benchmarks/cut_fresh_draw.py --seed 7`` gives its figures):
 
 * the case of its original tetrahedron (``corner``, ``quad``, ``partial``,
   ``general``) and whether the tip was inside it (``tip``);

@@ -118,7 +118,8 @@ def rebase(cm):
                           fair_nodes=cm.fair_nodes, smooth_vertices=cm.smooth_vertices)
     fresh.cut_faces_before = cut_faces
     # the cut's nodes are vertices of original tets now, which vertex smoothing may move (it never
-    # moves a cut node of a subdivided original): the next stroke's end looks at every cut-made tet
+    # moves a cut node of a subdivided original): the next finish_stroke looks at every cut-made tet
+    # (rebase_if_left and the session call it right after the rebase)
     fresh.whole_look_due = bool(cut_faces)
     fresh.uncut_before, fresh.uncut_places_before = uncut, uncut_places
     fresh.step_count = cm.step_count
