@@ -9,7 +9,8 @@ of that test at every stroke's end (``cut_path``): ``cutkit check`` passes,
 the live volume plus the crumbs removed is the model's, no piece below the
 crumb limit is left, and every crossed edge is cut or counted.  It reports
 the paths that failed (mesh, index, kind, tremor and the first line of the
-failure) and the distribution of the worst cut-made dihedral angle per path.
+failure), the distribution of the worst cut-made dihedral angle per path,
+and each path whose worst is below 5 degrees (mesh, index, kind, tremor, angle).
 
     python benchmarks/cut_fresh_draw.py [--seed 424242] [--meshes kuhn,gmsh,decimated]
                                         [--no-fairing] [--no-smoothing] [--json]
@@ -34,7 +35,7 @@ def run(seed: int, meshes: list, fairing: bool, smoothing: bool = True) -> dict:
     from _cut_paths import make_path
     from test_cut_thousand_paths import ALL_KINDS, MESHES, PATHS_PER_MESH, TREMORS, cut_path
 
-    failed, worst = [], []
+    failed, worst, below = [], [], []
     t0 = time.perf_counter()
     with Progress(transient=True) as bar:
         task = bar.add_task("cutting paths", total=len(meshes) * PATHS_PER_MESH)
@@ -48,6 +49,8 @@ def run(seed: int, meshes: list, fairing: bool, smoothing: bool = True) -> dict:
                     missed, angle = cut_path(p, t, poses, 2.5 if i % 2 else 10.0, where, fair_nodes=fairing,
                                              smooth_vertices=smoothing)
                     worst.append(angle)
+                    if angle < 5.0:
+                        below.append(where + [round(float(angle), 2)])
                     if missed:
                         failed.append(where + [f"{len(missed)} crossed edges left uncut and uncounted"])
                 except Exception as e:  # a failed check (AssertionError) or a crash: both are failures
@@ -57,7 +60,8 @@ def run(seed: int, meshes: list, fairing: bool, smoothing: bool = True) -> dict:
     return {"seed": seed, "meshes": meshes, "fairing": fairing, "smoothing": smoothing, "paths": len(meshes) * PATHS_PER_MESH,
             "failures": len(failed), "failed": failed[:20], "wall_s": time.perf_counter() - t0,
             "worst_angle_min_p1_p10_median_deg": [float(v) for v in np.percentile(w, [0, 1, 10, 50])],
-            "paths_below_5_deg": int((w < 5).sum()), "paths_below_1_deg": int((w < 1).sum())}
+            "paths_below_5_deg": int((w < 5).sum()), "paths_below_1_deg": int((w < 1).sum()),
+            "below_5_deg": sorted(below, key=lambda b: b[-1])}
 
 
 def main():
@@ -82,6 +86,8 @@ def main():
               f"{res['paths_below_5_deg']} below 5")
         for f in res["failed"]:
             print("  failed:", *f)
+        for b in res["below_5_deg"]:
+            print("  below 5 deg:", *b)
 
 
 if __name__ == "__main__":
