@@ -262,6 +262,63 @@ def test_a_crushing_point_load_never_inverts_a_tet(hessian, monkeypatch):
     assert st.positions[top, 2] < 0.5 * p[top, 2]  # the load did squash the block
 
 
+def test_the_line_search_says_when_the_inversion_bound_cut_its_first_trial_short():
+    """One tet whose apex a direction drives through its base at step length 1/2: the first trial is
+    0.9 of that (cut short, and the tet stays upright); a direction a tenth as long is not cut."""
+    import cutkit.relax.newton as N
+
+    p = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+    t = np.array([[0, 1, 2, 3]])
+    em = build_element_model(model_of(p, t))
+    free = np.ones_like(p, bool)
+    terms = N._free_terms(em, p, None, None, None)
+    problem = N._Potential(em, terms, free, NewtonSolver(em)._elements())
+    for scale, short in ((1.0, True), (0.1, False)):
+        x = p.copy()
+        d = np.zeros_like(p)
+        d[3, 2] = -2.0 * scale  # apex to z = 0 at a = 1/2 (scale 1)
+        r = d.copy()  # a descent direction's residual: slope > 0
+        moved, _, _, cut_short = N.line_search(problem, x, d, r, float(np.linalg.norm(r)))
+        assert cut_short is short
+        assert np.linalg.det(deformation_gradients(x, em.tets[:1], em.Dminv[:1]))[0] > 0.0
+
+
+def test_an_iteration_after_a_step_cut_short_solves_its_system_loosely_and_the_steps_still_converge(monkeypatch):
+    """The crushing load below on the conjugate-gradient path: every linear solve that follows a line
+    search the inversion bound cut short runs to at least BOUNDED_CG_RTOL, others tighter (the usual
+    tolerance); every step still ends on the true residual's tolerance with no tet inverted."""
+    import cutkit.relax.newton as N
+
+    p, t = kuhn_box((3.0, 3.0, 2.0), (3, 3, 2))
+    em = build_element_model(model_of(p, t))
+    em.fixed[p[:, 2] == 0] = True
+    f = np.zeros_like(p)
+    f[int(np.flatnonzero(p[:, 2] == 2.0)[4]), 2] = -0.3
+    events, search, solve_linear = [], N.line_search, NewtonSolver._solve_linear
+
+    def watched_search(*args, **kw):
+        out = search(*args, **kw)
+        events.append(("search", out[3]))
+        return out
+
+    def watched_solve(self, A, r, x, free, rtol, halt=None):
+        events.append(("solve", rtol))
+        return solve_linear(self, A, r, x, free, rtol, halt)
+
+    monkeypatch.setattr(N, "line_search", watched_search)
+    monkeypatch.setattr(NewtonSolver, "_solve_linear", watched_solve)
+    st = ElementState(p.copy(), np.zeros_like(p))
+    solver = NewtonSolver(em, linear="cg", hessian="projected")
+    for _ in range(10):
+        events.append(("step", None))
+        assert newton_step(em, st, 0.01, f, atol=1e-6, solver=solver).converged
+        assert np.linalg.det(deformation_gradients(st.positions, *arrays(em)[:2])).min() > 0.0
+    after_short = [b[1] for a, b in zip(events, events[1:]) if a == ("search", True) and b[0] == "solve"]
+    after_long = [b[1] for a, b in zip(events, events[1:]) if a == ("search", False) and b[0] == "solve"]
+    assert after_short and min(after_short) >= N.BOUNDED_CG_RTOL
+    assert after_long and min(after_long) < N.BOUNDED_CG_RTOL  # the rule is selective
+
+
 @pytest.mark.parametrize("preconditioner", PRECONDITIONERS)
 def test_the_cg_solves_reach_the_same_static_answer(preconditioner):
     """Preconditioned CG (what models above CHOLESKY_MAX_DOFS use) against the factorisation."""

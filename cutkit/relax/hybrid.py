@@ -154,7 +154,7 @@ def _iterate(step, x, r, atol, rings, fraction, max_iterations, timer):
             break
         full = KN.step_bound(x, d, local.el, 1.0) > 1.0
         with timer("line_search"):
-            moved, r, _ = line_search(local, x, d, r, res)
+            moved, r, _, _ = line_search(local, x, d, r, res)
         it += 1
         with timer("residual"):
             res = float(np.linalg.norm(r))
