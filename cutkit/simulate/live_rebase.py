@@ -96,9 +96,7 @@ class BackgroundRebase:
         s = self.session
         t0, w0 = self.clock(), time.perf_counter()
         try:
-            with s.lock.urgent():
-                s.rebase()
-            s.cut.finish()  # the look the rebase opens (cutkit.cutting.step.rebase_if_left)
+            s.rebase_and_look()
         except BaseException as err:  # handed to the main loop by done()
             self.error = err
         self.wall_s.append(time.perf_counter() - w0)

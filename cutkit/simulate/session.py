@@ -228,11 +228,18 @@ class Session:
             self.rebase_due = False
             self.rebase_runner()
             return True
-        with self.lock.urgent():
-            self.rebase()
-        self.cut.finish()  # the look the rebase opens (cutkit.cutting.step.rebase_if_left)
+        self.rebase_and_look()
         self.rebase_due = False
         return True
+
+    def rebase_and_look(self) -> None:
+        """:meth:`rebase` under the hand-over lock, then the look at every cut-made tet it opens (the
+        cut's nodes are vertices of original tets now, which vertex smoothing may move;
+        :func:`cutkit.cutting.step.rebase_if_left`), its moves handed over before the tissue's next
+        step.  The look takes the lock itself (it is not re-entrant), so it comes after."""
+        with self.lock.urgent():
+            self.rebase()
+        self.cut.finish()
 
     def rebase(self) -> np.ndarray:
         """Make the live tets the original ones of a fresh cut state (:meth:`CutMesh.rebase`), between strokes.
