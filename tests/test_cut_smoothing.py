@@ -3,7 +3,10 @@
 The paths are the thousand paths' (tests/test_cut_thousand_paths.py), whose
 ``cut_path`` checks at every stroke's end that ``cutkit check`` passes, that
 the volume plus the crumbs removed is the model's to 1e-12, that no crumb is
-left and that every edge the stroke crossed is cut or counted.
+left and that every edge the stroke crossed is cut or counted.  The other
+levers on a sliver, a split with a fixed diagonal flipped and the look's
+re-split (``splits.FLIP_DIAGONALS``, ``smoothing.RESPLIT``), are off here
+unless a test says otherwise, so each path witnesses what a vertex move does.
 """
 
 import numpy as np
@@ -12,7 +15,14 @@ import pytest
 from test_cut_thousand_paths import MESHES, _path, _sound, cut_path
 
 from cutkit.cutting import smoothing as SM
+from cutkit.cutting import splits as SP
 from cutkit.mesh.quality import signed_volumes
+
+
+@pytest.fixture(autouse=True)
+def _moves_only(monkeypatch):
+    monkeypatch.setattr(SP, "FLIP_DIAGONALS", False)
+    monkeypatch.setattr(SM, "RESPLIT", False)
 
 
 @pytest.mark.parametrize("name,i", [("decimated", 48), ("decimated", 144), ("gmsh", 104), ("decimated", 8)])
@@ -172,13 +182,17 @@ def test_the_rebase_looks_again_with_the_cuts_nodes_free_to_move(i, monkeypatch)
     assert not missed_on and not missed_off
 
 
-def test_finish_stroke_moves_only_what_was_pending_and_hands_the_moves_over():
-    """At each stroke's end of a path that leaves slivers pending: the result moves nodes only (no tet
-    made or removed), each moved node's ``moved_from`` is where it was, its delta carries the same
-    nodes, nothing is pending after, and a second call finds nothing to do (None)."""
+def test_finish_stroke_moves_only_what_was_pending_and_hands_the_moves_over(monkeypatch):
+    """At each stroke's end of a path that leaves slivers pending: the result moves nodes, and re-makes
+    only the sub-tets of completely split originals (a re-split, ``better_split``: the tets it removes
+    are dead after, those it adds alive and of such an original); each moved node's ``moved_from`` is
+    where it was, its delta carries the same nodes, nothing is pending after, and a second call finds
+    nothing to do (None)."""
     from cutkit.cutting import CutMesh, cut_step, finish_stroke
     from cutkit.cutting.step import blade_in_tissue
 
+    monkeypatch.setattr(SP, "FLIP_DIAGONALS", True)
+    monkeypatch.setattr(SM, "RESPLIT", True)
     p, t = MESHES["kuhn"]
     poses, blade_length, _ = _path("kuhn", 222)
     cm = CutMesh(p, t, blade_length=blade_length)
@@ -189,9 +203,11 @@ def test_finish_stroke_moves_only_what_was_pending_and_hands_the_moves_over():
         r = finish_stroke(cm)
         assert not cm.fair_pending and not cm.smooth_pending and finish_stroke(cm) is None
         if r is not None:
-            assert r.added_nodes.size == r.added_tets.size == r.removed_tets.size == 0
+            assert not cm._alive[r.removed_tets].any() and cm._alive[r.added_tets].all()
+            made_in = np.unique(cm.store.tet_origins[r.added_tets])
+            assert all(cm.completely_split(int(o)) for o in made_in), made_in
             np.testing.assert_array_equal(r.moved_from, before[r.moved_nodes])
-            assert (np.abs(cm.points[r.moved_nodes] - before[r.moved_nodes]).max(axis=1) > 0).any()
+            assert r.added_tets.size or (np.abs(cm.points[r.moved_nodes] - before[r.moved_nodes]).max(axis=1) > 0).any()
             np.testing.assert_array_equal(r.delta.moved_nodes, r.moved_nodes)
             np.testing.assert_array_equal(r.delta.moved_rest_to, cm.rest_points[r.moved_nodes])
             unmoved = np.setdiff1d(np.arange(len(before)), r.moved_nodes)

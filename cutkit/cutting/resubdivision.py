@@ -19,7 +19,8 @@ from cutkit.cutting import _kernels_step as K
 from cutkit.cutting import subdivision as S
 from cutkit.cutting.crumbs import forget_crumb_tets
 from cutkit.cutting.tolerances import TET_BARY_MIN, clamp_bary
-from cutkit.cutting.splits import COMPACT_VOL_MIN, SPLIT_ANGLE_GAIN, SPLIT_ANGLE_GOOD, compact_split, fix_diagonals
+from cutkit.cutting.splits import (COMPACT_VOL_MIN, SPLIT_ANGLE_GAIN, SPLIT_ANGLE_GOOD, compact_split, fix_diagonals,
+                                   flipped_split, live_angle)
 
 #: Where T may go when no tip is inside (fractions of the way from the cut
 #: nodes' centroid to the tet's centroid): the best-shaped cone is taken.  0
@@ -37,20 +38,16 @@ def _cone(tris, apex):
     return new
 
 
-def resubdivide(cm, o):
-    """Re-subdivide original tet ``o`` from scratch from its cut state."""
+def resubdivide(cm, o, flips=True):
+    """Re-subdivide original tet ``o`` from scratch from its cut state (``flips``: a poor complete
+    split may flip a diagonal a neighbour fixed, :func:`~cutkit.cutting.splits.compact_split`)."""
     mask = S.REDUCE_TABLE[cm.tet_mask(o)]
     case, group = S.CLASSIFY_TABLE[mask]
     if case == "uncut":
         return
     v = cm.orig_tets[o].tolist()
-    # tip / centre node T
-    tb = cm.tip_bary.get(o)
-    free_T = tb is None  # no tip inside: T may go where its cone is best shaped
     ct = cm.cut_tables()
-    if free_T:  # the mean of the tet's cut nodes
-        tb = K.cut_nodes_centroid(ct, o, mask)
-    tb = clamp_bary(tb, TET_BARY_MIN)
+    tb, free_T = _T_start(cm, ct, o, mask)
     complete = case in ("corner", "quad")
     general = case == "general"  # a forked face: one T per piece, always the T-cone
     group = np.array(group, np.int64)  # side (piece) of each corner
@@ -60,12 +57,7 @@ def resubdivide(cm, o):
         if free_T:
             tb, _ = _best_T(cm, v, tb, tris, free_T)
     elif complete and cm.compact_splits:
-        tris, corner, face, new, angle, choice = compact_split(cm, ct, o, mask, group)
-        if new is not None and angle < SPLIT_ANGLE_GOOD:
-            # a poor compact cone: the T-cone may be better (more tets, but no sliver)
-            tb_c, cone = _best_T(cm, v, tb, tris, free_T)
-            if cone > angle + SPLIT_ANGLE_GAIN:
-                new, tb = None, tb_c
+        tris, corner, face, new, choice, tb, _ = _complete_split(cm, ct, o, mask, group, flips)
     else:
         tris, corner, face = KP.face_triangles(ct, o, mask, cm.centre_nodes)
         if o != cm.tip_tet:  # no tip inside: the crack front may run between notch nodes
@@ -86,9 +78,65 @@ def resubdivide(cm, o):
     ids = cm.store.add_tets(new, o)
     cm.subtets[o] = ids
     cm.sub_start[o], cm.sub_count[o] = ids[0], len(ids)  # contiguous (TissueStore.add_tets)
-    # a partly cut tet across a split face follows the diagonal this split chose
+    # a tet across a split face follows the diagonal this split chose (and flips none of its own)
     for nb in fix_diagonals(cm, o, choice):
-        resubdivide(cm, nb)
+        resubdivide(cm, nb, flips=False)
+
+
+def _T_start(cm, ct, o, mask):
+    """(tb (4,) float64, free): where the tet's node T starts, the tip's barycentric weights, or with
+    no tip inside (``free``: T may go where its cone is best shaped) the mean of its cut nodes."""
+    tb = cm.tip_bary.get(o)
+    free_T = tb is None
+    return clamp_bary(K.cut_nodes_centroid(ct, o, mask) if free_T else tb, TET_BARY_MIN), free_T
+
+
+def _complete_split(cm, ct, o, mask, group, flips):
+    """(tris, corner, face, tets or None (the T-cone), choice, tb, angle): the complete split of ``o``
+    as :func:`resubdivide` makes it: the best compact split; below ``SPLIT_ANGLE_GOOD`` the T-cone
+    where that is better by ``SPLIT_ANGLE_GAIN`` (more tets, but no sliver), and with ``flips`` a
+    compact split with a fixed diagonal flipped where that is better still
+    (:func:`~cutkit.cutting.splits.flipped_split`); ``angle`` its smallest dihedral angle (degrees)."""
+    tb, free_T = _T_start(cm, ct, o, mask)
+    tris, corner, face, new, angle, choice = compact_split(cm, ct, o, mask, group)
+    if new is not None and angle >= SPLIT_ANGLE_GOOD:
+        return tris, corner, face, new, choice, tb, angle
+    v = cm.orig_tets[o].tolist()
+    if new is None:  # no compact split: the T-cone, T where the cut nodes are (the cut stays flat)
+        angle = _best_T(cm, v, tb, tris, False)[1]
+    else:
+        tb_c, cone = _best_T(cm, v, tb, tris, free_T)
+        if cone > angle + SPLIT_ANGLE_GAIN:
+            new, tb, angle = None, tb_c, cone
+    flipped = flipped_split(cm, ct, o, mask, group, angle, split_angle_with) if flips else None
+    if flipped is not None:
+        tris, corner, face, new, angle, choice = flipped
+    return tris, corner, face, new, choice, tb, angle
+
+
+def split_angle_with(cm, nb, f, d) -> float:
+    """Smallest dihedral angle (degrees) of the complete split of ``nb`` as :func:`resubdivide` would
+    make it (no flip) with face ``f``'s diagonal through vertex ``d``; ``cm`` is left as it was."""
+    kept = int(cm.face_diag[f])
+    cm.face_diag[f] = d
+    angle = _split_angle(cm, nb, False)
+    cm.face_diag[f] = kept
+    return angle
+
+
+def better_split(cm, o, gain) -> bool:
+    """Whether :func:`resubdivide` would lift the smallest angle of completely split ``o``'s live
+    sub-tets by more than ``gain`` degrees: a split made before a later move of its nodes, or before
+    its neighbours fixed their diagonals, may be a sliver that another split of the same cut lifts
+    (a fixed diagonal flipped, :func:`~cutkit.cutting.splits.flipped_split`)."""
+    return _split_angle(cm, o, True) > live_angle(cm, o) + gain
+
+
+def _split_angle(cm, o, flips) -> float:
+    """Smallest dihedral angle (degrees) of the complete split :func:`resubdivide` would make of ``o``."""
+    mask = S.REDUCE_TABLE[cm.tet_mask(o)]
+    _, group = S.CLASSIFY_TABLE[mask]
+    return float(_complete_split(cm, cm.cut_tables(), o, mask, np.array(group, np.int64), flips)[-1])
 
 
 def _face_apex_cone(cm, o, v, tb, free_T, tris, face):

@@ -44,6 +44,12 @@ What a move keeps:
   or with a cut node the blade placed this step (looked at again at the
   next step), stays.
 
+Before a vertex moves for a sliver of a completely split original, the
+original is re-split where its split as :func:`~cutkit.cutting.resubdivision.resubdivide`
+would make it now (a fixed diagonal flipped, :func:`~cutkit.cutting.splits.flipped_split`)
+lifts the sliver by more than :data:`SMOOTH_MIN_GAIN_DEG` (:data:`RESPLIT`): the
+split was chosen before its nodes moved, or before its neighbours fixed their diagonals.
+
 The move is carried to the rest configuration and the texture through the
 deformation of the star's tetrahedron that holds the vertex's new place; the
 vertex and its cut nodes are the step's moved nodes
@@ -58,6 +64,7 @@ from __future__ import annotations
 import numpy as np
 
 from cutkit.cutting import _kernels_fair as KF
+from cutkit.cutting.resubdivision import better_split
 from cutkit.cutting.snapping import (COPLANAR_TOL, _dependants, _rest_move, _star, _surface_direction,
                                      boundary_faces, crack_nodes, face_normals)
 from cutkit.mesh.geometry import tet_volume_gradients
@@ -80,6 +87,9 @@ SURFACE_BEND_DEG = 30.0
 #: Looks at the poor tets per call at most (another only after one that moved a vertex): a move can
 #: open a move of another vertex that did not gain before (docs/cutting.md, "Angles").
 SMOOTH_PASSES = 3
+#: The look re-splits a completely split original whose split as it would be made now lifts its
+#: sliver (:func:`~cutkit.cutting.resubdivision.better_split`), before moving a vertex for it.
+RESPLIT = True
 #: Directions of an interior vertex: the axes and the cube diagonals, both ways.
 _SPACE = np.vstack([np.eye(3), -np.eye(3),
                     np.array([[i, j, k] for i in (1, -1) for j in (1, -1) for k in (1, -1)]) / np.sqrt(3.0)])
@@ -117,18 +127,20 @@ def smooth_vertices_around(cm, originals, held) -> int:
     cm.smooth_pending = set()
     if not fresh:
         return 0
-    fresh = np.array(sorted(fresh), np.int64)
     moved = 0
     for _ in range(SMOOTH_PASSES):
-        now = _smooth_pass(cm, fresh, held)
+        resplit = set()
+        now = _smooth_pass(cm, np.array(sorted(fresh), np.int64), held, resplit)
         moved += now
         if not now:
             break
+        fresh |= resplit  # a re-split's neighbours, re-made to follow its diagonals
     return moved
 
 
-def _smooth_pass(cm, fresh, held) -> int:
-    """One look at the poor tets of the originals ``fresh`` (k,) int64, the poorest first."""
+def _smooth_pass(cm, fresh, held, resplit) -> int:
+    """One look at the poor tets of the originals ``fresh`` (k,) int64, the poorest first; the
+    originals across the faces of one it re-split are added to ``resplit`` (set of int)."""
     mesh = KF.FairMesh(cm._x, cm._tets, cm._alive, cm.sub_start, cm.sub_count)
     tets, owner = KF.poor_tets(mesh, fresh, SMOOTH_BELOW_DEG)
     whole = fresh[(cm.sub_count[fresh] == 0) & cm._alive[fresh]]  # an earlier stroke's tet, uncut since
@@ -143,6 +155,11 @@ def _smooth_pass(cm, fresh, held) -> int:
             continue  # a move before lifted it
         if held and not held.isdisjoint(cm._tets[t].tolist()):
             cm.smooth_pending.add(o)  # the blade is at it: it may change again at the next step
+            continue
+        if RESPLIT and t != o and cm.compact_splits and cm.completely_split(o) and better_split(cm, o, SMOOTH_MIN_GAIN_DEG):
+            cm.resubdivide(o)  # another split of the same cut lifts it (resubdivision.better_split)
+            resplit.update(int(n) for n in cm.face_tets[cm.tet_faces[o]].ravel() if n >= 0)
+            moved += 1
             continue
         best = None
         for v in cm.orig_tets[o].tolist():

@@ -23,6 +23,7 @@ import numpy as np
 
 from cutkit.cutting import _kernels_split as KP
 from cutkit.cutting.subdivision import FACE_EDGES
+from cutkit.mesh.quality import min_dihedral_angles
 from cutkit.mesh.topology import TET_EDGES
 
 #: Compact complete splits accept only sub-tets of at least this fraction
@@ -37,6 +38,9 @@ SPLIT_ANGLE_GOOD = 6.0
 #: Below SPLIT_ANGLE_GOOD the T-cone (about twice the tets) replaces the
 #: compact split only when its worst angle is better by this many degrees.
 SPLIT_ANGLE_GAIN = 2.0
+#: A complete split below SPLIT_ANGLE_GOOD may flip a split face's diagonal fixed before
+#: (:func:`flipped_split`; False keeps every fixed diagonal).
+FLIP_DIAGONALS = True
 
 
 def compact_split(cm, ct, o, mask, group):
@@ -62,7 +66,6 @@ def compact_split(cm, ct, o, mask, group):
     o : int  original tet
     mask : int  its cut edges (6-bit, reduced)
     group : (4,) int64  side (0 or 1) of each corner of the tet
-
     Returns
     -------
     (tris, corner, face, tets, angle, choice)
@@ -71,16 +74,100 @@ def compact_split(cm, ct, o, mask, group):
         with the chosen diagonals); the split's tets (p, 4) int64 and their
         smallest dihedral angle in degrees, or (None, 0.0) when no choice
         passes the volume test (``_kernels_split.compact_split``); and the
-        chosen diagonals, a list of (face, vertex id, the smaller-id vertex
-        it would default to), left unfixed.
+        chosen diagonals, a list of (face, vertex id, the vertex it had:
+        the smaller-id one for a free face, the fixed one for a flipped
+        face, :func:`flipped_split`), left unfixed.
     """
     free = _free_diagonals(cm, o, mask)
-    vol_min = COMPACT_VOL_MIN * float(cm._vol0(o))
-    bits, tris, corner, face, tets, angle = KP.compact_split_diagonals(
-        ct, cm._x, o, mask, group, vol_min, np.array(free, np.int64).reshape(-1, 3), cm.centre_nodes)
-    choice = [(f, hi if bits > 0 and bits >> i & 1 else lo, lo) for i, (f, lo, hi) in enumerate(free)]
-    cm.face_diag[[f for f, _, _ in free]] = -1
+    return _as_split(_search(cm, ct, o, mask, group, COMPACT_VOL_MIN * float(cm._vol0(o)), free))
+
+
+def flipped_split(cm, ct, o, mask, group, floor, neighbour_angle):
+    """The compact split of ``o`` with diagonals fixed before flipped, where that lifts the worse of
+    ``o`` and the neighbours re-split for it; as :func:`compact_split`, or None.
+
+    A split face's diagonal is fixed by the first complete split that used it
+    (:func:`fix_diagonals`), and every split of the tet across it may then be
+    a sliver (a corner a retraced stroke cut off a tet the first pass made).
+    Each fixed diagonal of a face on the surface or across a cut neighbour
+    (:func:`_flippable_faces`) is tried both ways with the free ones; the
+    best split is taken when its smallest angle, and that of every
+    completely split neighbour re-split with the flipped diagonal, beat the
+    worse of ``floor`` and those neighbours' now.  The caller re-splits the
+    neighbours without flips of their own, so a flip never cascades.
+
+    Parameters
+    ----------
+    cm, ct, o, mask, group : as :func:`compact_split`
+    floor : float  smallest dihedral angle (degrees) of the split ``o`` gets without a flip
+    neighbour_angle : callable
+        ``neighbour_angle(cm, nb, face, vertex)``: smallest dihedral angle (degrees) of completely
+        split ``nb`` re-split with ``face``'s diagonal through ``vertex`` (no flip).
+    """
+    flippable = _flippable_faces(cm, o, mask)
+    if not (FLIP_DIAGONALS and flippable):
+        return None
+    free = _free_diagonals(cm, o, mask)
+    trial = _search(cm, ct, o, mask, group, COMPACT_VOL_MIN * float(cm._vol0(o)),
+                    free + [(f, d, e) for f, d, e, _ in flippable])
+    bits = trial[1]
+    flipped = [row for i, row in enumerate(flippable) if bits >= 0 and bits >> (len(free) + i) & 1]
+    if not (flipped and trial[-1] > floor):
+        return None
+    worst_before, worst_after = floor, trial[-1]
+    for f, _, e, nb in (row for row in flipped if row[3] >= 0):
+        worst_before = min(worst_before, live_angle(cm, nb))
+        worst_after = min(worst_after, neighbour_angle(cm, nb, f, e))
+    return _as_split(trial) if worst_after > worst_before else None
+
+
+def _as_split(found):
+    """:func:`compact_split`'s tuple from :func:`_search`'s."""
+    rows, (bits, tris, corner, face, tets, angle) = found[0], found[1:]
+    choice = [(f, hi if bits > 0 and bits >> i & 1 else lo, lo) for i, (f, lo, hi) in enumerate(rows)]
     return tris, corner, face, (tets if bits >= 0 else None), float(angle), choice
+
+
+def _search(cm, ct, o, mask, group, vol_min, rows):
+    """(rows, bits, tris, corner, face, tets, angle): ``KP.compact_split_diagonals`` of ``o`` over
+    ``rows`` [(face, vertex of bit 0, vertex of bit 1)], the faces' diagonals left as they were."""
+    faces = [f for f, _, _ in rows]
+    kept = cm.face_diag[faces].copy()
+    out = KP.compact_split_diagonals(ct, cm._x, o, mask, group, vol_min,
+                                     np.array(rows, np.int64).reshape(-1, 3), cm.centre_nodes)
+    cm.face_diag[faces] = kept
+    return (rows, *out)
+
+
+def _flippable_faces(cm, o, mask):
+    """[(face, its fixed diagonal vertex, the other, the neighbour or -1)]: the split faces of ``o``
+    whose diagonal is fixed, not along an earlier cut, on the model's surface (no neighbour: -1), or
+    across a partly cut neighbour (its cone takes either diagonal: -1) or a completely split one (a
+    crumb's tets it re-makes are found and removed again by the step,
+    :func:`~cutkit.cutting.crumbs.remove_crumbs`)."""
+    if cm.centre_nodes:
+        return []
+    out = []
+    for lf in range(4):
+        f = int(cm.tet_faces[o, lf])
+        if cm.face_diag[f] < 0 or f in cm.face_twins:
+            continue
+        uncut = [k for k in FACE_EDGES[lf].tolist() if not mask >> k & 1]
+        if len(uncut) != 1:
+            continue
+        nb = [int(t) for t in cm.face_tets[f] if t >= 0 and t != o]
+        nb = nb[0] if nb and nb[0] in cm.subtets and cm.completely_split(nb[0]) else -1
+        a, b = (int(q) for q in cm.orig_tets[o, TET_EDGES[uncut[0]]])
+        d = int(cm.face_diag[f])
+        out.append((f, d, b if d == a else a, nb))
+    return out
+
+
+def live_angle(cm, o) -> float:
+    """Smallest dihedral angle (degrees) of the live sub-tets of ``o`` (180 where none is)."""
+    ids = np.array(cm.subtets[o], np.int64)
+    ids = ids[cm._alive[ids]]
+    return float(min_dihedral_angles(cm._x, cm._tets[ids]).min()) if ids.size else 180.0
 
 
 def _free_diagonals(cm, o, mask):

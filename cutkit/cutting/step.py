@@ -469,8 +469,10 @@ def finish_stroke(cm: CutMesh, every_cut_tet: bool = True) -> StepResult | None:
     Returns
     -------
     StepResult or None
-        The nodes moved (``delta.moved_nodes``; no tet made or removed), or
-        None when nothing moved.
+        The nodes moved (``delta.moved_nodes``) and the sub-tets of a
+        complete split re-made another way where that lifted a sliver
+        (:func:`~cutkit.cutting.resubdivision.better_split`), or None when
+        nothing changed.
     """
     fair = cm.fair_nodes and bool(cm.fair_pending)
     if every_cut_tet:
@@ -486,7 +488,7 @@ def finish_stroke(cm: CutMesh, every_cut_tet: bool = True) -> StepResult | None:
     if cm.smooth_vertices and (cm.smooth_pending or reshaped):
         smooth_vertices_around(cm, reshaped, set())
     cm.smooth_pending = set()
-    if not len(cm.store.step_log.moved_nodes):
+    if not (len(cm.store.step_log.moved_nodes) or len(cm.store.step_log.added_tets)):
         return None
     return _step_result(cm, n_nodes_before, [], cm.tip_tet)
 

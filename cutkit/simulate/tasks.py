@@ -233,7 +233,7 @@ class CutTask:
         from cutkit.cutting import finish_stroke
 
         result = finish_stroke(self.cm, every_cut_tet)
-        if result is not None and result.moved_nodes.size:
+        if result is not None:
             self._apply(result, "strokes_finished")
 
     def note(self, code: int) -> None:
