@@ -40,7 +40,7 @@ def _cone(tris, apex):
 
 def resubdivide(cm, o, flips=True):
     """Re-subdivide original tet ``o`` from scratch from its cut state (``flips``: a poor complete
-    split may flip a diagonal a neighbour fixed, :func:`~cutkit.cutting.splits.compact_split`)."""
+    split may flip a diagonal a neighbour fixed, :func:`~cutkit.cutting.splits.flipped_split`)."""
     mask = S.REDUCE_TABLE[cm.tet_mask(o)]
     case, group = S.CLASSIFY_TABLE[mask]
     if case == "uncut":
@@ -57,7 +57,7 @@ def resubdivide(cm, o, flips=True):
         if free_T:
             tb, _ = _best_T(cm, v, tb, tris, free_T)
     elif complete and cm.compact_splits:
-        tris, corner, face, new, choice, tb, _ = _complete_split(cm, ct, o, mask, group, flips)
+        tris, corner, face, new, choice, tb, _ = _complete_split(cm, ct, o, mask, group, (tb, free_T), flips)
     else:
         tris, corner, face = KP.face_triangles(ct, o, mask, cm.centre_nodes)
         if o != cm.tip_tet:  # no tip inside: the crack front may run between notch nodes
@@ -91,13 +91,14 @@ def _T_start(cm, ct, o, mask):
     return clamp_bary(K.cut_nodes_centroid(ct, o, mask) if free_T else tb, TET_BARY_MIN), free_T
 
 
-def _complete_split(cm, ct, o, mask, group, flips):
+def _complete_split(cm, ct, o, mask, group, T_start, flips):
     """(tris, corner, face, tets or None (the T-cone), choice, tb, angle): the complete split of ``o``
     as :func:`resubdivide` makes it: the best compact split; below ``SPLIT_ANGLE_GOOD`` the T-cone
     where that is better by ``SPLIT_ANGLE_GAIN`` (more tets, but no sliver), and with ``flips`` a
     compact split with a fixed diagonal flipped where that is better still
-    (:func:`~cutkit.cutting.splits.flipped_split`); ``angle`` its smallest dihedral angle (degrees)."""
-    tb, free_T = _T_start(cm, ct, o, mask)
+    (:func:`~cutkit.cutting.splits.flipped_split`); ``angle`` its smallest dihedral angle (degrees).
+    ``T_start``: :func:`_T_start`'s (tb, free)."""
+    tb, free_T = T_start
     tris, corner, face, new, angle, choice = compact_split(cm, ct, o, mask, group)
     if new is not None and angle >= SPLIT_ANGLE_GOOD:
         return tris, corner, face, new, choice, tb, angle
@@ -136,7 +137,8 @@ def _split_angle(cm, o, flips) -> float:
     """Smallest dihedral angle (degrees) of the complete split :func:`resubdivide` would make of ``o``."""
     mask = S.REDUCE_TABLE[cm.tet_mask(o)]
     _, group = S.CLASSIFY_TABLE[mask]
-    return float(_complete_split(cm, cm.cut_tables(), o, mask, np.array(group, np.int64), flips)[-1])
+    ct = cm.cut_tables()
+    return float(_complete_split(cm, ct, o, mask, np.array(group, np.int64), _T_start(cm, ct, o, mask), flips)[-1])
 
 
 def _face_apex_cone(cm, o, v, tb, free_T, tris, face):

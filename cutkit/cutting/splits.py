@@ -66,6 +66,7 @@ def compact_split(cm, ct, o, mask, group):
     o : int  original tet
     mask : int  its cut edges (6-bit, reduced)
     group : (4,) int64  side (0 or 1) of each corner of the tet
+
     Returns
     -------
     (tris, corner, face, tets, angle, choice)
