@@ -615,18 +615,24 @@ def test_decimation_leaves_no_hanging_node(monkeypatch):
 def test_demo_twice_into_its_folder(tmp_path, monkeypatch):
     """`cutkit demo -o X` twice: the second run reuses the build and replaces the first run's outputs;
     a folder with other files in it is refused (a small recipe stands in for the knee)."""
+    import functools
+
     import cutkit.demo as demo_module
     import cutkit.demo.warmup as warmup
+    import cutkit.simulate as simulate_module
 
     (tmp_path / "r.toml").write_text(
         f"[recipe]\nvolume = '{BLOCK}'\n\n[segment]\nlabels = true\n\n[[materials]]\nlabel = 1\nname = 'fat'\n\n"
         "[[materials]]\nlabel = 2\nname = 'muscle'\n\n[boundary]\n[[boundary.fixed_regions]]\naxis = 'z'\n"
         "side = 'min'\ndepth_mm = 1.0\n")
-    traj = straight_incision([6.0, 9.2, 10.0], [30.0, 9.2, 10.0], [0, 0, -1.0], depth=3.0, approach=2.0,
+    traj = straight_incision([6.0, 9.2, 10.0], [14.0, 9.2, 10.0], [0, 0, -1.0], depth=3.0, approach=2.0,
                              press_time=0.05, cut_time=0.1, rate=100.0)
     write_trajectory(tmp_path / "c.csv", traj)
     monkeypatch.setattr(demo_module, "demo_inputs", lambda: (tmp_path / "r.toml", tmp_path / "c.csv"))
     monkeypatch.setattr(warmup, "start_background", lambda: None)
+    # what is asserted is the folder's handling, not the tissue's rest: no hold after the cut
+    monkeypatch.setattr(simulate_module, "SimulateOptions", functools.partial(simulate_module.SimulateOptions,
+                                                                              hold_s=0.0))
     out = tmp_path / "X"
     code, output = run(["demo", "-o", out, "--no-png"])
     assert code == 0, output
