@@ -367,7 +367,7 @@ def test_bracketed_names_pass_through_every_command(tmp_path):
         (["check", mesh], [f"check {mesh}"]),
         (["export", mesh, d / "e[x].vtu"], [f"-> {d / 'e[x].vtu'}"]),
         (["assign", mesh, "--recipe", d / "r[1].toml", "-o", model], [f"-> {model}"]),
-        (["trajectory", "--model", model, "--start", "4,6,10", "--end", "30,6,10", "--depth", "2",
+        (["trajectory", "--model", model, "--start", "4,6,10", "--end", "12,6,10", "--depth", "2",
           "-o", d / "cut[final].csv"], [f"{d / 'cut[final].csv'}: "]),
         (["cut", model, "--trajectory", d / "cut[final].csv", "-o", d / "o[ut]"], [f"-> {d / 'o[ut]'}/cut.pvd"]),
         (["relax", model, "--seconds", "0.01", "--fps", "100", "-o", d / "r[/]"], [f"-> {d / 'r[/]'}/relax.pvd"]),
