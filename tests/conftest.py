@@ -33,10 +33,12 @@ def pytest_collection_modifyitems(config, items):
     """The order the workers take the test files in (``--dist loadfile``: a file runs whole on one
     worker, so a module fixture is built once).
 
-    The file that builds the demo knee first (about a minute on two cores), then the files with
-    slow tests, heaviest first, then the other files that read the knee (built by then), then the
-    rest, which even out the workers' ends.  xdist keeps this order (its reordering by the
-    number of tests is switched off in :func:`pytest_configure`)."""
+    The files of :data:`FIRST` in their order (the first builds the demo knee, about a minute on
+    two cores), then the files with slow tests, heaviest first, then the other files that read the
+    knee (built by then), then the rest, which even out the workers' ends.  xdist keeps this order
+    (its reordering by the number of tests is switched off in :func:`pytest_configure`) and starts
+    each worker on two files: the first and third of the order go to one, the second and fourth to
+    the other."""
     files = {}
     for item in items:
         f = files.setdefault(item.path, {"slow": 0, "knee": False, "first": len(files)})
@@ -45,8 +47,8 @@ def pytest_collection_modifyitems(config, items):
 
     def rank(item):
         f = files[item.path]
-        if item.path.name == KNEE_FIRST:
-            return (0, 0, f["first"])
+        if item.path.name in FIRST:
+            return (0, FIRST.index(item.path.name), f["first"])
         if f["knee"]:
             return (2, 0, f["first"])
         return (1, -f["slow"], f["first"]) if f["slow"] else (3, 0, f["first"])
@@ -54,8 +56,12 @@ def pytest_collection_modifyitems(config, items):
     items.sort(key=rank)  # stable: each file keeps its tests' order
 
 
-#: The test file run first: its module fixture builds the demo knee, then simulates on it.
-KNEE_FIRST = "test_knee_tissue.py"
+#: The test files run first, in this order.  The first's module fixture builds the demo knee, then
+#: simulates on it, with the third after it on that worker; the other worker starts on the cut's
+#: own files (second and fourth), so that in a fresh clone the two compile different numba kernels
+#: first and each later loads what the other compiled, rather than both compiling the simulation's
+#: kernels at once.
+FIRST = ("test_knee_tissue.py", "test_cut_properties.py", "test_simulate.py", "test_cut_thousand_paths.py")
 
 
 @pytest.fixture(autouse=True)
