@@ -1,6 +1,8 @@
 """The average nodal pressure (ANP) tetrahedron: kernels against NumPy twins, derivatives against
 finite differences, and its behaviour under homogeneous strain, cuts, prestress and crushing."""
 
+import functools
+
 import numpy as np
 import pytest
 
@@ -368,14 +370,22 @@ def _locking_benchmark():
     return B
 
 
-def _locking_ratios(nu, kind, size=1, ref=2, elements=("nh", "anp", f"anp:{anp.ANP_SMOOTHING}")):
-    """cutkit's cantilever deflection and block force over the P2 reference at ``ref`` times the
-    base cells, for each element, on the meshes of benchmarks/element_locking.py at ``size``."""
+@functools.lru_cache(maxsize=None)
+def _p2_references(nu, ref):
+    """(cantilever deflection, block force) of the P2 reference at ``ref`` times the base cells: the
+    same for both mesh kinds, so solved once per process (a file's tests run on one worker)."""
     from _fem_reference import p2_block_reaction, p2_cantilever
 
     B = _locking_benchmark()
-    ref_c = p2_cantilever(B.CANTILEVER, (10 * ref, 2 * ref, 2 * ref), E, nu, B.TRACTION)
-    ref_b = p2_block_reaction(B.BLOCK, (4 * ref, 4 * ref, 2 * ref), E, nu, B.STRAIN)
+    return (p2_cantilever(B.CANTILEVER, (10 * ref, 2 * ref, 2 * ref), E, nu, B.TRACTION),
+            p2_block_reaction(B.BLOCK, (4 * ref, 4 * ref, 2 * ref), E, nu, B.STRAIN))
+
+
+def _locking_ratios(nu, kind, size=1, ref=2, elements=("nh", "anp", f"anp:{anp.ANP_SMOOTHING}")):
+    """cutkit's cantilever deflection and block force over the P2 reference at ``ref`` times the
+    base cells, for each element, on the meshes of benchmarks/element_locking.py at ``size``."""
+    B = _locking_benchmark()
+    ref_c, ref_b = _p2_references(nu, ref)
     pc, tc = B.mesh(kind, B.CANTILEVER, (10 * size, 2 * size, 2 * size))
     pb, tb = B.mesh(kind, B.BLOCK, (4 * size, 4 * size, 2 * size))
     return {e: (B.cantilever(pc, tc, nu, e) / ref_c, B.block(pb, tb, nu, e) / ref_b) for e in elements}

@@ -273,8 +273,11 @@ def vertex_place(star, directions, steps, move_max):
     x0 = star.x
     y = x0.copy()
     normals = np.empty((4, 3))
-    angles = np.empty((star.tets.shape[0], 6))
+    angles = np.zeros((star.tets.shape[0], 6))  # rows past a non-positive tet stay 0 (the order below only)
     start = _worst_angle(y, star.tets, -np.inf, normals, angles)
+    # a trial that cannot win is then refused at its first tet (the smallest angle is the same in any
+    # order; often the poorest tet holds no moved node, and every trial ends there)
+    tets = _poorest_first(star.tets, angles)
     now = np.empty(star.ends.shape[0], np.bool_)
     _edges_crossing(x0[star.vertex], star.ends, star.swept, now)
     after = np.empty_like(now)
@@ -290,7 +293,7 @@ def vertex_place(star, directions, steps, move_max):
                 if trial[0] * trial[0] + trial[1] * trial[1] + trial[2] * trial[2] > move_max * move_max:
                     continue
                 _shifted(x0, star.share, trial, y)
-                a = _worst_angle(y, star.tets, best + _GAIN_EPS_DEG, normals, angles)
+                a = _worst_angle(y, tets, best + _GAIN_EPS_DEG, normals, angles)
                 if not a > best + _GAIN_EPS_DEG:
                     continue
                 _edges_crossing(y[star.vertex], star.ends, star.swept, after)

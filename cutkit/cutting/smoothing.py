@@ -67,7 +67,7 @@ from cutkit.cutting import _kernels_fair as KF
 from cutkit.cutting.resubdivision import better_split
 from cutkit.cutting.snapping import (COPLANAR_TOL, _dependants, _rest_move, _star, _surface_direction,
                                      boundary_faces, crack_nodes, face_normals)
-from cutkit.mesh.geometry import tet_volume_gradients
+from cutkit.mesh.geometry import cross_rows, tet_volume_gradients
 from cutkit.mesh.quality import min_dihedral_angles
 
 #: A cut-made tetrahedron below this smallest dihedral angle (degrees) has its original's vertices
@@ -90,6 +90,8 @@ SMOOTH_PASSES = 3
 #: The look re-splits a completely split original whose split as it would be made now lifts its
 #: sliver (:func:`~cutkit.cutting.resubdivision.better_split`), before moving a vertex for it.
 RESPLIT = True
+#: Up to this many nodes a sorted face's three node numbers fit one int64 (n**3 < 2**63).
+_ROW_KEY_MAX_NODES = 2_000_000
 #: Directions of an interior vertex: the axes and the cube diagonals, both ways.
 _SPACE = np.vstack([np.eye(3), -np.eye(3),
                     np.array([[i, j, k] for i in (1, -1) for j in (1, -1) for k in (1, -1)]) / np.sqrt(3.0)])
@@ -193,13 +195,15 @@ def _directions(cm, group, stars):
     for n in face_n:
         if all(abs(abs(float(n @ m)) - 1.0) > COPLANAR_TOL for m in normals):
             normals.append(n)  # a crack's faces seen from its two sides are one plane
+            if len(normals) > 2:
+                break  # more than two: what follows reads the faces, not how many planes
     if len(normals) == 0:
         return _SPACE
     if len(normals) == 1:
         return _plane_directions(normals[0])
     line = None
     if len(normals) == 2:
-        line = _surface_direction(np.array(normals), np.cross(normals[0], normals[1]))  # the crease, or None
+        line = _surface_direction(np.array(normals), cross_rows(normals[0], normals[1]))  # the crease, or None
     if line is not None:
         line = line / np.linalg.norm(line)
         return np.array([line, -line])
@@ -211,9 +215,9 @@ def _directions(cm, group, stars):
 
 def _plane_directions(normal) -> np.ndarray:
     """(8, 3) unit directions in the plane of unit ``normal`` (3,): two axes and their diagonals, both ways."""
-    u = np.cross(normal, np.eye(3)[int(np.argmin(np.abs(normal)))])
+    u = cross_rows(normal, np.eye(3)[int(np.argmin(np.abs(normal)))])
     u /= np.linalg.norm(u)
-    w = np.cross(normal, u)
+    w = cross_rows(normal, u)
     d = np.array([u, w, (u + w) / np.sqrt(2.0), (u - w) / np.sqrt(2.0)])
     return np.vstack([d, -d])
 
@@ -223,7 +227,11 @@ def _earlier_cut_sides(cm, faces):
     stars: a face met from both sides (its corners' coincident copies twice among ``faces``), a face
     of an earlier stroke's cut (``cm.cut_faces_before``); None where some corners come more than
     twice."""
-    _, inverse, count = np.unique(np.sort(cm.node_rep[faces], axis=1), axis=0, return_inverse=True,
+    rows = np.sort(cm.node_rep[faces], axis=1)
+    n = cm.node_rep.shape[0]
+    if n <= _ROW_KEY_MAX_NODES:  # one integer per row, in the rows' order: np.unique on it is far faster
+        rows = (rows[:, 0] * np.int64(n) + rows[:, 1]) * np.int64(n) + rows[:, 2]
+    _, inverse, count = np.unique(rows, axis=0 if rows.ndim == 2 else None, return_inverse=True,
                                   return_counts=True)
     if (count > 2).any():
         return None
@@ -258,7 +266,7 @@ def _on_a_gentle_surface(cm, faces, normals, sides) -> bool:
     if (paired != earlier).any() or paired.all():  # half of a cut, or no outer surface (the bent cut's case)
         return False
     x, outer = cm._x, faces[~paired]
-    area = np.linalg.norm(np.cross(x[outer[:, 1]] - x[outer[:, 0]], x[outer[:, 2]] - x[outer[:, 0]]), axis=1)
+    area = np.linalg.norm(cross_rows(x[outer[:, 1]] - x[outer[:, 0]], x[outer[:, 2]] - x[outer[:, 0]]), axis=1)
     mean = area @ normals[~paired]
     size = float(np.linalg.norm(mean))
     return size > 0.0 and bool((normals[~paired] @ (mean / size) >= np.cos(np.radians(SURFACE_BEND_DEG))).all())
@@ -292,7 +300,8 @@ def _followers(cm, group):
     """(ids (k,) int64, weights (k,) float64): the cut nodes defined on a node of ``group`` and their
     weight on it."""
     ids = np.concatenate([_dependants(cm, v) for v in group.tolist()])
-    w = np.isin(cm._def_nodes[ids], group) * cm._def_w[ids]
+    on = (cm._def_nodes[ids][..., None] == group).any(axis=-1)  # np.isin for a handful of copies
+    w = on * cm._def_w[ids]
     return ids, w.sum(axis=1)
 
 
@@ -330,12 +339,12 @@ def _best_move(cm, v, held, o):
     if not budget > 0.0:
         return None
     nodes, local = np.unique(cm._tets[np.concatenate([live_tets(cm, star) for star in stars])], return_inverse=True)
-    present = np.isin(group, nodes)  # a copy can be a corner of none of its star's live tets (a crumb took it)
+    present = _sorted_has(nodes, group)  # a copy can be a corner of none of its star's live tets (a crumb took it)
     if not present[0]:
         return None
     share = np.zeros(nodes.size)
     share[np.searchsorted(nodes, group[present])] = 1.0
-    inside = np.isin(ids, nodes)
+    inside = _sorted_has(nodes, ids)
     share[np.searchsorted(nodes, ids[inside])] = weights[inside]
     problem = KF.VertexStar(np.ascontiguousarray(x[nodes]), local.reshape(-1, 4).astype(np.int64), share,
                             int(np.searchsorted(nodes, v)), np.ascontiguousarray(x[uncut]),
@@ -344,6 +353,15 @@ def _best_move(cm, v, held, o):
     if not angle >= start + SMOOTH_MIN_GAIN_DEG:
         return None
     return group, stars, dx, ids, angle
+
+
+def _sorted_has(nodes, query) -> np.ndarray:
+    """(q,) bool: which of ``query`` (q,) int64 are in ``nodes`` (k,) int64, sorted and unique (what
+    :func:`numpy.isin` gives, by a binary search)."""
+    if not nodes.size:
+        return np.zeros(query.shape, bool)
+    at = np.minimum(np.searchsorted(nodes, query), nodes.size - 1)
+    return nodes[at] == query
 
 
 def _swept_near(cm, points) -> np.ndarray:

@@ -52,7 +52,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from cutkit.mesh.geometry import EDGE_END_EPS, TET_FACES, edge_triangle_crossing
+from cutkit.mesh.geometry import EDGE_END_EPS, TET_FACES, cross_rows, edge_triangle_crossing
 from cutkit.mesh.quality import min_dihedral_angles
 
 #: Only a crossing within this fraction of its edge's length from a vertex moves the vertex
@@ -128,7 +128,7 @@ def boundary_faces(cm, v, star) -> np.ndarray:
 def face_normals(cm, faces) -> np.ndarray:
     """(k, 3) float64 the unit normals of ``faces`` (k, 3) int64 (right-handed order) at ``cm._x``."""
     x = cm._x
-    n = np.cross(x[faces[:, 1]] - x[faces[:, 0]], x[faces[:, 2]] - x[faces[:, 0]])
+    n = cross_rows(x[faces[:, 1]] - x[faces[:, 0]], x[faces[:, 2]] - x[faces[:, 0]])
     return n / np.linalg.norm(n, axis=1, keepdims=True)
 
 
@@ -165,7 +165,7 @@ def _surface_direction(normals, direction):
     if len(normals) == 1:
         return direction - (direction @ normals[0]) * normals[0]
     if len(normals) == 2:
-        line = np.cross(normals[0], normals[1])
+        line = cross_rows(normals[0], normals[1])
         if line @ line < COPLANAR_TOL:  # opposite faces (a sheet one tet thick)
             return None
         return (direction @ line) / (line @ line) * line
@@ -178,7 +178,7 @@ def _plane(cm, e, swept):
     p, q = (int(i) for i in cm.edges[e])
     for tri in swept:
         if edge_triangle_crossing(x[p], x[q], tri) >= 0.0:
-            n = np.cross(tri[1] - tri[0], tri[2] - tri[0])
+            n = cross_rows(tri[1] - tri[0], tri[2] - tri[0])
             return tri[0], n / np.linalg.norm(n)
     return None
 
@@ -209,7 +209,7 @@ def _shape_ok(x, tets, before):
     """Whether the tets (k, 4) over ``x`` (n, 3) are positive and their worst dihedral angle is
     >= min(``before``, SNAP_KEEP_DEG)."""
     vol = np.einsum("ij,ij->i", x[tets[:, 1]] - x[tets[:, 0]],
-                    np.cross(x[tets[:, 2]] - x[tets[:, 0]], x[tets[:, 3]] - x[tets[:, 0]]))
+                    cross_rows(x[tets[:, 2]] - x[tets[:, 0]], x[tets[:, 3]] - x[tets[:, 0]]))
     if not (vol > 0).all():
         return False
     return bool(min_dihedral_angles(x, tets).min() >= min(before, SNAP_KEEP_DEG))

@@ -303,7 +303,7 @@ def count_pieces(field, dims, counts, used):
                     for c in range(8):
                         used[g0 + (((c >> 2) & 1) * ny + ((c >> 1) & 1)) * nz + (c & 1)] = 1
                     continue
-                m = _cube_pieces(i, j, k, dims, field, scratch)
+                m = _cube_pieces(np.int64(i), j, k, dims, field, scratch)
                 nt += m
                 seen[:] = False
                 for r in range(m):
@@ -425,7 +425,7 @@ def fill_pieces(field, crossings, vmap, offsets, dims, affine, outputs):
                         tet_labels[nt] = u
                         nt += 1
                     continue
-                m = _cube_pieces(i, j, k, dims, field, scratch)
+                m = _cube_pieces(np.int64(i), j, k, dims, field, scratch)
                 if m == 0:
                     continue
                 centre_id[:] = -1
@@ -445,7 +445,7 @@ def fill_pieces(field, crossings, vmap, offsets, dims, affine, outputs):
                                 centre_id[t] = nc
                                 # default: the mean of its crossings (with the background
                                 # if it has some), moved where that cone makes a sliver
-                                place_centre(out, m, t, lab, Cube(g0, i, j, k, ny, nz), crossings, affine,
+                                place_centre(out, m, t, lab, Cube(g0, np.int64(i), j, k, ny, nz), crossings, affine,
                                              (cworld, cknown, cwork), points[nc])
                                 nc += 1
                             node = centre_id[t]

@@ -117,13 +117,14 @@ def advance_nodes(
         return K.NodeSprings(model.adj_offsets, model.adj_nodes, model.adj_springs, model.adj_rest,
                              model.adj_stiffness, coefficients)
 
+    # the node lists C-contiguous: one compiled signature of relax_nodes (a strided view compiles another)
     if classes is not None:
         after = K.NodeUpdates(x, v, ts, state.accel_window, state.n_updates)
         for cls in classes:
             if vt is not None:
                 # Gauss-Seidel: this class sees the new positions of the classes before it
                 add_volume_forces(cls, p, volume, given, summed)
-            K.relax_nodes(cls, target_time, before, after, p, springs(_NO_COEFFICIENTS), terms, mode, True)
+            K.relax_nodes(np.ascontiguousarray(cls), target_time, before, after, p, springs(_NO_COEFFICIENTS), terms, mode, True)
         return
     if vt is not None:
         add_volume_forces(nodes, p, volume, given, summed)
@@ -135,7 +136,7 @@ def advance_nodes(
         c = _NO_COEFFICIENTS
     x_new, v_new, ts_new = x.copy(), v.copy(), ts.copy()
     after = K.NodeUpdates(x_new, v_new, ts_new, state.accel_window, state.n_updates)
-    K.relax_nodes(nodes, target_time, before, after, p, springs(c), terms, mode, False)
+    K.relax_nodes(np.ascontiguousarray(nodes), target_time, before, after, p, springs(c), terms, mode, False)
     state.positions, state.velocities, state.time_stamps = x_new, v_new, ts_new
 
 
