@@ -22,7 +22,7 @@ from cutkit.decimate import _legality as L
 from cutkit.decimate import _pool as P
 from cutkit.decimate import _state as S
 from cutkit.mesh.geometry import point_triangle_dist2, tet_max_cos, tet_volume6
-from cutkit.decimate.decimate import _adjacency
+from cutkit.decimate.decimate import _adjacency, decimation_state
 
 
 def test_tet_max_cos_matches_dihedral_angles():
@@ -134,19 +134,14 @@ def test_legality_of_single_collapses_matches_twin():
     rng = np.random.default_rng(4)
     points = points + rng.uniform(-0.15, 0.15, points.shape)  # break the grid's symmetry
     n = points.shape[0]
-    start, length, pool, vclass = _state(points, tets, labels)
+    start, length, pool, _ = _state(points, tets, labels)
     params = np.zeros(L.N_PARAMS)
     params[L.P_H] = 1.0
     params[L.P_COS_MIN] = math.cos(math.radians(10.0))
     params[L.P_TOL] = 1e9
     params[L.P_SURF_SAFETY] = 1.0
     params[L.P_NORMAL_COS] = -1.0
-    maxcos = K.all_tet_max_cos(points, tets)
-    tet_lab = np.zeros(tets.shape[0], np.int64)
     counters = np.zeros(P.N_COUNTERS, np.int64)
-    mark = np.zeros(n, np.int64)
-    mark2 = np.zeros(n, np.int64)
-    own_next = np.full(n, -1, np.int64)
     edges = set()
     for t in tets:
         for a in t:
@@ -157,10 +152,12 @@ def test_legality_of_single_collapses_matches_twin():
     new_maxcos = np.empty(int(length.max()))
     picks = [edges[i] for i in rng.choice(len(edges), 250, replace=False)]
     n_legal = 0
+    # the state a decimation builds (so the kernel is the one compiled for it), no volume budget
+    state, _ = decimation_state(points, np.ascontiguousarray(tets, np.int64), np.ascontiguousarray(labels, np.int32),
+                                np.zeros(tets.shape[0]), np.zeros(n, np.uint8), 1.0)
+    k = state.budget.vol_budget.shape[0]
+    state = state._replace(budget=S.Budget(np.zeros(k), np.full(k, np.inf)))
     for u, v in picks:
-        state = S.Decimation(S.Mesh(points, labels, tet_lab, None, maxcos, None, vclass, None),
-                             S.Stars(tets, start, length, pool), None, None, S.Owners(points, None, own_next),
-                             (mark, mark2), S.Budget(np.zeros(1), np.array([np.inf])), None, None)
         got, _ = L.can_collapse(u, v, state, counters, params, new_maxcos)
         want = legal_collapse_twin(points, tets, labels, u, v, params[L.P_COS_MIN], 1e9, -1.0)
         assert got == want, (u, v)

@@ -114,7 +114,7 @@ def classify_vertices(tets, labels, adj_start, adj_len, pool):
         fb = np.empty(m, np.int64)
         f0 = np.empty(m, np.int64)
         f1 = np.empty(m, np.int64)
-        if surface_faces(x, Stars(tets, adj_start, adj_len, pool), labels, (fa, fb, f0, f1)) > 0:
+        if surface_faces(np.int64(x), Stars(tets, adj_start, adj_len, pool), labels, (fa, fb, f0, f1)) > 0:
             out[x] = 1
     return out
 
@@ -138,7 +138,7 @@ def surface_face_points(points, tets, labels, adj_start, adj_len, pool, vclass):
         fb = np.empty(m, np.int64)
         f0 = np.empty(m, np.int64)
         f1 = np.empty(m, np.int64)
-        nf = surface_faces(x, Stars(tets, adj_start, adj_len, pool), labels, (fa, fb, f0, f1))
+        nf = surface_faces(np.int64(x), Stars(tets, adj_start, adj_len, pool), labels, (fa, fb, f0, f1))
         c = 0
         for i in range(nf):
             if x < fa[i] and x < fb[i]:
@@ -155,7 +155,7 @@ def surface_face_points(points, tets, labels, adj_start, adj_len, pool, vclass):
         fb = np.empty(m, np.int64)
         f0 = np.empty(m, np.int64)
         f1 = np.empty(m, np.int64)
-        nf = surface_faces(x, Stars(tets, adj_start, adj_len, pool), labels, (fa, fb, f0, f1))
+        nf = surface_faces(np.int64(x), Stars(tets, adj_start, adj_len, pool), labels, (fa, fb, f0, f1))
         j = offsets[x]
         for i in range(nf):
             if x < fa[i] and x < fb[i]:
@@ -213,7 +213,7 @@ def _all_best_costs(mesh, stars, params):
     out = np.full(n, np.inf)
     for w in prange(n):
         if mesh.vert_alive[w] and not mesh.locked[w]:
-            out[w] = best_cost(w, mesh.points, stars.tets, stars.adj_start, stars.adj_len, stars.pool, mesh.vclass,
+            out[w] = best_cost(np.int64(w), mesh.points, stars.tets, stars.adj_start, stars.adj_len, stars.pool, mesh.vclass,
                                params)
     return out
 

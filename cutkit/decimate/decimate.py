@@ -143,6 +143,74 @@ def _distinct(labels: np.ndarray) -> np.ndarray:
     return np.unique(labels)
 
 
+def legality_params(h, tol, min_dihedral_deg):
+    """(N_PARAMS,) float64: the legality rules' parameters (``_legality.P_*``) for reference length
+    ``h`` and surface tolerance ``tol`` (mm) and the smallest dihedral angle allowed (degrees)."""
+    from cutkit.decimate import _legality as L
+
+    params = np.zeros(L.N_PARAMS)
+    params[L.P_H] = h
+    params[L.P_COS_MIN] = math.cos(math.radians(min_dihedral_deg))
+    params[L.P_TOL] = tol
+    params[L.P_NORMAL_COS] = math.cos(math.radians(NORMAL_MAX_DEG))
+    params[L.P_W_SURFACE] = W_SURFACE
+    params[L.P_W_TOUCH] = W_TOUCH
+    params[L.P_VOL_EPS] = VOL_EPS_REL * h**3
+    params[L.P_SURF_SAFETY] = SURFACE_SAFETY
+    return params
+
+
+def decimation_state(points, tets0, labels, vol6, locked, h):
+    """The kernels' state of a decimation before its first collapse, and the pool's end.
+
+    Parameters
+    ----------
+    points : (n, 3) float64
+    tets0 : (m, 4) int64
+        Positively oriented; copied (the collapses rewrite the copy).
+    labels : (m,) int32
+    vol6 : (m,) float64
+        Six times each tet's volume.
+    locked : (n,) uint8
+        1 where a vertex never moves (a boundary condition holds it).
+    h : float
+        The reference length, mm.
+
+    Returns
+    -------
+    (state, pool_end) : (``_state.Decimation``, int)
+    """
+    from cutkit.decimate import _kernels as K
+    from cutkit.decimate import _state as S
+
+    n, m = points.shape[0], tets0.shape[0]
+    tets = tets0.copy()
+    adj_start, adj_len, adj_cap, pool, pool_end = _adjacency(tets, n)
+    label_values = _distinct(labels)
+    tet_lab = np.searchsorted(label_values, labels).astype(np.int64)
+    budget = S.Budget(np.zeros(label_values.size),
+                      VOLUME_BUDGET_REL * np.bincount(tet_lab, weights=vol6 / 6.0, minlength=label_values.size))
+    vclass = K.classify_vertices(tets, labels, adj_start, adj_len, pool)
+    mesh = S.Mesh(points, labels, tet_lab, np.ones(m, np.uint8), K.all_tet_max_cos(points, tets),
+                  (adj_len > 0).astype(np.uint8), vclass, locked)
+    # Original surface points each vertex stands for: itself, the centroids of
+    # the S-faces it is the smallest vertex of, and what it absorbs.
+    face_owner, face_centroids = K.surface_face_points(points, tets, labels, adj_start, adj_len, pool, vclass)
+    own_pts = np.ascontiguousarray(np.concatenate([points, face_centroids]))
+    owners = S.Owners(own_pts, np.arange(n, dtype=np.int64), np.full(own_pts.shape[0], -1, np.int64))
+    K.link_owned_points(face_owner, n, owners.own_tail, owners.own_next)
+    cap = 4 * n + 64
+    queue = S.Queue(np.zeros(n, np.int64), np.full(n, np.inf), np.full(n, np.inf), np.empty(cap),
+                    np.empty(cap, np.int64), np.empty(cap, np.int64))
+    tet_counts = np.empty(n + 1, np.int64)
+    tet_counts[0] = m
+    log = S.Log(np.empty(n, np.int64), np.empty(n, np.int64), tet_counts)
+    state = S.Decimation(mesh, S.Stars(tets, adj_start, adj_len, pool), adj_cap, queue, owners,
+                         (np.zeros(n, np.int64), np.zeros(n, np.int64)), budget, log,
+                         S.Boundary(*_boundary_grid(points, tets0, h)))
+    return state, pool_end
+
+
 def decimate(
     model: TetModel,
     target_tets: int | None = None,
@@ -182,9 +250,7 @@ def decimate(
         when no legal collapse is left; compare ``n_tets``.
     """
     from cutkit.decimate import _kernels as K
-    from cutkit.decimate import _legality as L
     from cutkit.decimate import _pool as P
-    from cutkit.decimate import _state as S
 
     points, tets0, labels, vol6 = _check_model(model)
     n, m = points.shape[0], tets0.shape[0]
@@ -206,57 +272,12 @@ def decimate(
             raise MeshError(f"boundary.{name} references nodes outside 0..{n - 1}")
         locked[nodes] = 1
 
-    tets = tets0.copy()
-    adj_start, adj_len, adj_cap, pool, pool_end = _adjacency(tets, n)
+    state, pool_end = decimation_state(points, tets0, labels, vol6, locked, h)
     counters = np.zeros(P.N_COUNTERS, np.int64)
     counters[P.C_POOL_END] = pool_end
     counters[P.C_ALIVE_TETS] = m
     counters[P.C_TARGET] = target
-    params = np.zeros(L.N_PARAMS)
-    params[L.P_H] = h
-    params[L.P_COS_MIN] = math.cos(math.radians(min_dihedral_deg))
-    params[L.P_TOL] = tol
-    params[L.P_NORMAL_COS] = math.cos(math.radians(NORMAL_MAX_DEG))
-    params[L.P_W_SURFACE] = W_SURFACE
-    params[L.P_W_TOUCH] = W_TOUCH
-    params[L.P_VOL_EPS] = VOL_EPS_REL * h**3
-    params[L.P_SURF_SAFETY] = SURFACE_SAFETY
-    label_values = _distinct(labels)
-    tet_lab = np.searchsorted(label_values, labels).astype(np.int64)
-    vol_budget = VOLUME_BUDGET_REL * np.bincount(tet_lab, weights=vol6 / 6.0, minlength=label_values.size)
-    vol_drift = np.zeros(label_values.size)
-
-    tet_alive = np.ones(m, np.uint8)
-    tet_maxcos = K.all_tet_max_cos(points, tets)
-    vclass = K.classify_vertices(tets, labels, adj_start, adj_len, pool)
-    vert_alive = (adj_len > 0).astype(np.uint8)
-    ver = np.zeros(n, np.int64)
-    qkey = np.full(n, np.inf)
-    qlow = np.full(n, np.inf)
-    # Original surface points each vertex stands for: itself, the centroids of
-    # the S-faces it is the smallest vertex of, and what it absorbs.
-    face_owner, face_centroids = K.surface_face_points(points, tets, labels, adj_start, adj_len, pool, vclass)
-    own_pts = np.ascontiguousarray(np.concatenate([points, face_centroids]))
-    own_tail = np.arange(n, dtype=np.int64)
-    own_next = np.full(own_pts.shape[0], -1, np.int64)
-    K.link_owned_points(face_owner, n, own_tail, own_next)
-    mark = np.zeros(n, np.int64)
-    mark2 = np.zeros(n, np.int64)
-    cap = 4 * n + 64
-    heap_key = np.empty(cap)
-    heap_u = np.empty(cap, np.int64)
-    heap_stamp = np.empty(cap, np.int64)
-    collapse_u = np.empty(n, np.int64)
-    collapse_v = np.empty(n, np.int64)
-    tet_counts = np.empty(n + 1, np.int64)
-    tet_counts[0] = m
-
-    bnd_keys, bnd_nodes, grid = _boundary_grid(points, tets0, h)
-    state = S.Decimation(
-        S.Mesh(points, labels, tet_lab, tet_alive, tet_maxcos, vert_alive, vclass, locked),
-        S.Stars(tets, adj_start, adj_len, pool), adj_cap, S.Queue(ver, qkey, qlow, heap_key, heap_u, heap_stamp),
-        S.Owners(own_pts, own_tail, own_next), (mark, mark2), S.Budget(vol_drift, vol_budget),
-        S.Log(collapse_u, collapse_v, tet_counts), S.Boundary(bnd_keys, bnd_nodes, grid))
+    params = legality_params(h, tol, min_dihedral_deg)
 
     to_remove = max(m - target, 0)
     rounds = 0
@@ -274,14 +295,15 @@ def decimate(
             progress(int(min(m - counters[P.C_ALIVE_TETS], to_remove)), to_remove)
 
     k = int(counters[P.C_COLLAPSES])
-    alive_idx = np.flatnonzero(tet_alive).astype(np.int64)
-    out_tets_local = tets[alive_idx]
+    alive_idx = np.flatnonzero(state.mesh.tet_alive).astype(np.int64)
+    out_tets_local = state.stars.tets[alive_idx]
     used = np.unique(out_tets_local)
     renum = np.full(n, -1, np.int64)
     renum[used] = np.arange(used.shape[0])
 
     result = _assemble(model, points, labels, out_tets_local, alive_idx, used, renum)
-    result.extra[RECORD] = _record(model, points, tets0, labels, collapse_u[:k], collapse_v[:k], tet_counts[: k + 1], alive_idx, used)
+    result.extra[RECORD] = _record(model, points, tets0, labels, state.log.collapse_u[:k], state.log.collapse_v[:k],
+                                      state.log.tet_counts[: k + 1], alive_idx, used)
     result.provenance = copy.deepcopy(model.provenance)
     result.provenance["decimate"] = {
         "input_tets": m,
