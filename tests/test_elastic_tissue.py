@@ -9,8 +9,9 @@ from cutkit.model.tetmodel import Materials, TetModel
 from cutkit.relax.elastic_tissue import ElasticTissue
 
 
-def tissue(solver="hybrid"):
+def tissue(solver="hybrid", jitter=0.0):
     p, t = box_mesh((3, 3, 3), spacing=(1.0, 1.0, 1.0))
+    p = p + np.random.default_rng(3).uniform(-jitter, jitter, p.shape)
     row = dict(label=1, name="m", E=30e3, poisson_ratio=0.45, density=1090.0, damping=8.0, F_enter=0.8,
                mu_static=1e-6, mu_dynamic=1e-6, rho_dynamic=1e-8, alpha_static=0.1, alpha_dynamic=0.1,
                c_edge=1.0, c_shape=1.0)
@@ -241,3 +242,26 @@ def test_at_rest_after_a_resting_step_in_balance_only_with_the_hybrid_and_newton
         tis.advance(f, tis.time + 3 * tis.step_s)
         assert tis.at_rest() == (solver != "vbd")
         assert tis.counts.get("resting_steps", 0) >= (solver != "vbd")
+
+
+def test_an_unloaded_model_takes_a_one_percent_strain_as_its_force_scale():
+    """Without prestress or a prescribed displacement the model's as-built forces are rounding
+    (about 1e-16 N); its force scale is then that of a 1 % strain of every tet (the NumPy twin of
+    the forces at 1.01 times the rest shape), so a step's tolerance is a force, and a loaded step
+    converges instead of chasing rounding to its cap."""
+    import _twins_elastic as T
+
+    tis = tissue("newton", jitter=0.2)  # off the grid: the as-built forces are rounding, not exactly 0
+    em, n = tis.em, tis.n_nodes
+    X = tis.rest_positions
+    Dminv, volume, _ = T.rest_shape(X, em.tets[:em.n_elements])
+    m = em.n_elements
+    as_built = np.linalg.norm(T.forces(X, em.tets[:m], Dminv, volume, em.mu[:m], em.lam[:m]))
+    strained = np.linalg.norm(T.forces(1.01 * X, em.tets[:m], Dminv, volume, em.mu[:m], em.lam[:m]))
+    assert as_built < 1e-9 * strained
+    assert abs(tis.force_scale - strained) <= 1e-9 * strained
+    f = np.zeros((n, 3))
+    f[interior_node(tis), 2] = 0.05 * strained
+    tis.advance(f, tis.time + 2 * tis.step_s)
+    rep = tis.relax_report()
+    assert rep["not_converged"] == 0 and rep["worst_relative_residual"] <= rep["rtol"], rep

@@ -47,6 +47,9 @@ from cutkit.tissue.store import TissueStore
 #: unsettled model, see :meth:`ElasticTissue.force_scale`): the same
 #: accuracy as the settle's (docs/relaxation.md, "Accuracy of a step").
 STEP_RTOL = 1e-2
+#: An as-built out-of-balance force below this fraction of that of a 1 % strain of every tet is
+#: rounding, not a load: the force scale is then the 1 % strain's (:meth:`ElasticTissue._force_scale`).
+AS_BUILT_ROUNDING = 1e-9
 #: Sweeps one step may take before it moves on (counted in the summary).
 STEP_MAX_ITERATIONS = 50
 #: Relative residual the settle before a cut reaches (docs/relaxation.md).
@@ -339,15 +342,16 @@ class ElasticTissue(TissueBase):
 
     def _force_scale(self) -> float:
         """N: the out-of-balance force of the model as built (prestress, prescribed
-        displacements), or, without either, that of a 1 % strain of every tet."""
+        displacements), or, without either, that of a 1 % strain of every tet.
+
+        "Without either" is an as-built force below :data:`AS_BUILT_ROUNDING` of the 1 % strain's:
+        an unloaded model's forces are rounding (about 1e-16 N), not a scale."""
         from cutkit.relax.anp import element_forces as elastic_forces
 
         free = ~self.em.fixed
         r = float(np.linalg.norm(elastic_forces(self.em, self.state.positions)[free]))
-        if r > 0.0:
-            return r
-        x = self.rest_positions * 1.01
-        return float(np.linalg.norm(elastic_forces(self.em, x)[free]))
+        strained = float(np.linalg.norm(elastic_forces(self.em, self.rest_positions * 1.01)[free]))
+        return r if r > AS_BUILT_ROUNDING * strained else strained
 
     # ------------------------------------------------------------ the shared interface
     @property
