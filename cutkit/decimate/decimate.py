@@ -302,8 +302,9 @@ def decimate(
     renum[used] = np.arange(used.shape[0])
 
     result = _assemble(model, points, labels, out_tets_local, alive_idx, used, renum)
-    result.extra[RECORD] = _record(model, points, tets0, labels, state.log.collapse_u[:k], state.log.collapse_v[:k],
-                                      state.log.tet_counts[: k + 1], alive_idx, used)
+    log = state.log
+    result.extra[RECORD] = _record(model, points, tets0, labels, log.collapse_u[:k], log.collapse_v[:k],
+                                   log.tet_counts[: k + 1], alive_idx, used)
     result.provenance = copy.deepcopy(model.provenance)
     result.provenance["decimate"] = {
         "input_tets": m,
