@@ -130,18 +130,17 @@ def make_path(kind, rng, L, tremor=0.0):
 def crossing_strokes(rng, L, through=True, tremor=0.0):
     """Two straight strokes crossing near the middle of a mesh spanning [0, L] (3,), ``None`` between.
 
-    Each stroke runs along a random direction in the x-y plane through a
-    point near the middle (the second at 45-135 degrees to the first), the
+    Each stroke runs along a random direction in the x-y plane, its tip over
+    one point near the middle (the second at 45-135 degrees to the first), the
     blade tilted at random; ``through``: the tip below the mesh (each stroke
     cuts it in two), else at a random depth.
     """
     L = np.asarray(L, float)
-    mid = L / 2
     phi = rng.uniform(0.0, np.pi)
+    c = L / 2 + np.array([*rng.uniform(-0.15, 0.15, 2) * L[:2], 0.0])  # both strokes' tips pass over it
     poses = []
     for k, ang in enumerate((phi, phi + rng.uniform(0.25 * np.pi, 0.75 * np.pi))):
         d = np.array([np.cos(ang), np.sin(ang), 0.0])
-        c = mid + np.array([*rng.uniform(-0.15, 0.15, 2) * L[:2], 0.0])
         c[2] = -0.5 if through else rng.uniform(0.3, 0.8) * L[2]
         a = _unit([*rng.uniform(-0.2, 0.2, 2), -1.0])
         reach = np.linalg.norm(L) + 1.0  # past the mesh at every height of the tilted blade
