@@ -6,7 +6,9 @@ once.  The session's demo
 knee is built once for all workers: the first to need it builds it under a
 file lock in the run's shared temporary folder, the others read it there.
 Each worker gives numba an equal share of the cores (at least one thread);
-the tests that compare thread counts set them explicitly.
+the tests that compare thread counts set them explicitly.  The property
+tests' examples are the same on every run unless
+``CUTKIT_HYPOTHESIS_PROFILE=explore`` (below).
 """
 
 import os
@@ -14,6 +16,15 @@ import signal
 import threading
 
 import pytest
+from hypothesis import settings
+
+#: The property tests draw the same examples on every run ("repeatable": a failure seen once is seen
+#: again, and CI does not pass or fail by the luck of a draw); CUTKIT_HYPOTHESIS_PROFILE=explore draws
+#: fresh ones (what `benchmarks/cut_fresh_draw.py` does for the thousand paths).  Neither keeps an
+#: example database.
+settings.register_profile("repeatable", derandomize=True, database=None)
+settings.register_profile("explore", database=None)
+settings.load_profile(os.environ.get("CUTKIT_HYPOTHESIS_PROFILE", "repeatable"))
 
 def pytest_configure(config):
     if "PYTEST_XDIST_WORKER" in os.environ:
