@@ -26,6 +26,7 @@ settings.register_profile("repeatable", derandomize=True, database=None)
 settings.register_profile("explore", database=None)
 settings.load_profile(os.environ.get("CUTKIT_HYPOTHESIS_PROFILE", "repeatable"))
 
+
 def pytest_configure(config):
     if "PYTEST_XDIST_WORKER" in os.environ:
         # a worker's environment says COLUMNS=80; the commands' output is piped in the tests,
