@@ -134,7 +134,12 @@ def test_legality_of_single_collapses_matches_twin():
     rng = np.random.default_rng(4)
     points = points + rng.uniform(-0.15, 0.15, points.shape)  # break the grid's symmetry
     n = points.shape[0]
-    start, length, pool, _ = _state(points, tets, labels)
+    # the state a decimation builds (so the kernel is the one compiled for it), no volume budget
+    state, _ = decimation_state(points, np.ascontiguousarray(tets, np.int64), np.ascontiguousarray(labels, np.int32),
+                                np.zeros(tets.shape[0]), np.zeros(n, np.uint8), 1.0)
+    k = state.budget.vol_budget.shape[0]
+    state = state._replace(budget=S.Budget(np.zeros(k), np.full(k, np.inf)))
+    start, length, pool = state.stars.adj_start, state.stars.adj_len, state.stars.pool
     params = np.zeros(L.N_PARAMS)
     params[L.P_H] = 1.0
     params[L.P_COS_MIN] = math.cos(math.radians(10.0))
@@ -152,11 +157,6 @@ def test_legality_of_single_collapses_matches_twin():
     new_maxcos = np.empty(int(length.max()))
     picks = [edges[i] for i in rng.choice(len(edges), 250, replace=False)]
     n_legal = 0
-    # the state a decimation builds (so the kernel is the one compiled for it), no volume budget
-    state, _ = decimation_state(points, np.ascontiguousarray(tets, np.int64), np.ascontiguousarray(labels, np.int32),
-                                np.zeros(tets.shape[0]), np.zeros(n, np.uint8), 1.0)
-    k = state.budget.vol_budget.shape[0]
-    state = state._replace(budget=S.Budget(np.zeros(k), np.full(k, np.inf)))
     for u, v in picks:
         got, _ = L.can_collapse(u, v, state, counters, params, new_maxcos)
         want = legal_collapse_twin(points, tets, labels, u, v, params[L.P_COS_MIN], 1e9, -1.0)
