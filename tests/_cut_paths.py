@@ -158,20 +158,103 @@ def lift(cm):
 
 
 def uncut_reason(cm, e):
-    """Why original edge ``e`` of the current stroke is not cut: "refused", "deferred" or None.
+    """Why original edge ``e`` of the current stroke is not cut: "followed", "refused", "deferred" or None.
 
     An edge and its coincident copies along an earlier stroke's cut
     (``edge_twins``) are cut together or not at all (docs/cutting.md):
-    refused when one of the copies is cut already (met first, at another
-    point, from the other side), deferred when the cut is waiting (two
-    opposite cut edges alone in a tet).
+    followed when the blade crossed it inside an earlier stroke's wound and
+    ran along its walls (``cutkit.cutting.following``; checked by
+    :func:`check_followed` at its step), refused when one of
+    the copies is cut already (met first, at another point, from the other
+    side), deferred when the cut is waiting (two opposite cut edges alone in
+    a tet).
     """
     group = [int(e)] + list(cm.edge_twins.get(int(e), ()))
+    if any(g in vars(cm).get("followed_checked", ()) for g in group):
+        return "followed"
     if any(np.isfinite(cm.edge_t[g]) for g in group):
         return "refused"
     if any(g in cm.pending_edges for g in group):
         return "deferred"
     return None
+
+
+#: How far past ``FOLLOW_BAND`` of the mesh size a followed edge's crossing may lie from an earlier cut's
+#: wall (rounding of the test's own crossing and distances).
+FOLLOW_SLACK = 1e-6
+
+
+def point_triangle_distances(p, a, b, c):
+    """(k,) distance from point p (3,) to the triangles a, b, c (k, 3) each: the least of the distances to
+    the plane's foot (where it lies inside) and to the three sides, in NumPy (the slow reference)."""
+    n = np.cross(b - a, c - a)
+    nn = np.maximum((n * n).sum(1), 1e-300)
+    foot = p - (((p - a) * n).sum(1) / nn)[:, None] * n
+    inside = (n * n).sum(1) > 0.0  # a degenerate triangle is its sides
+    for u, v in ((a, b), (b, c), (c, a)):
+        inside &= (np.cross(v - u, foot - u) * n).sum(1) >= 0.0
+    d = np.where(inside, np.linalg.norm(p - foot, axis=1), np.inf)
+    for u, v in ((a, b), (b, c), (c, a)):
+        e = v - u
+        t = np.clip(((p - u) * e).sum(1) / np.maximum((e * e).sum(1), 1e-300), 0.0, 1.0)
+        d = np.minimum(d, np.linalg.norm(p - (u + t[:, None] * e), axis=1))
+    return d
+
+
+def model_sizes(cm):
+    """(m0,) the model's mesh size at each original tet: the edge of the regular tetrahedron of its
+    model tet's volume (the live pieces' rest volumes summed)."""
+    X = cm.rest_points
+    t = cm.orig_tets
+    vol = np.abs(np.linalg.det(X[t[:, 1:]] - X[t[:, :1]])) / 6.0
+    model = np.bincount(cm.model_tet, weights=vol, minlength=cm.n_model_tets)
+    return np.cbrt(6.0 * np.sqrt(2.0) * model[cm.model_tet])
+
+
+def followed_near_wound(cm, e, swept, x, sizes=None):
+    """Whether original edge ``e`` is crossed by one of a step's ``swept`` triangles within
+    ``FOLLOW_BAND`` of the model's mesh size there (:func:`model_sizes`, the largest of the tets
+    around the edge) of an earlier stroke's wall (``cm.cut_faces_before``), with the
+    nodes at ``x`` (n, 3), where the step began: the test's own crossings and distances.  None where
+    the test finds no crossing (an edge in the blade's plane: the cut's symbolic perturbation crosses
+    it, the test's crossing does not, and it need not be cut)."""
+    from _twins_cut import segment_triangle_many
+
+    from cutkit.cutting.following import FOLLOW_BAND
+
+    i, j = cm.edges[e]
+    sizes = model_sizes(cm) if sizes is None else sizes
+    length = float(sizes[np.flatnonzero((cm.tet_edges == e).any(axis=1))].max())  # the largest around it
+    walls = x[np.array(sorted(cm.cut_faces_before))] if cm.cut_faces_before else None
+    crossed = False
+    for tri in swept:
+        s = segment_triangle_many(x[i][None], x[j][None], *[np.asarray(q, float) for q in tri])[0]
+        if s < 0.0:
+            continue
+        crossed = True
+        d = point_triangle_distances(x[i] + s * (x[j] - x[i]), walls[:, 0], walls[:, 1], walls[:, 2]).min() \
+            if walls is not None else np.inf
+        if d <= (FOLLOW_BAND + FOLLOW_SLACK) * length:
+            return True
+    return False if crossed else None
+
+
+def check_followed(cm, x, swept, before):
+    """After a step (nodes at ``x`` (n, 3) where it began, its ``swept`` triangles, ``before`` the set
+    of edges followed before it): each edge the cut followed first in this step that the test finds
+    crossed in the wound's band (:func:`followed_near_wound`) joins ``cm.followed_checked`` (a set the
+    test keeps on the cut state; a rebase drops both); returns those the test finds crossed outside it."""
+    checked = vars(cm).setdefault("followed_checked", set())
+    bad = []
+    new = sorted(cm.followed_edges - before)
+    sizes = model_sizes(cm) if new else None
+    for e in new:
+        near = followed_near_wound(cm, e, swept, x, sizes)
+        if near:
+            checked.add(e)
+        elif near is not None:
+            bad.append(e)
+    return bad
 
 
 def crossed_edges(p, edges, swept):

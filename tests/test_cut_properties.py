@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
 
-from _cut_paths import (KINDS, crossed_edges, crossing_strokes, delaunay_ball, jittered_block, lift, make_path,
-                        uncut_reason)
+from _cut_paths import (KINDS, crossed_edges, crossing_strokes, delaunay_ball, check_followed, jittered_block,
+                        lift, make_path, uncut_reason)
 from cutkit.collision._swept_kernels import tri_tri  # noqa: F401  (compiled once for the oracle below)
 from cutkit.cutting import CutMesh, cut_step, to_model
 from cutkit.cutting import subdivision as S
@@ -94,13 +94,14 @@ def run_path(cm, poses, v0, check=True, end_strokes=False, on_stroke_end=None):
             end()
             lift(cm)
             continue
-        prev = cm.prev_pose
+        prev, x0, followed = cm.prev_pose, cm.points.copy(), set(cm.followed_edges)
         tip, a = pose
         cut_step(cm, tip, a)
         if prev is not None:
             P1, Q1 = cm.prev_pose
             stroke += [(prev[0], prev[1], Q1), (prev[0], Q1, P1)]
             swept += stroke[-2:]
+            assert not check_followed(cm, x0, stroke[-2:], followed), i  # followed only in an earlier cut's band
         if end_strokes and not blade_in_tissue(cm):
             end()
             rebase_if_left(cm)
@@ -121,10 +122,13 @@ def test_every_step_is_a_clean_mesh(name, kind, tremor, seed, blade_length):
 
 def stroke_losses(cm, stroke):
     """(lost, refused, deferred): sets of this stroke's original edges crossed strictly inside and
-    left uncut; of those, the refused and the deferred (:func:`_cut_paths.uncut_reason`)."""
+    left uncut; of those, the refused and the deferred (:func:`_cut_paths.uncut_reason`).  An edge the
+    cut followed along an earlier stroke's wound, its crossing found in the wound's band by the test
+    at its step (:func:`_cut_paths.check_followed`, in :func:`run_path`), is not lost."""
     crossed = crossed_edges(cm.points[:cm.n_orig_points], cm.edges, stroke)
     lost = crossed - set(np.flatnonzero(np.isfinite(cm.edge_t)).tolist())
     why = {e: uncut_reason(cm, e) for e in lost}
+    lost -= {e for e in lost if why[e] == "followed"}
     return lost, {e for e in lost if why[e] == "refused"}, {e for e in lost if why[e] == "deferred"}
 
 
@@ -139,7 +143,9 @@ def test_oracle_every_crossed_edge_is_cut(name, kind, tremor, seed, blade_length
     face) and a tet cut into up to four pieces; an edge crossed twice is
     cut at its first crossing.  The one exception: an edge deferred (two
     opposite cut edges alone in a tet) waits for the blade to move on, so a
-    blade that stops or leaves in between may leave it uncut.
+    blade that stops or leaves in between may leave it uncut.  (A crossing
+    inside an earlier stroke's wound, followed instead of cut, is checked to
+    lie in the wound's band: :func:`stroke_losses`.)
     """
     p, t, v0, L = mesh(name)
     cm = CutMesh(p, t, blade_length=blade_length)

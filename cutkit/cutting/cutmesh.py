@@ -34,6 +34,7 @@ from cutkit.mesh.topology import edge_to_tets
 from cutkit.cutting import subdivision as S
 from cutkit.cutting import _kernels_step as K
 from cutkit.cutting.crumbs import init_crumbs
+from cutkit.cutting.following import init_following
 from cutkit.cutting.rebase import cut_twins, init_records, rebase, twin_face_bary
 from cutkit.cutting.resubdivision import resubdivide
 from cutkit.cutting.smoothing import init_smoothing
@@ -84,6 +85,8 @@ class CutMesh:
     snap_vertices : bool  move an uncut vertex away from the cut before an edge is cut near it (:mod:`.snapping`)
     smooth_vertices : bool  move a vertex of a sliver's original tet where that lifts it, after fairing
         (:mod:`.smoothing`; the element tissue takes moved vertices, the paper's springs do not)
+    follow_wounds : bool  a blade inside an earlier stroke's wound follows its walls instead of slicing
+        them (:mod:`.following`)
     """
 
     # What the cut reads of its tissue store that a step changes, under the cut's names (the store's
@@ -118,19 +121,22 @@ class CutMesh:
 
     def __init__(self, points, tets, rest_points=None, texcoords=None, labels=None,
                  blade_length=20.0, centre_nodes=False, compact_splits=True, snap_vertices=False, fair_nodes=True,
-                 smooth_vertices=True):
+                 smooth_vertices=True, follow_wounds=True):
         store = TissueStore(points, tets, rest_points=rest_points, texcoords=texcoords, labels=labels)
-        self._cut_over(store, blade_length, centre_nodes, compact_splits, snap_vertices, fair_nodes, smooth_vertices)
+        self._cut_over(store, blade_length, centre_nodes, compact_splits, snap_vertices, fair_nodes, smooth_vertices,
+                       follow_wounds)
 
     @classmethod
     def over(cls, store: TissueStore, blade_length=20.0, centre_nodes=False, compact_splits=True,
-             snap_vertices=False, fair_nodes=True, smooth_vertices=True) -> CutMesh:
+             snap_vertices=False, fair_nodes=True, smooth_vertices=True, follow_wounds=True) -> CutMesh:
         """The cut state of the tissue ``store`` (nothing cut since its last rebase); cuts write into it."""
         cm = cls.__new__(cls)
-        cm._cut_over(store, blade_length, centre_nodes, compact_splits, snap_vertices, fair_nodes, smooth_vertices)
+        cm._cut_over(store, blade_length, centre_nodes, compact_splits, snap_vertices, fair_nodes, smooth_vertices,
+                     follow_wounds)
         return cm
 
-    def _cut_over(self, store, blade_length, centre_nodes, compact_splits, snap_vertices, fair_nodes, smooth_vertices):
+    def _cut_over(self, store, blade_length, centre_nodes, compact_splits, snap_vertices, fair_nodes, smooth_vertices,
+                  follow_wounds):
         if not blade_length > 0:
             raise InputError(f"blade_length: {blade_length}, expected > 0")
         self.store = store
@@ -179,14 +185,16 @@ class CutMesh:
         init_crumbs(self)  # pieces cut loose below CRUMB_VOLUME_FRACTION of the model are removed
         init_snapping(self, snap_vertices)  # vertices moved away from the cut instead of slivers
         init_smoothing(self, smooth_vertices)  # vertices moved where a sliver is left after fairing
+        init_following(self, follow_wounds)  # a blade inside an earlier cut's wound follows its walls
 
     @classmethod
     def from_model(cls, model, blade_length=20.0, centre_nodes=False, compact_splits=True, snap_vertices=False,
-                   fair_nodes=True, smooth_vertices=True):
+                   fair_nodes=True, smooth_vertices=True, follow_wounds=True):
         """Cut state of a :class:`~cutkit.model.tetmodel.TetModel` (rest = current positions)."""
         return cls(model.points, model.tets, texcoords=model.texcoords, labels=model.labels,
                    blade_length=blade_length, centre_nodes=centre_nodes, compact_splits=compact_splits,
-                   snap_vertices=snap_vertices, fair_nodes=fair_nodes, smooth_vertices=smooth_vertices)
+                   snap_vertices=snap_vertices, fair_nodes=fair_nodes, smooth_vertices=smooth_vertices,
+                   follow_wounds=follow_wounds)
 
     def rebase(self):
         """Make the live tets the original ones of a fresh cut state (blade out); see :func:`.rebase.rebase`.
@@ -282,6 +290,11 @@ class CutMesh:
         """
         mine = self.refused_edges.union(self.pending_edges)
         return self.uncut_before + sum(1 for e in mine if not np.isfinite(self.edge_t[e]))
+
+    def edges_followed(self):
+        """Crossings the blade made inside an earlier stroke's wound and followed instead of cutting (int,
+        every stroke so far; :mod:`.following`).  Not edges left uncut: the wound parts the tissue there."""
+        return self.followed_before + len(self.followed_edges)
 
     def uncut_edge_places(self):
         """(k, 3) float64 rest midpoints, mm, of the edges :meth:`edges_left_uncut` counts (every stroke's)."""

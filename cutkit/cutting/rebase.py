@@ -115,13 +115,15 @@ def rebase(cm):
     ids = cm.store.rebase()  # the one renumbering: every holder of the store sees it
     fresh = type(cm).over(cm.store, blade_length=cm.blade_length, centre_nodes=cm.centre_nodes,
                           compact_splits=cm.compact_splits, snap_vertices=cm.snap_vertices,
-                          fair_nodes=cm.fair_nodes, smooth_vertices=cm.smooth_vertices)
+                          fair_nodes=cm.fair_nodes, smooth_vertices=cm.smooth_vertices,
+                          follow_wounds=cm.follow_wounds)
     fresh.cut_faces_before = cut_faces
     # the cut's nodes are vertices of original tets now, which vertex smoothing may move (it never
     # moves a cut node of a subdivided original): the next finish_stroke looks at every cut-made tet
     # (rebase_if_left and the session call it right after the rebase)
     fresh.whole_look_due = bool(cut_faces)
     fresh.uncut_before, fresh.uncut_places_before = uncut, uncut_places
+    fresh.followed_before = cm.edges_followed()
     fresh.step_count = cm.step_count
     fresh.started_inside = cm.started_inside
     fresh.node_rep = node_rep

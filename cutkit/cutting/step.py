@@ -35,6 +35,7 @@ from cutkit.cutting import _kernels_step as KS
 from cutkit.cutting.contact import touches_only
 from cutkit.cutting.crumbs import remove_crumbs
 from cutkit.cutting.fairing import fair_cut_nodes
+from cutkit.cutting.following import followed_in_step
 from cutkit.cutting.smoothing import live_tets, pend_every_cut_made_tet, smooth_vertices_around
 from cutkit.cutting.snapping import new_crossings, recrossed, snap_away
 from cutkit.cutting.cutmesh import CutMesh
@@ -208,7 +209,7 @@ def cut_step(cm: CutMesh, tip, a) -> StepResult:
     blade = np.array([Q1, P1])
     # 2. local traversal (numba); its events are replayed in visit order
     active, ev_id, ev_val = _sweep(cm, stamp, seeds, swept, blade, P0)
-    changed, cut_edges = _replay_events(cm, ev_id, ev_val, swept)
+    changed, cut_edges = _replay_events(cm, ev_id, ev_val, swept, P1 if tip_tet >= 0 else None)
     _follow_tip(cm, tip_tet, P1, changed)
     # 3. re-subdivide every original tet whose cut state changed
     # (complete splits first: they choose the diagonals of their split faces, splits.compact_split)
@@ -307,8 +308,9 @@ def _step_seeds(cm: CutMesh, P0, Q0, P1, Q1):
     return seeds, tip_tet
 
 
-def _replay_events(cm: CutMesh, ev_id, ev_val, swept):
-    """Replay the traversal's events through the cut state machine, in visit order.
+def _replay_events(cm: CutMesh, ev_id, ev_val, swept, tip=None):
+    """Replay the traversal's events through the cut state machine, in visit order (``tip`` (3,): the
+    blade's tip where it is inside the tissue, else None).
 
     Returns the set of original tets whose cut state changed and the list
     of original edges cut (in cutting order).
@@ -316,6 +318,7 @@ def _replay_events(cm: CutMesh, ev_id, ev_val, swept):
     changed = set()
     cut_edges = []
     edge_events = np.flatnonzero(ev_id[:, 0] == KS.EV_EDGE).tolist()
+    followed = followed_in_step(cm, ev_id[edge_events, 1], ev_val[edge_events, 0], swept, tip)
     start = 0
     for k in edge_events + [ev_id.shape[0]]:
         if k > start:
@@ -326,7 +329,7 @@ def _replay_events(cm: CutMesh, ev_id, ev_val, swept):
         if k == ev_id.shape[0]:
             break
         i = int(ev_id[k, 1])
-        if np.isfinite(cm.edge_t[i]):  # cut already: an edge is cut once
+        if np.isfinite(cm.edge_t[i]) or i in followed:  # cut already (an edge is cut once), or in a wound
             continue
         s = recrossed(cm, i, ev_val[k, 0], swept)  # an end moved away from the cut earlier in the step
         s = -1.0 if s < 0.0 or touches_only(cm, i, s, swept) else snap_away(cm, i, s, swept)

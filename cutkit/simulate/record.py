@@ -190,6 +190,7 @@ def summary(session, *, model_path, loop_wall: float, t_traj_end, opening_at_tra
         "new_tets_per_cut_tet": (new_tets / n_cut) if n_cut else 0.0,
         "rebases": int(session.cut_before["rebases"]),
         "edges_left_uncut": int(cm.edges_left_uncut()),
+        "edges_followed": int(cm.edges_followed()),
         **crumbs_report(cm),
         "states": list(session.states_seen),
         "frames": int(frames),
