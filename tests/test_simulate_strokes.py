@@ -95,6 +95,7 @@ def test_both_strokes_cut_and_are_counted(run):
     assert s["cut_tets"] > 300 and s["new_tets"] > 2 * s["cut_tets"]
     assert s["tets_initial"] == slab().tets.shape[0]
     assert json.loads((out / "summary.json").read_text())["cut_tets"] == s["cut_tets"]
+    assert s["edges_followed"] == 0  # the second stroke crosses the first's wound: it follows none of it
     if s["material_model"] == "neohookean":
         # a steady hand cuts every edge it meets: the blade's rest pose follows the hand smoothly
         # (cutkit.relax.rest_map; the mean over the active tets' corners left 9 edges uncut here)
