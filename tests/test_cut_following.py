@@ -10,7 +10,7 @@ and leaves a cut across the wound (an X) as it was.
 import numpy as np
 import pytest
 
-from _cut_paths import check_followed, jittered_block, lift, point_triangle_distances
+from _cut_paths import check_followed, jittered_block, lift, make_path, point_triangle_distances
 from _twins_cut import components
 from test_cut_thousand_paths import ALL_KINDS, MESHES, TREMORS, cut_path
 
@@ -64,8 +64,6 @@ def test_a_retrace_keeps_the_dihedral_bound(name, i, seed):
     p, t = MESHES[name]
     kind, tremor = ALL_KINDS[i % len(ALL_KINDS)], TREMORS[(i // len(ALL_KINDS)) % len(TREMORS)]
     assert kind == "retrace"
-    from _cut_paths import make_path
-
     poses = make_path(kind, np.random.default_rng(1000 * i + seed), p.max(axis=0), tremor)
     missed, worst = cut_path(p, t, poses, 2.5 if i % 2 else 10.0, (name, i))
     assert not missed
