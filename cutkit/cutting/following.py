@@ -46,7 +46,8 @@ from collections import namedtuple
 
 import numpy as np
 
-from cutkit.mesh.geometry import cross_rows, edge_triangle_crossing
+from cutkit.mesh.geometry import (cross_rows, edge_triangle_crossing, point_triangle_dist2, segment_dist2,
+                                  tet_volumes6)
 
 #: A crossing within this fraction of the model's mesh size of an earlier cut's wall may be followed
 #: (the wall lies up to EDGE_SNAP = 0.25 of the model's edges off the blade that made it).
@@ -96,8 +97,6 @@ def _on_front(p, corners, front, d) -> bool:
     """Whether the nearest point to p (3,) of the wall triangle ``corners`` (3, 3), at distance ``d``,
     lies on its front (its corners with ``front`` (3,) bool and the sides between two of them): the
     crossing is past the wound's end, where a deeper pass must cut."""
-    from cutkit.mesh.geometry import segment_dist2
-
     near = np.inf
     for i in range(3):
         if front[i]:
@@ -121,8 +120,6 @@ def _blade_normal(p, q, swept) -> np.ndarray:
 
 def _distances(p, corners) -> np.ndarray:
     """(k,) float64 distance from point p (3,) to each triangle of ``corners`` (k, 3, 3)."""
-    from cutkit.mesh.geometry import point_triangle_dist2
-
     return np.sqrt(np.array([point_triangle_dist2(p, c[0], c[1], c[2]) for c in corners]))
 
 
@@ -154,8 +151,6 @@ def _model_sizes(cm) -> np.ndarray:
     ``EDGE_SNAP`` of the model's edges), not the pieces' edges.
     """
     if cm.wound_sizes is None:
-        from cutkit.mesh.geometry import tet_volumes6
-
         volumes = np.abs(tet_volumes6(np.ascontiguousarray(cm._X[:cm.n_orig_points]), cm.orig_tets)) / 6.0
         model = np.bincount(cm.model_tet, weights=volumes, minlength=cm.n_model_tets)
         cm.wound_sizes = np.cbrt(6.0 * np.sqrt(2.0) * model[cm.model_tet])
