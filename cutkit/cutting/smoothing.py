@@ -92,6 +92,8 @@ SMOOTH_PASSES = 3
 RESPLIT = True
 #: Up to this many nodes a sorted face's three node numbers fit one int64 (n**3 < 2**63).
 _ROW_KEY_MAX_NODES = 2_000_000
+#: :func:`_best_move`'s answer for a vertex with a cut node the blade placed this step.
+_HELD = "held"
 #: Directions of an interior vertex: the axes and the cube diagonals, both ways.
 _SPACE = np.vstack([np.eye(3), -np.eye(3),
                     np.array([[i, j, k] for i in (1, -1) for j in (1, -1) for k in (1, -1)]) / np.sqrt(3.0)])
@@ -152,6 +154,7 @@ def _smooth_pass(cm, fresh, held, resplit) -> int:
         return 0
     order = np.argsort(min_dihedral_angles(cm._x, cm._tets[tets]), kind="stable")
     moved = 0
+    looked = {}  # vertex -> its best move (or None, _HELD) since the cut state last changed: poor tets share vertices
     for t, o in zip(tets[order].tolist(), owner[order].tolist()):
         if not cm._alive[t] or min_dihedral_angles(cm._x, cm._tets[t:t + 1]).min() >= SMOOTH_BELOW_DEG:
             continue  # a move before lifted it
@@ -162,15 +165,19 @@ def _smooth_pass(cm, fresh, held, resplit) -> int:
             cm.resubdivide(o)  # another split of the same cut lifts it (resubdivision.better_split)
             resplit.update(int(n) for n in cm.face_tets[cm.tet_faces[o]].ravel() if n >= 0)
             moved += 1
+            looked.clear()
             continue
         best = None
         for v in cm.orig_tets[o].tolist():
-            option = _best_move(cm, int(v), held, o)
-            if option is not None and (best is None or option[-1] > best[-1]):
+            option = looked[v] if v in looked else looked.setdefault(v, _best_move(cm, v, held))
+            if option is _HELD:
+                cm.smooth_pending.add(o)  # the blade is at one of its cut nodes: looked at again next step
+            elif option is not None and (best is None or option[-1] > best[-1]):
                 best = option
         if best is not None:
             _apply(cm, *best[:-1])
             moved += 1
+            looked.clear()
     return moved
 
 
@@ -318,9 +325,11 @@ def _far_ends(cm, group, stars):
     return np.concatenate(far), np.concatenate(uncut)
 
 
-def _best_move(cm, v, held, o):
+def _best_move(cm, v, held):
     """(copies, their stars, dx (3,), follower ids, angle after) of the best move of vertex ``v`` (with
-    its coincident copies), or None."""
+    its coincident copies); None where it has none; :data:`_HELD` where a cut node of its own is in
+    ``held`` (set of int).  Reads the cut state only: :func:`_smooth_pass` reuses the answer until
+    the state changes."""
     group = _copies(cm, v)
     if cm.store.held[group].any():
         return None
@@ -330,8 +339,7 @@ def _best_move(cm, v, held, o):
         return None
     ids, weights = _followers(cm, group)
     if held and not held.isdisjoint(ids.tolist()):
-        cm.smooth_pending.add(o)
-        return None
+        return _HELD
     x = cm._x
     far, uncut = _far_ends(cm, group, stars)
     h = float(np.linalg.norm(x[far] - x[v], axis=1).min())
