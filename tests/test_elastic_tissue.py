@@ -42,6 +42,47 @@ def test_lift_opens_a_folded_tet_and_keeps_the_others_open():
     assert J.min() > 0.0
 
 
+def test_lift_moves_a_node_no_farther_than_its_tets_reach():
+    """A folded tet whose face opposite the node is squashed near a line: the exact step that opens it
+    is far longer than the tets (J barely depends on the node); the lift stops at UNFOLD_REACH of the
+    distance to the farthest corner of the node's tets (a node was thrown 500 mm so), and what it
+    leaves folded the relaxation opens."""
+    from cutkit.relax.elastic_tissue import UNFOLD_REACH
+
+    tis = tissue()
+    i = interior_node(tis)
+    em = tis.em
+    around = em.tets[em.tets_of(i)][:1]  # the one tet the node is lifted for
+    rest = signed_volumes(tis.rest_positions, around)
+    a, b, c = [v for v in around[0] if v != i]
+    x = tis.positions
+    x[c] = x[a] + (x[b] - x[a]) * 0.5 + 1e-6 * (x[c] - x[a])  # the opposite face almost a segment
+    x[i] += 1.6 * ((x[a] + x[b] + x[c]) / 3.0 - x[i])  # through it
+    start = x[i].copy()
+    reach = np.sqrt(((x[around.ravel()] - start) ** 2).sum(axis=1).max())
+    assert signed_volumes(x, around)[0] < 0.0
+    tis._lift(i, around, rest)
+    assert 0.0 < np.linalg.norm(tis.positions[i] - start) <= UNFOLD_REACH * reach * (1 + 1e-12)
+
+
+def test_unfold_never_takes_a_place_off_the_tissue():
+    """A corner node folded inward, whose place before the step (as handed over) lies 500 mm out: far
+    out every tet of a node on the surface opens, so a vote by the smallest volume ratio alone took
+    it; candidates farther than the node's farthest tet corner are not looked at."""
+    tis = tissue()
+    x = tis.positions
+    i = int(np.argmin(x.sum(axis=1)))  # the box's corner at its origin
+    em = tis.em
+    around = em.tets[em.tets_of(i)]
+    centre = x[around.ravel()].mean(axis=0)
+    out = (x[i] - centre) / np.linalg.norm(x[i] - centre)
+    reach = np.sqrt(((x[around.ravel()] - x[i]) ** 2).sum(axis=1).max())
+    x[i] = centre + (centre - x[i])  # pushed through its tets: all folded
+    assert (signed_volumes(x, around) <= 0.0).any()
+    tis._unfold(np.arange(em.n_elements), np.array([i]), (x[i] + 500.0 * out)[None])
+    assert np.linalg.norm(tis.positions[i] - centre) < 2.0 * reach
+
+
 def test_unfold_leaves_a_mesh_without_folds_alone():
     tis = tissue()
     x0 = tis.positions.copy()

@@ -297,6 +297,45 @@ def node_rings(adj, nodes, rings, n):
     return np.sort(found[:k])
 
 
+@njit(cache=True, nogil=True)
+def loose_nodes(adj, nodes, fixed, budget, n):
+    """Which of ``nodes`` (k,) int64 lie in a loose piece: a component of the tets with no node held
+    in any direction by ``fixed`` (n, 3) bool, found whole within ``budget`` nodes by a breadth-first
+    search over the adjacency rows' ``opposite`` corners.  A component the search leaves before it
+    meets a held node or its end counts as held.  Returns (k,) bool; ``n`` is the node count."""
+    seen = np.zeros(n, np.int64)  # 0 unseen, else the search that saw it (1-based)
+    queue = np.empty(min(n, budget) + 1, np.int64)
+    verdict = np.zeros(nodes.shape[0] + 1, np.bool_)  # per search: loose
+    loose = np.zeros(nodes.shape[0], np.bool_)
+    searches = 0
+    for q in range(nodes.shape[0]):
+        if seen[nodes[q]] == 0:
+            searches += 1
+            seen[nodes[q]] = searches
+            queue[0] = nodes[q]
+            i = nodes[q]
+            head, tail, open_end = 0, 1, fixed[i, 0] or fixed[i, 1] or fixed[i, 2]
+            while head < tail and not open_end:
+                i = queue[head]
+                head += 1
+                for r in range(adj.start[i], adj.start[i] + adj.degree[i]):
+                    for c in range(3):
+                        j = adj.opposite[r, c]
+                        if seen[j] == searches:
+                            continue
+                        if seen[j] != 0 or fixed[j, 0] or fixed[j, 1] or fixed[j, 2] or tail >= budget:
+                            open_end = True  # an earlier search's (held), a held node, or past the budget
+                        else:
+                            seen[j] = searches
+                            queue[tail] = j
+                            tail += 1
+                    if open_end:
+                        break
+            verdict[searches] = not open_end
+        loose[q] = verdict[seen[nodes[q]]]
+    return loose
+
+
 #: Blocks the nodes of :func:`awake_after_sweep` are split into for its threads.
 AWAKE_BLOCKS = 16
 

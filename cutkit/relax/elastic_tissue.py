@@ -32,7 +32,7 @@ from cutkit.relax.elastic import (
     node_damping,
 )
 from cutkit.mesh.geometry import signed_volumes_serial
-from cutkit.relax.kernels import loaded_nodes, node_rings, tets_around
+from cutkit.relax.kernels import loaded_nodes, loose_nodes, node_rings, tets_around
 from cutkit.relax.growable import append_rows
 from cutkit.relax.hessian_pattern import HessianPattern
 from cutkit.relax.vbd import DEFAULT_ATOL_N, kept_volume_ratios, local_step, refresh_forces
@@ -117,15 +117,38 @@ CRUSHED_J = 1e-3
 #: A new or moved node within this (barycentric) distance outside the nearest tet of the
 #: old shape is placed by that tet's affine map extended; farther, by its defining nodes.
 PLACE_REACH = 0.5
+#: The blade's load skips a piece with no held node (ElasticTissue.bearing_nodes) found whole by a search
+#: of at most this many nodes (a larger loose piece is loaded: its mass takes the reaction).  The search
+#: runs at every geometry update while cutting; where no held node is near it reads this many, about
+#: 0.1 ms on the demo knee.
+LOOSE_SEARCH_NODES = 1000
 #: A tet born folded is opened to this volume ratio by moving one of its placed nodes ...
 UNFOLD_J = 0.05
-#: ... in at most this many exact steps per node (ElasticTissue._lift).
+#: ... in at most this many exact steps per node (ElasticTissue._lift), ...
 UNFOLD_STEPS = 4
+#: ... moving it at most this fraction of the distance to the farthest corner of its tets: where the
+#: faces opposite the node are near degenerate, the step that opens the worst tet exactly is far longer
+#: than the tets (50 m in test_lift_moves_a_node_no_farther_than_its_tets_reach).  A tet left folded
+#: shows in the relaxation's report (``min_J``).
+UNFOLD_REACH = 0.5
 
 
 #: Above this share of the nodes to sum again, the kept elastic forces are summed whole
 #: (:class:`KeptForces`): one pass of the model's kernel beats gathering the tets around most of it.
 KEPT_FORCES_WHOLE_SHARE = 0.25
+
+
+def _farthest_corner(x: np.ndarray, tets: np.ndarray, point: np.ndarray) -> float:
+    """Distance from ``point`` (3,) to the farthest corner of ``tets`` (k, 4) int64 at positions ``x`` (n, 3);
+    0 for no tets."""
+    return float(np.sqrt(((x[tets.ravel()] - point) ** 2).sum(axis=1).max())) if tets.size else 0.0
+
+
+def _within(point: np.ndarray, centre: np.ndarray, radius: float) -> np.ndarray:
+    """``point`` (3,) moved along the line to ``centre`` (3,) into the ball of ``radius`` around it."""
+    d = point - centre
+    size = float(np.linalg.norm(d))
+    return point if size <= radius else centre + d * (radius / size)
 
 
 class KeptForces:
@@ -379,6 +402,20 @@ class ElasticTissue(TissueBase):
         """``nodes`` grown by ``rings`` rings of live tets, through the element model's adjacency."""
         em = self.em
         return node_rings(em.adjacency, np.ascontiguousarray(nodes, np.int64), int(rings), em.n_nodes)
+
+    def bearing_nodes(self, nodes: np.ndarray) -> np.ndarray:
+        """The nodes of ``nodes`` (k,) int64 not in a piece the cut has set loose (a component of the
+        tets with no held node, of at most :data:`LOOSE_SEARCH_NODES` nodes; the springs'
+        rule, :meth:`cutkit.relax.spring_tissue.Tissue.bearing_nodes`).
+
+        A loose slice cannot resist the blade: the reaction of the cut force spread over its few
+        milligrams threw one of 19 mm^3, cut off a wall by a retrace, 500 mm away within a stroke,
+        where the next steps cut it again in the rest configuration.  It gets no share.
+        """
+        em = self.em
+        loose = loose_nodes(em.adjacency, np.ascontiguousarray(nodes, np.int64), em.fixed, LOOSE_SEARCH_NODES,
+                            em.n_nodes)
+        return nodes[~loose]
 
     @property
     def fixed(self) -> np.ndarray:
@@ -856,8 +893,11 @@ class ElasticTissue(TissueBase):
             now = x[i].copy()
             best, best_j = now, -np.inf
             ring = x[around[around != i]].mean(axis=0) if around.size else now  # the one-ring's centroid
+            reach = _farthest_corner(x, around, now)
             for c in (now, interp[k], before[k], 0.5 * (now + interp[k]), 0.5 * (now + before[k]), ring,
                       0.5 * (now + ring)):
+                if not np.linalg.norm(c - now) <= reach:
+                    continue  # a far place opens every tet of a node on the surface, by moving it off the tissue
                 x[i] = c
                 j = float(np.min(signed_volumes_serial(x, around) / rest)) if around.size else 0.0
                 if j > best_j:
@@ -888,6 +928,8 @@ class ElasticTissue(TissueBase):
             Their rest volumes.
         """
         x = self.state.positions
+        start = x[i].copy()
+        reach = UNFOLD_REACH * _farthest_corner(x, around, start)
         for _ in range(UNFOLD_STEPS):
             J = signed_volumes_serial(x, around) / rest
             w = int(np.argmin(J))
@@ -906,7 +948,7 @@ class ElasticTissue(TissueBase):
             slope = g @ d
             open_ = (J > 0.0) & (slope < 0.0)
             a = min(1.0, float(np.min(0.5 * J[open_] / -slope[open_]))) if open_.any() else 1.0
-            x[i] = xi + a * d
+            x[i] = _within(xi + a * d, start, reach)
 
     def _old_shape(self, tets: np.ndarray, moved: np.ndarray, moved_from: np.ndarray):
         """Rest and current corners of tets as they were before a cut step moved some of their nodes.
