@@ -84,6 +84,12 @@ class _TableGroup(click.Group):
             message = " ".join(str(err).split())  # exactly one line
             click.echo(f"cutkit: error: {message}", err=True)
             ctx.exit(err.exit_code)
+        except OSError as err:
+            # the system refused a read or write (a full disk, a folder taken away): one line, the file named
+            where = f"{err.filename}: " if err.filename else ""
+            message = " ".join(f"{where}{err.strerror or err}".split())
+            click.echo(f"cutkit: error: {message}", err=True)
+            ctx.exit(1)
         except Terminated:
             click.echo("cutkit: terminated", err=True)
             ctx.exit(143)

@@ -444,3 +444,36 @@ def test_the_rest_tolerance_is_the_runs_to_choose():
     model = slab()
     assert make_tissue(model, None, "neohookean", SimulateOptions()).rest_rtol == REST_RTOL == 1e-4
     assert make_tissue(model, None, "neohookean", SimulateOptions(rest_rtol=3e-4)).rest_rtol == 3e-4
+
+
+def test_a_frame_the_system_refuses_to_write_ends_the_run_in_one_line(tmp_path, monkeypatch, capsys):
+    """Frames are written by a thread beside the run; a write that fails (here the third frame: a
+    full disk) still ends ``cutkit simulate`` with one line naming the file and exit 1, not a
+    traceback, and leaves the frames before it listed in a valid .pvd."""
+    import cutkit.io.series as series
+
+    calls = []
+    write = series.SeriesWriter.write
+
+    def full_disk(self, *args, **kwargs):
+        calls.append(1)
+        if len(calls) == 3:
+            raise OSError(28, "No space left on device", str(self.frames_dir / "0002.vtu"))
+        return write(self, *args, **kwargs)
+
+    monkeypatch.setattr(series.SeriesWriter, "write", full_disk)
+    write_model(tmp_path / "slab.h5", slab())
+    traj = straight_incision([6.0, 0.0, 8.3], [26.0, 0.0, 8.3], inward=[0, 1, 0], depth=5.0, approach=3.0,
+                             press_time=0.3, cut_time=0.6, rate=100)
+    write_trajectory(tmp_path / "cut.csv", traj)
+    out = tmp_path / "out"
+    code = main(["simulate", str(tmp_path / "slab.h5"), "--trajectory", str(tmp_path / "cut.csv"), "-o", str(out),
+                 "--fps", "10"])
+    err = capsys.readouterr().err
+    assert code == 1
+    lines = [line for line in err.splitlines() if line.startswith("cutkit:")]
+    assert lines == [f"cutkit: error: {out / 'frames' / '0002.vtu'}: No space left on device"], err
+    assert "Traceback" not in err
+    frames = sorted((out / "frames").glob("*.vtu"))
+    assert [f.name for f in frames] == ["0000.vtu", "0001.vtu"]
+    assert (out / "cut.pvd").read_text().count("<DataSet") == 2

@@ -11,14 +11,29 @@ from __future__ import annotations
 
 import json
 import time
+from collections import deque
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
 
 
+#: Frames handed to the writer thread and not yet written, at most (each holds a copy of the tissue's
+#: arrays, about 10 MB on the demo knee): the next frame waits for the oldest.
+FRAMES_IN_FLIGHT = 2
+
+
 class FrameRecorder:
-    """``frames/NNNN.vtu`` + ``cut.pvd`` and ``surface/NNNN.vtp`` + ``cut_surface.pvd``."""
+    """``frames/NNNN.vtu`` + ``cut.pvd`` and ``surface/NNNN.vtp`` + ``cut_surface.pvd``.
+
+    :meth:`show` copies the tissue's arrays under the session's lock and hands them to one writer
+    thread, which writes the frames in order while the session goes on: VTK compresses a frame
+    (zlib) without holding the GIL, about 150 ms for the demo knee's 172k tets, most of a run's
+    output time.  What is written is the copy, so writing never changes what is simulated.
+    :meth:`close` waits for every frame; a write that failed raises there or at the next
+    :meth:`show`.
+    """
 
     def __init__(self, session, out_dir):
         from cutkit.io.series import SeriesWriter
@@ -28,13 +43,17 @@ class FrameRecorder:
         self.series = SeriesWriter(Path(out_dir), "cut")
         self.surface = SurfaceSeries(out_dir)
         self.colours = NodeColours(session.model, session.cut_mesh)
+        self._writer = ThreadPoolExecutor(max_workers=1, thread_name_prefix="cutkit-frames")
+        self._pending: deque = deque()
+        self._failed = False
 
     @property
     def n_frames(self) -> int:
+        """Frames written so far (all of them after :meth:`close`)."""
         return self.series.n_frames
 
     def show(self, t: float) -> None:
-        """Write the tissue and its cut surface at time ``t``."""
+        """Write the tissue and its cut surface at time ``t`` (handed to the writer thread)."""
         from cutkit.cutting import compact_nodes, cut_surface_faces
 
         s = self.session
@@ -54,17 +73,40 @@ class FrameRecorder:
             pd["texture_rgb"] = rgb
         cd = {"label": labels, "new_tet": made.astype(np.uint8)}
         kept, new_index = compact_nodes(tets, n)  # no orphan node in a frame
-        self.series.write(t, positions[kept], new_index[tets], point_data={k: v[kept] for k, v in pd.items()},
-                          cell_data=cd)
         spd = {"displacement": pd["displacement"]}
         if rgb is not None:
-            spd["texture_rgb"] = rgb
-        self.surface.write(t, positions, surf_faces, spd)
+            spd["texture_rgb"] = rgb  # NodeColours grows by a new array: this one stays as it is
+        frame = (t, positions[kept], new_index[tets], {k: v[kept] for k, v in pd.items()}, cd)
+        self._wait(FRAMES_IN_FLIGHT - 1)
+        self._pending.append(self._writer.submit(self._write, frame, (t, positions, surf_faces, spd)))
         s.task_s["output"] += time.perf_counter() - t1
 
+    def _write(self, frame, surface) -> None:
+        """The writer thread: one frame of the tissue and of its cut surface; none after one failed
+        (the recording ends with the last frame written whole)."""
+        if self._failed:
+            return
+        try:
+            t, points, tets, point_data, cell_data = frame
+            self.series.write(t, points, tets, point_data=point_data, cell_data=cell_data)
+            self.surface.write(*surface)
+        except BaseException:
+            self._failed = True
+            raise
+
+    def _wait(self, keep: int) -> None:
+        """Wait until at most ``keep`` frames are pending; re-raises a failed write."""
+        while len(self._pending) > keep:
+            self._pending.popleft().result()
+
     def close(self) -> None:
-        self.series.close()
-        self.surface.close()
+        """Wait for every frame, then write the collections."""
+        try:
+            self._wait(0)
+        finally:
+            self._writer.shutdown(wait=True, cancel_futures=True)
+            self.series.close()
+            self.surface.close()
 
 
 class NodeColours:
