@@ -72,8 +72,11 @@ def pytest_collection_modifyitems(config, items):
 #: simulates on it, with the third after it on that worker; the other worker starts on the cut's
 #: own files (second and fourth), so that in a fresh clone the two compile different numba kernels
 #: first and each later loads what the other compiled, rather than both compiling the simulation's
-#: kernels at once.
-FIRST = ("test_knee_tissue.py", "test_cut_properties.py", "test_simulate.py", "test_cut_thousand_paths.py")
+#: kernels at once.  The fifth to seventh use no relaxation kernel: the cut's worker takes them
+#: while the knee's worker still compiles the relaxation's kernels for the knee's settle (about
+#: 50 s of compiling done twice otherwise, measured with numba's compile events in a fresh clone).
+FIRST = ("test_knee_tissue.py", "test_cut_properties.py", "test_simulate.py", "test_cut_thousand_paths.py",
+         "test_isovolume.py", "test_readme.py", "test_packaging.py")
 
 
 @pytest.fixture(autouse=True)

@@ -121,6 +121,39 @@ def test_the_element_tissue_places_a_smoothed_vertex_through_the_old_shape():
     assert checked and np.isfinite(tis.positions).all()
 
 
+def test_the_element_tissue_keeps_a_moved_held_vertex_held_where_the_old_shape_puts_it(monkeypatch):
+    """The decimated mesh with the half x < median held (fixed nodes), deformed, cut by a path that
+    moves a held vertex inside the held half: after each hand-over the vertex sits where the tissue
+    before the step puts its new rest place, and stays held."""
+    from _tissues import with_cut_mesh
+    from test_cut_snapping import cut_and_check_moved_vertices
+
+    from cutkit.model.tetmodel import BoundaryConditions, Materials, TetModel
+    from cutkit.relax.elastic_tissue import ElasticTissue
+
+    row = dict(label=1, name="m", E=30e3, poisson_ratio=0.45, density=1090.0, damping=8.0, F_enter=0.8,
+               mu_static=1e-6, mu_dynamic=1e-6, rho_dynamic=1e-8, alpha_static=0.1, alpha_dynamic=0.1,
+               c_edge=1.0, c_shape=1.0)
+    p, t = MESHES["decimated"]
+    poses, blade_length, _ = _path("decimated", 73)
+    fixed = np.flatnonzero(p[:, 0] < float(np.median(p[:, 0])))
+    model = TetModel.from_arrays(p, t, materials=Materials.from_rows([row]),
+                                 boundary=BoundaryConditions(fixed_nodes=fixed))
+    tis = with_cut_mesh(ElasticTissue(model, step_s=0.02), blade_length)
+    moved_held, apply = [], SM._apply
+
+    def recorded(cm, group, stars, dx, followers):
+        moved_held.extend(int(g) for g in group if cm.store.held[g])
+        return apply(cm, group, stars, dx, followers)
+
+    monkeypatch.setattr(SM, "_apply", recorded)
+    X = tis.cm.rest_points
+    tis.state.positions[:] = X + 0.1 * np.sin(X[:, [1, 2, 0]])  # a smooth deformation: current != rest
+    checked = cut_and_check_moved_vertices(tis, poses, len(p))
+    assert checked and moved_held and np.isfinite(tis.positions).all()
+    assert tis.em.fixed[moved_held].all()
+
+
 def test_a_run_with_the_papers_springs_does_not_smooth():
     """The springs re-interpolate moved nodes from their defining nodes, which a vertex has none of:
     a session with them cuts without smoothing, one with the element model with it."""
@@ -181,6 +214,7 @@ def test_the_rebase_looks_again_with_the_cuts_nodes_free_to_move(i, monkeypatch)
         return ids
 
     monkeypatch.setattr(CutMesh, "rebase", rebase_without_look)
+    monkeypatch.setattr(SM, "LIFT_TO_BOUND", False)  # (which lifts path 239's last sliver by 0.04 degrees)
     missed_off, off = cut_path(p, t, *_path("decimated", i), follow_wounds=False)
     assert off < SM.SMOOTH_BELOW_DEG <= on, (off, on)
     assert not missed_on and not missed_off
@@ -433,3 +467,64 @@ def test_a_piece_a_vertex_move_shrinks_below_the_crumb_limit_is_removed(monkeypa
     with pytest.raises(AssertionError) as err:
         cut_path(p, t, poses, 10.0 if i % 2 == 0 else 2.5, ("gmsh", i), follow_wounds=False)
     assert "loose_pieces" in str(err.traceback[-1].statement)  # the crumb check, not another
+
+
+def _held_cut_meshes(monkeypatch, held_of):
+    """Make ``cut_path`` cut over a tissue store whose nodes ``held_of(points)`` (n,) bool are held by
+    the boundary conditions (as ``TissueStore.from_model`` reads them from a model)."""
+    import test_cut_thousand_paths as TP
+
+    from cutkit.cutting import CutMesh
+    from cutkit.tissue import TissueStore
+
+    def over_held(p, t, blade_length, **options):
+        return CutMesh.over(TissueStore(p, t, held=held_of(p)), blade_length=blade_length, **options)
+
+    monkeypatch.setattr(TP, "CutMesh", over_held)
+
+
+def test_a_vertex_inside_a_held_tissue_moves_as_a_free_one(monkeypatch):
+    """A cut into a held tissue (bone is held in the demo knee): a vertex whose star's corners are all
+    held moves as it would were nothing held, so the same path ends with the same worst angle, lifted
+    to 5 degrees, where held vertices that never move leave the sliver (below 5)."""
+    p, t = MESHES["decimated"]
+    free = cut_path(p, t, *_path("decimated", 48), follow_wounds=False)
+    _held_cut_meshes(monkeypatch, lambda q: np.ones(len(q), bool))
+    held = cut_path(p, t, *_path("decimated", 48), follow_wounds=False)
+    unsmoothed = cut_path(p, t, *_path("decimated", 48), smooth_vertices=False, follow_wounds=False)
+    assert not held[0] and held[1] == free[1] >= SM.SMOOTH_BELOW_DEG > unsmoothed[1]
+
+
+def test_a_held_vertex_next_to_free_tissue_stays(monkeypatch):
+    """Half the mesh held: every vertex smoothing moves is free, or held with every corner of its star
+    held (a held vertex with a free neighbour never moves); the paths move some of each."""
+    p, t = MESHES["decimated"]
+    half = float(np.median(p[:, 0]))
+    _held_cut_meshes(monkeypatch, lambda q: q[:, 0] < half)
+    moves, apply = [], SM._apply
+
+    def recorded(cm, group, stars, dx, followers):
+        corners = np.concatenate([cm.orig_tets[star] for star in stars])
+        moves.append((bool(cm.store.held[group].any()), bool(cm.store.held[corners].all())))
+        return apply(cm, group, stars, dx, followers)
+
+    monkeypatch.setattr(SM, "_apply", recorded)
+    for i in (9, 104):
+        missed, worst = cut_path(p, t, *_path("decimated", i), follow_wounds=False)
+        assert not missed and worst >= SM.SMOOTH_BELOW_DEG, (i, worst)
+    assert all(whole for held, whole in moves if held)
+    assert any(held for held, _ in moves) and not all(held for held, _ in moves)
+
+
+def test_a_sliver_just_under_the_bound_is_lifted_to_it(monkeypatch):
+    """A retrace with 1 mm tremor on the Kuhn box (a fresh draw's path: seed 1000 * 57 + 20261129) whose
+    last sliver, 4.96 degrees, no vertex move lifts by SMOOTH_MIN_GAIN_DEG: the move that lifts its star
+    to SMOOTH_BELOW_DEG is taken (LIFT_TO_BOUND), and without it the path ends below the bound."""
+    from _cut_paths import make_path
+
+    p, t = MESHES["kuhn"]
+    poses = make_path("retrace", np.random.default_rng(1000 * 57 + 20261129), p.max(axis=0), 1.0)
+    missed, worst = cut_path(p, t, poses, 2.5, ("kuhn", 57))
+    assert not missed and worst >= SM.SMOOTH_BELOW_DEG
+    monkeypatch.setattr(SM, "LIFT_TO_BOUND", False)
+    assert cut_path(p, t, poses, 2.5, ("kuhn", 57))[1] < SM.SMOOTH_BELOW_DEG

@@ -32,7 +32,8 @@ What a move keeps:
 * **every contact**: no uncut edge of the vertex comes to cross a triangle
   the stroke's blade has swept (so no crossing the cut missed appears);
 * **the tets**: every tetrahedron of the star stays positive and its
-  smallest angle rises by at least :data:`SMOOTH_MIN_GAIN_DEG`;
+  smallest angle rises by at least :data:`SMOOTH_MIN_GAIN_DEG`, or from
+  below :data:`SMOOTH_BELOW_DEG` to it (:data:`LIFT_TO_BOUND`);
 * **an earlier stroke's cut closed**: a vertex on an earlier stroke's cut
   surface moves with its coincident copies (the other sides'), by the same
   move, within the cut surface's plane where that is flat (the faces of the
@@ -40,9 +41,12 @@ What a move keeps:
   inside the model, in space (the cut's faces bend with them, both sides
   alike; a stroke retracing the cut sweeps through the copies, so the
   contact rule above keeps each edge of theirs on its side);
-* **what else holds**: a vertex held by the boundary conditions (any copy),
-  or with a cut node the blade placed this step (looked at again at the
-  next step), stays.
+* **what else holds**: a vertex held by the boundary conditions (any copy)
+  stays unless every corner of its star is held too (inside a held tissue
+  such as bone, :func:`_inside_held_tissue`: the move changes no tet with a
+  free node, and the physics keeps the moved node held where the old shape
+  places it); a vertex with a cut node the blade placed this step stays
+  (looked at again at the next step).
 
 Before a vertex moves for a sliver of a completely split original, the
 original is re-split where its split as :func:`~cutkit.cutting.resubdivision.resubdivide`
@@ -80,6 +84,9 @@ SMOOTH_STEPS = np.array([0.1, 0.05, 0.02, 0.01])
 #: A vertex moves only when the smallest angle of its star rises by at least this (degrees): a move
 #: costs the physics a re-placement of the star.
 SMOOTH_MIN_GAIN_DEG = 0.2
+#: A move that gains less than :data:`SMOOTH_MIN_GAIN_DEG` is still taken where it lifts its star from
+#: below :data:`SMOOTH_BELOW_DEG` to it (a sliver just under the bound, which no move lifts by the gain).
+LIFT_TO_BOUND = True
 #: A vertex on the model's outer surface where the normals of its boundary faces are all within this
 #: angle (degrees) of their area-weighted mean moves in the plane that keeps the volume
 #: (:func:`_on_a_gentle_surface`); the surface then moves by at most the move.
@@ -331,9 +338,9 @@ def _best_move(cm, v, held):
     ``held`` (set of int).  Reads the cut state only: :func:`_smooth_pass` reuses the answer until
     the state changes."""
     group = _copies(cm, v)
-    if cm.store.held[group].any():
-        return None
     stars = [_star(cm, g) for g in group.tolist()]
+    if cm.store.held[group].any() and not _inside_held_tissue(cm, stars):
+        return None
     directions = _directions(cm, group, stars)
     if directions is None:
         return None
@@ -358,9 +365,18 @@ def _best_move(cm, v, held):
                             int(np.searchsorted(nodes, v)), np.ascontiguousarray(x[uncut]),
                             _swept_near(cm, x[nodes]))
     dx, angle, start = KF.vertex_place(problem, directions, SMOOTH_STEPS * h, budget)
-    if not angle >= start + SMOOTH_MIN_GAIN_DEG:
+    if not (angle >= start + SMOOTH_MIN_GAIN_DEG or (LIFT_TO_BOUND and angle >= SMOOTH_BELOW_DEG > start)):
         return None
     return group, stars, dx, ids, angle
+
+
+def _inside_held_tissue(cm, stars) -> bool:
+    """Whether every corner of every original tet of ``stars`` (list of (k,) int64) is held by the
+    boundary conditions: a held vertex there (inside a held tissue such as bone, or on its outer
+    surface) may move, since no tet with a free node changes (the cut nodes inside are held too, the
+    store's rule) and the physics places the held nodes through the old shape, where they stay."""
+    held = cm.store.held
+    return all(bool(held[cm.orig_tets[star]].all()) for star in stars)
 
 
 def _sorted_has(nodes, query) -> np.ndarray:
