@@ -10,12 +10,14 @@ smallest J of any step, the written mesh through ``cutkit check``, and the
 cut-made tetrahedra's smallest dihedral angle (rest configuration) with how
 many lie below 5 degrees.
 
-    python benchmarks/knee_incisions.py knee.h5 [--json] [--random N --seed S]
+    python benchmarks/knee_incisions.py knee.h5 [--json] [--random N --seed S [--tilt DEG]]
 
 About 1 min on two threads.  ``--random N`` simulates N straight incisions
 drawn at random instead (:func:`random_incisions`): on the front, the back
 or the side, 10-30 mm long in any direction along the skin, 2-12 mm deep,
-cut in 0.6-1.5 s (about 10 s each).
+cut in 0.6-1.5 s (about 10 s each); with ``--tilt DEG`` the blade leans
+sideways (about the direction of the cut) by an angle drawn from -DEG to
+DEG, the incisions otherwise the same.
 """
 
 import argparse
@@ -37,9 +39,10 @@ INCISIONS = {
 }
 
 
-def random_incisions(n: int, seed: int) -> dict:
-    """``n`` incisions drawn from ``seed``, as :data:`INCISIONS` gives them."""
-    rng = np.random.default_rng(seed)
+def random_incisions(n: int, seed: int, tilt_deg: float = 0.0) -> dict:
+    """``n`` incisions drawn from ``seed``, as :data:`INCISIONS` gives them; the blade leaning
+    sideways by up to ``tilt_deg`` (drawn from a stream of its own: the incisions stay the same)."""
+    rng, lean = np.random.default_rng(seed), np.random.default_rng(seed + 1000)
     out = {}
     for i in range(n):
         side = int(rng.integers(3))
@@ -53,6 +56,9 @@ def random_incisions(n: int, seed: int) -> dict:
         along = [np.cos(angle), 0.0, np.sin(angle)] if side < 2 else [0.0, np.cos(angle), np.sin(angle)]
         b = a + rng.uniform(10, 30) * np.array(along)
         depth, cut_time = rng.uniform(2, 12), rng.uniform(0.6, 1.5)
+        if tilt_deg:
+            tilt = np.radians(lean.uniform(-tilt_deg, tilt_deg))
+            inward = (np.cos(tilt) * np.array(inward, float) + np.sin(tilt) * np.cross(along, inward)).tolist()
         out[f"random {i}"] = (a.tolist(), b.tolist(), inward, depth, cut_time)
     return out
 
@@ -88,6 +94,8 @@ def main():
     ap.add_argument("--json", action="store_true")
     ap.add_argument("--random", type=int, default=0, metavar="N", help="N random incisions instead of the five")
     ap.add_argument("--seed", type=int, default=1, help="seed of the random incisions")
+    ap.add_argument("--tilt", type=float, default=0.0, metavar="DEG",
+                    help="the random incisions' blade leaning sideways by up to DEG degrees")
     args = ap.parse_args()
     from cutkit.errors import InputError
     from cutkit.io.model_h5 import read_model
@@ -96,7 +104,7 @@ def main():
         model = read_model(args.model)
     except (InputError, OSError) as e:
         sys.exit(f"knee_incisions: {e}")
-    cases = random_incisions(args.random, args.seed) if args.random else INCISIONS
+    cases = random_incisions(args.random, args.seed, args.tilt) if args.random else INCISIONS
     res = {name: one(model, *case) for name, case in cases.items()}
     if args.json:
         print(json.dumps(res, indent=2))
