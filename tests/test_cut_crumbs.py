@@ -85,12 +85,19 @@ def test_crumb_kernel_matches_twin():
     alive = cm._alive[:total].copy()
     live = np.flatnonzero(alive)
     rng = np.random.default_rng(0)
+    m0 = cm.sub_count.shape[0]
+    blocks = KC.make_blocks(np.ascontiguousarray(cm._X[:cm.n_orig_points]), cm.orig_tets, cm.neighbors, 0.5)
+    changed = (cm.sub_count > 0) | ~alive[:m0]  # blocks with such a tet are dirty, the others count whole
+    dirty = np.zeros(blocks[1].shape[0], bool)
+    dirty[blocks[0][changed]] = True
+    assert 0 < dirty.sum() < dirty.size
     inc = KC.Incidence(cm.node_tet_off, cm.node_tet_idx, cm._def_nodes, cm.n_orig_points, cm.sub_start,
-                       cm.sub_count, cm.neighbors)
-    mark = np.zeros(total, np.int64)
+                       cm.sub_count, cm.neighbors, *blocks, dirty)
+    mark, block_mark = np.zeros(total, np.int64), np.zeros(dirty.size, np.int64)
     for i, limit in enumerate((1e-3, 0.05, 1.0, 5.0, 50.0, 1e3)):  # 1e3: the whole block is one crumb
         seeds = rng.choice(live, 12)
-        got, k = KC.loose_small_pieces(cm._X, cm._tets[:total], alive, inc, seeds, limit, mark, 4 * (i + 1))
+        got, k = KC.loose_small_pieces(cm._X, cm._tets[:total], alive, inc, seeds, limit, mark, block_mark,
+                                       4 * (i + 1))
         ref, k_ref = loose_small_pieces_twin(cm._X, cm._tets[:total], alive, seeds, limit)
         assert k == k_ref
         np.testing.assert_array_equal(np.sort(got), ref)
@@ -125,3 +132,57 @@ def test_cut_cli_reports_the_crumb_it_removed_and_writes_no_trace_of_it(tmp_path
     assert float(signed_volumes(m.points, m.tets).sum()) + float(found.group(1)) == pytest.approx(v0, rel=1e-3)
     assert np.unique(m.tets).size == len(m.points)
     assert "cut loose besides the largest" not in r.output
+
+
+def _clean_blocks_are_whole(cm, where):
+    """Every block the crumb search counts whole (not dirty) has all its tets live and uncut, and its
+    volume as made is theirs at their rest places now."""
+    of, volume = cm.crumb_blocks[0], cm.crumb_blocks[1]
+    m0 = cm.sub_count.shape[0]
+    changed = (cm.sub_count > 0) | ~cm._alive[:m0]
+    clean = ~cm.crumb_block_dirty
+    assert not changed[clean[of]].any(), where
+    now = np.bincount(of, weights=signed_volumes(cm._X, cm.orig_tets), minlength=volume.size)
+    np.testing.assert_allclose(now[clean], volume[clean], rtol=1e-12, atol=0, err_msg=str(where))
+    return int(clean.sum())
+
+
+@pytest.mark.parametrize("name,i,crumbs", [("kuhn", 42, 1), ("decimated", 168, 2), ("decimated", 35, 1),
+                                           ("gmsh", 104, 0), ("decimated", 73, 0)])
+def test_a_clean_block_is_whole_and_keeps_its_volume(name, i, crumbs):
+    """After every step of cut paths that subdivide, remove crumbs, move cut nodes (fairing) and
+    vertices (smoothing) and rebase between strokes, the blocks the crumb search counts whole are
+    whole: the search's shortcut (cutkit/cutting/_kernels_crumbs.py) is exact only so."""
+    from _cut_paths import lift
+    from test_cut_thousand_paths import MESHES, _path
+
+    from cutkit.cutting.step import blade_in_tissue, finish_stroke, rebase_if_left
+
+    p, t = MESHES[name]
+    poses, blade_length, where = _path(name, i)
+    cm = CutMesh(p, t, blade_length=blade_length)
+    counted = []
+    for k, pose in enumerate(poses):
+        if pose is None:
+            finish_stroke(cm)
+            lift(cm)
+        else:
+            cut_step(cm, *pose)
+            if not blade_in_tissue(cm) and cm.prev_pose is not None:
+                rebase_if_left(cm)
+        counted.append(_clean_blocks_are_whole(cm, (where, k)))
+    finish_stroke(cm)
+    _clean_blocks_are_whole(cm, (where, "end"))
+    assert min(counted) > 0 and cm.crumb_blocks[1].size > 1 and cm.crumb_count == crumbs
+
+
+def test_a_crumb_of_uncut_tets_leaves_their_blocks_dirty():
+    """A corner cut off the box whose piece holds whole uncut cubes, below the crumb limit (the model's
+    volume set large): the crumb's uncut tets go, and their blocks are no longer counted whole."""
+    p, t = box_mesh((6, 4, 4))
+    cm = CutMesh(p, t, blade_length=12.0)
+    cm.model_volume = 8000.0  # the limit, 8 mm^3, above the corner piece's 7.1 mm^3
+    corner_cut(cm, 3.5)
+    m0 = cm.sub_count.shape[0]
+    assert cm.crumb_count == 1 and (~cm._alive[:m0] & (cm.sub_count == 0)).sum() >= 6  # uncut tets removed
+    _clean_blocks_are_whole(cm, "corner")

@@ -29,6 +29,10 @@ CRUMB_VOLUME_FRACTION = 1e-3
 #: kept, it would be the loose body with the crumb's part missing (a hole whose rim edges are
 #: non-manifold).  The main body is far larger, so only loose pieces are removed this way.
 CRUMB_REGROWN_FRACTION = 1e-2
+#: The crumb search's blocks (:func:`~cutkit.cutting._kernels_crumbs.make_blocks`) are made of about
+#: this share of the crumb limit each: where the search meets the uncut tissue, a few clean blocks
+#: prove the main body large.
+BLOCK_SHARE = 16
 
 
 def init_crumbs(cm):
@@ -43,6 +47,11 @@ def init_crumbs(cm):
     cm.crumb_volume_before = 0.0  # crumbs removed before the last rebase, mm^3
     cm.crumb_mark = np.zeros(m0, np.int64)  # per-tet marks of the crumb search (see loose_small_pieces)
     cm.crumb_stamp = 0
+    # blocks of face-connected original tets, each a share of the crumb limit: a clean one counts whole
+    cm.crumb_blocks = KC.make_blocks(np.ascontiguousarray(cm._X[:n0]), cm.orig_tets, cm.neighbors,
+                                     CRUMB_VOLUME_FRACTION * cm.model_volume / BLOCK_SHARE)
+    cm.crumb_block_dirty = np.zeros(cm.crumb_blocks[1].shape[0], bool)
+    cm.crumb_block_mark = np.zeros(cm.crumb_blocks[1].shape[0], np.int64)
     cm.crumb_count = 0  # crumbs removed (a crumb re-made by a later step and removed again counts again)
 
 
@@ -80,8 +89,9 @@ def remove_crumbs(cm, seeds) -> int:
         mark[:cm.crumb_mark.shape[0]] = cm.crumb_mark
         cm.crumb_mark = mark
     cm.crumb_stamp += 4  # marks of earlier calls are below it: no per-step reset
+    _blocks_changed(cm, seeds)
     inc = KC.Incidence(cm.node_tet_off, cm.node_tet_idx, cm._def_nodes, cm.n_orig_points, cm.sub_start,
-                       cm.sub_count, cm.neighbors)
+                       cm.sub_count, cm.neighbors, *cm.crumb_blocks, cm.crumb_block_dirty)
     regrown = _touching_crumbs(cm, seeds)  # before this call's crumbs join cm.crumb_tets
     n = _remove_pieces(cm, inc, seeds, CRUMB_VOLUME_FRACTION * cm.model_volume)
     regrown = regrown[cm._alive[regrown]]
@@ -94,13 +104,24 @@ def remove_crumbs(cm, seeds) -> int:
 def _remove_pieces(cm, inc, seeds, limit) -> int:
     """Remove the pieces through live tets ``seeds`` whose rest volume is at most ``limit``."""
     dead, n_pieces = KC.loose_small_pieces(cm._X, cm._tets, cm._alive, inc, seeds, limit, cm.crumb_mark,
-                                           cm.crumb_stamp)
+                                           cm.crumb_block_mark, cm.crumb_stamp)
     if not n_pieces:
         return 0
     cm.remove_tets(dead)
+    gone = dead[dead < cm.sub_count.shape[0]]
+    cm.crumb_block_dirty[cm.crumb_blocks[0][gone]] = True  # uncut tets of the crumb: their blocks changed
     cm.crumb_tets.update(dead.tolist())
     cm.crumb_count += int(n_pieces)
     return int(n_pieces)
+
+
+def _blocks_changed(cm, seeds) -> None:
+    """Mark dirty the blocks a step changed: those of the seeds' original tets (the seeds are the
+    step's new tets and the live tets of the stars of the original vertices it moved, so every
+    original tet the step subdivided or reshaped is one or holds one)."""
+    m0 = cm.sub_count.shape[0]
+    origin = np.where(seeds < m0, seeds, cm.store.tet_origins[seeds])
+    cm.crumb_block_dirty[cm.crumb_blocks[0][origin]] = True
 
 
 def _touching_crumbs(cm, seeds):
