@@ -193,3 +193,23 @@ def test_a_tip_sliding_along_the_skin_cuts_nothing(a, y):
         for x in np.linspace(-0.5, 5.5, 25):
             cut_step(cm, [x, y, 3.0 - depth], a)
         assert bool(cm.subtets) == cuts and (cm.n_points > len(p)) == cuts
+
+
+def test_the_uncut_edges_line_counts_and_names_them():
+    """The warning line: the count, one midpoint per edge up to NAMED_UNCUT_EDGES (rest, mm), singular
+    for one edge; nothing when every crossed edge was cut."""
+    from types import SimpleNamespace
+
+    from cutkit.cutting import contact
+
+    def line(k):
+        places = np.arange(3.0 * k).reshape(k, 3)
+        return contact.uncut_edges_line(SimpleNamespace(uncut_edge_places=lambda: places))
+
+    assert line(0) == ""
+    assert line(1) == ("1 edge the blade met could not be cut (deferred where its stroke ended, or a copy along "
+                       "an earlier cut cut elsewhere) and stays joined; midpoint at (0.00, 1.00, 2.00) mm; "
+                       "see docs/cutting.md")
+    many = line(contact.NAMED_UNCUT_EDGES + 2)
+    assert many.startswith(f"{contact.NAMED_UNCUT_EDGES + 2} edges the blade met") and "and stay joined" in many
+    assert many.count("(") == 1 + contact.NAMED_UNCUT_EDGES and " and 2 more mm;" in many

@@ -48,9 +48,10 @@ def uncut_edges_line(cm) -> str:
         return ""
     named = "; ".join("(" + ", ".join(f"{c:.2f}" for c in p) + ")" for p in places[:NAMED_UNCUT_EDGES].tolist())
     more = f" and {k - NAMED_UNCUT_EDGES} more" if k > NAMED_UNCUT_EDGES else ""
-    return (f"{k} edge{'s' * (k != 1)} the blade met could not be cut (deferred where its stroke ended, or a "
-            f"copy along an earlier cut cut elsewhere) and stay joined; midpoints at {named}{more} mm; "
-            "see docs/cutting.md")
+    one = k == 1
+    return (f"{k} edge{'' if one else 's'} the blade met could not be cut (deferred where its stroke ended, or a "
+            f"copy along an earlier cut cut elsewhere) and stay{'s' if one else ''} joined; "
+            f"midpoint{'' if one else 's'} at {named}{more} mm; see docs/cutting.md")
 
 
 def touches_only(cm, e: int, t: float, swept) -> bool:
