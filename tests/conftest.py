@@ -76,7 +76,7 @@ def pytest_collection_modifyitems(config, items):
 #: while the knee's worker still compiles the relaxation's kernels for the knee's settle (about
 #: 50 s of compiling done twice otherwise, measured with numba's compile events in a fresh clone).
 FIRST = ("test_knee_tissue.py", "test_cut_properties.py", "test_simulate.py", "test_cut_thousand_paths.py",
-         "test_isovolume.py", "test_readme.py", "test_packaging.py")
+         "test_isovolume.py", "test_cut_kernels.py", "test_packaging.py")
 
 
 @pytest.fixture(autouse=True)
