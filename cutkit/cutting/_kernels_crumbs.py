@@ -137,7 +137,7 @@ def make_blocks(X, tets, neighbors, target):
 def _count_blocks(inc, marks, b, room):
     """Count clean block b and the clean blocks joined to it into the growing piece, until their
     volume passes ``room``.  Returns (volume, large): ``large`` if one of them was found large before."""
-    stack = marks[3]  # (B + 1,) int64 scratch: column 0 the blocks counted in this growth, then them
+    stack = marks[3]  # (B + 1,) int64 scratch: entry 0 how many blocks this growth counted, then they
     top = stack[0]
     _set_block(marks, b, _GROWING)
     stack[0] += 1

@@ -119,9 +119,7 @@ def _blocks_changed(cm, seeds) -> None:
     """Mark dirty the blocks a step changed: those of the seeds' original tets (the seeds are the
     step's new tets and the live tets of the stars of the original vertices it moved, so every
     original tet the step subdivided or reshaped is one or holds one)."""
-    m0 = cm.sub_count.shape[0]
-    origin = np.where(seeds < m0, seeds, cm.store.tet_origins[seeds])
-    cm.crumb_block_dirty[cm.crumb_blocks[0][origin]] = True
+    cm.crumb_block_dirty[cm.crumb_blocks[0][cm.store.tet_origins[seeds]]] = True  # an original's origin is itself
 
 
 def _touching_crumbs(cm, seeds):
