@@ -89,6 +89,7 @@ class _Grid:
         self.level = level
         self.scalar = scalar
         self.n = shape[0] * shape[1] * shape[2]
+        self._positions = {}  # node -> its position: a centre's search reads its cone's nodes many times
 
     def gid(self, p):
         return (p[0] * self.shape[1] + p[1]) * self.shape[2] + p[2]
@@ -101,6 +102,11 @@ class _Grid:
         return self.n + N_DIRS * self.gid(lo) + (4 * d[0] + 2 * d[1] + d[2] - 1)
 
     def pos(self, node):
+        if node not in self._positions:
+            self._positions[node] = self._place(node)
+        return self._positions[node].copy()
+
+    def _place(self, node):
         if node[0] == "v":
             return np.array(node[1], float)
         if node[0] == "c":
