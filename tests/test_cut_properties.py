@@ -111,7 +111,7 @@ def run_path(cm, poses, v0, check=True, end_strokes=False, on_stroke_end=None):
     return swept
 
 
-@settings(max_examples=120, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(st.sampled_from(sorted(MESHES)), st.sampled_from(KINDS), st.sampled_from([0.0, 0.1, 0.3, 1.0]),
        st.integers(0, 2**31 - 1), st.sampled_from([2.5, 10.0]))
 def test_every_step_is_a_clean_mesh(name, kind, tremor, seed, blade_length):
@@ -132,7 +132,7 @@ def stroke_losses(cm, stroke):
     return lost, {e for e in lost if why[e] == "refused"}, {e for e in lost if why[e] == "deferred"}
 
 
-@settings(max_examples=100, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=50, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(st.sampled_from(["jittered", "delaunay"]), st.sampled_from(KINDS), st.sampled_from([0.0, 0.3, 1.0]),
        st.integers(0, 2**31 - 1), st.sampled_from([2.5, 10.0]))
 def test_oracle_every_crossed_edge_is_cut(name, kind, tremor, seed, blade_length):
@@ -160,7 +160,7 @@ def test_oracle_every_crossed_edge_is_cut(name, kind, tremor, seed, blade_length
     assert not lost, sorted(lost)[:10]
 
 
-@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(st.sampled_from(["jittered", "delaunay"]), st.sampled_from(KINDS), st.sampled_from([0.0, 0.3, 1.0]),
        st.integers(0, 2**31 - 1), st.sampled_from([2.5, 10.0]))
 def test_every_lost_edge_is_a_documented_refusal(name, kind, tremor, seed, blade_length):
