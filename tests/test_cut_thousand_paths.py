@@ -19,8 +19,9 @@ the path:
   earlier stroke's wound with its crossing in the wound's band.
 
 The bound on the cut-made tetrahedra's smallest dihedral angle
-(``MIN_CUT_DIHEDRAL_DEG``) is checked on every other path of each mesh (the
-distribution over all of them: ``benchmarks/cut_fresh_draw.py --seed 7``).
+(``MIN_CUT_DIHEDRAL_DEG``) is checked on every path: every one keeps it but
+the two of :data:`BELOW_BOUND`, which may not get worse (the distribution:
+``benchmarks/cut_fresh_draw.py --seed 7``).
 """
 
 import functools
@@ -46,8 +47,10 @@ ALL_KINDS = KINDS + MORE_KINDS
 TREMORS = (0.0, 0.1, 0.3, 1.0)
 #: Every cut-made tetrahedron's smallest dihedral angle should be at least this (issue 30).
 MIN_CUT_DIHEDRAL_DEG = 5.0
-#: The bound's test takes every this-many-th path of each mesh.
-BOUND_EVERY = 2
+#: The paths that do not keep the bound yet (issue 30), with the worst angle each may reach (degrees,
+#: 0.05 under what it has): retraces on the decimated ellipsoid whose second pass reaches past the
+#: wound by a hair (27) or crosses it with 1 mm of tremor (237), slicing tets earlier passes made.
+BELOW_BOUND = {("decimated", 27): 2.42, ("decimated", 237): 4.22}
 
 
 def _meshes():
@@ -140,9 +143,9 @@ def test_a_thousand_paths_stay_sound(name, chunk):
 
 @pytest.mark.parametrize("name", sorted(MESHES))
 def test_cut_made_tets_keep_the_dihedral_bound(name):
-    worst = {i: _cut(name, i)[1] for i in range(0, PATHS_PER_MESH, BOUND_EVERY)}
-    below = {i: w for i, w in worst.items() if w < MIN_CUT_DIHEDRAL_DEG}
-    assert not below, (name, len(below), min(worst.values()))
+    worst = {i: _cut(name, i)[1] for i in range(PATHS_PER_MESH)}
+    below = {i: w for i, w in worst.items() if w < BELOW_BOUND.get((name, i), MIN_CUT_DIHEDRAL_DEG)}
+    assert not below, (name, below)
 
 
 @pytest.mark.parametrize("i", [102, 267])
