@@ -269,7 +269,7 @@ def test_crossing_strokes_stay_clean(name, through, tremor, seed):
 
 
 @pytest.mark.slow
-@settings(max_examples=3, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=2, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(st.sampled_from(["straight", "curved", "tremor", "reversal", "crossing", "guillotine"]),
        st.integers(0, 2**31 - 1))
 def test_knee_sized_block(kind, seed):
