@@ -48,8 +48,9 @@ TREMORS = (0.0, 0.1, 0.3, 1.0)
 #: Every cut-made tetrahedron's smallest dihedral angle should be at least this (issue 30).
 MIN_CUT_DIHEDRAL_DEG = 5.0
 #: The paths that do not keep the bound yet (issue 30), with the worst angle each may reach (degrees,
-#: 0.05 under what it has): retraces on the decimated ellipsoid whose second pass reaches past the
-#: wound by a hair (27) or crosses it with 1 mm of tremor (237), slicing tets earlier passes made.
+#: 0.05 under what it has): retraces on the decimated ellipsoid whose last pass steps out of the
+#: wound's band (0.1 mm tremor, 27) or zigzags across the wound (1 mm, 237) and cuts thin pieces off
+#: tets the earlier pass made, whose vertices lie on that pass's bent walls and may not move.
 BELOW_BOUND = {("decimated", 27): 2.42, ("decimated", 237): 4.22}
 
 
