@@ -2,7 +2,6 @@
 
 import numpy as np
 
-from cutkit.decimate.optimize import _ignore_sigpipe_again
 from cutkit.mesh.generate import box_mesh
 from cutkit.mesh.quality import signed_volumes
 
@@ -18,8 +17,7 @@ def delaunay_box(L, h):
     """gmsh's Delaunay tetrahedralisation of the box [0, L] (3,) at mesh size h: points, tets."""
     import gmsh
 
-    gmsh.initialize(interruptible=False)
-    _ignore_sigpipe_again()
+    gmsh.initialize(interruptible=False)  # it resets SIGPIPE: conftest's _sigpipe_ignored sets it again per test
     try:
         gmsh.option.setNumber("General.Terminal", 0)
         gmsh.option.setNumber("General.NumThreads", 1)
