@@ -168,12 +168,12 @@ def _set_block(marks, b, state):
 
 
 @njit(cache=True, nogil=True)
-def _join_volume(X, tets, inc, marks, c, room):
-    """The rest volume tet c brings as it joins the growing piece: its own (a cut tet, or one of a
-    block a step changed), nothing (its block counted already), or its clean block's with the clean
-    blocks joined to it (:func:`_count_blocks`).  Returns (volume, large)."""
+def _join_volume(inc, marks, c, own, room):
+    """The rest volume tet c brings as it joins the growing piece: its own ``own`` (a cut tet, or
+    one of a block a step changed), nothing (its block counted already), or its clean block's with
+    the clean blocks joined to it (:func:`_count_blocks`).  Returns (volume, large)."""
     if c >= inc.sub_count.shape[0] or inc.block_dirty[inc.block_of[c]]:
-        return _rest_volume(X, tets[c]), False
+        return own, False
     b = inc.block_of[c]
     st = _block_state(marks, b)
     if st == _LARGE:
@@ -283,8 +283,9 @@ def _visit_uncut(X, tets, inc, alive, marks, t, q, hk, room):
             return q, hk, 2, added
         if st == 0:
             _set_state(marks, nb, _GROWING)
-            q, hk = _enqueue(q, hk, nb, True, _rest_volume(X, tets[nb]))
-            v, large = _join_volume(X, tets, inc, marks, nb, room - added)
+            own = _rest_volume(X, tets[nb])
+            q, hk = _enqueue(q, hk, nb, True, own)
+            v, large = _join_volume(inc, marks, nb, own, room - added)
             added += v
             if large:
                 return q, hk, 2, added
@@ -314,8 +315,9 @@ def _scan_nodes(X, tets, alive, inc, t, marks, q, hk, room):
                 if _state(marks, c) == _LARGE:
                     return q, hk, True, added
                 _set_state(marks, c, _GROWING)
-                q, hk = _enqueue(q, hk, c, c < m0, _rest_volume(X, tets[c]))
-                w, large = _join_volume(X, tets, inc, marks, c, room - added)
+                own = _rest_volume(X, tets[c])
+                q, hk = _enqueue(q, hk, c, c < m0, own)
+                w, large = _join_volume(inc, marks, c, own, room - added)
                 added += w
                 if large:
                     return q, hk, True, added
@@ -336,8 +338,9 @@ def _grow(X, tets, alive, inc, s, limit, marks, q, hk):
     q[:, 0] = 0
     marks[3][0] = 0  # no block counted yet
     _set_state(marks, s, _GROWING)
-    q, hk = _enqueue(q, hk, s, s < inc.sub_count.shape[0], _rest_volume(X, tets[s]))
-    vol, large = _join_volume(X, tets, inc, marks, s, limit)
+    own = _rest_volume(X, tets[s])
+    q, hk = _enqueue(q, hk, s, s < inc.sub_count.shape[0], own)
+    vol, large = _join_volume(inc, marks, s, own, limit)
     if large:
         return q, hk, True
     while vol <= limit and (q[1, 0] > 0 or q[2, 0] > 0):
