@@ -387,8 +387,15 @@ def main() -> None:
     ap.add_argument("--skip-periphery", action="store_true", help="Only the session (no window or play benchmark).")
     ap.add_argument("--solver", choices=["vbd", "hybrid", "newton"], default=None,
                     help="The session's element solver (SimulateOptions.solver; default: the runtime's).")
+    ap.add_argument("--rest-smoothing", type=int, default=None,
+                    help="Sweeps between a resting step's Newton iterations (default: the runtime's "
+                         "REST_SMOOTHING_SWEEPS; 0: none), for a before/after on the same machine.")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args()
+    if args.rest_smoothing is not None:
+        from cutkit.relax import elastic_tissue
+
+        elastic_tissue.REST_SMOOTHING_SWEEPS = args.rest_smoothing
     result = {"machine": platform.machine(), "python": platform.python_version(),
               "load_1min": __import__("os").getloadavg()[0]}
     if not args.skip_periphery:

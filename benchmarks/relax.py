@@ -33,11 +33,17 @@ Prints one JSON object with ``--json``:
   polishes' wall seconds, in all and by part).  ``--static`` adds to each run a static projected
   Newton solve of its cut model from its final state to 1e-3 of the force scale (``static``: the
   mean distance between node copies coincident at rest before and after, how far nodes move).
+  Each run of ``--solvers`` also reports ``newton_rest_steps``: for every resting step that made a
+  Newton iteration (``cutkit.relax.newton.rest_step``), its wall seconds, Newton iterations, CG
+  iterations and sweeps.  ``--rest-smoothing N`` sets the sweeps a resting step makes between its
+  Newton iterations (``cutkit.relax.elastic_tissue.REST_SMOOTHING_SWEEPS``; 0: none) for a
+  before/after on the same machine.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import time
 
@@ -191,7 +197,7 @@ def knee_solvers(model, solvers=("newton", "vbd"), hold_s: float = 1.0, rtol: fl
     out, cut = {}, None
     runs = [(name, name if k == 0 else f"{name}#{k + 1}") for k in range(repeat) for name in solvers]
     for name, key in runs:
-        with tempfile.TemporaryDirectory() as d:
+        with tempfile.TemporaryDirectory() as d, timed_rest_steps() as rest_steps:
             t0 = time.perf_counter()
             s = simulate(model, traj, Path(d), SimulateOptions(fps=10, frames=False, hold_s=hold_s, solver=name,
                                                                rest_rtol=rest_rtol))
@@ -212,7 +218,7 @@ def knee_solvers(model, solvers=("newton", "vbd"), hold_s: float = 1.0, rtol: fl
                      "time_per_task_s": s["time_per_task_s"], "cut_tets": s["cut_tets"],
                      "opening_mm": s["cut_opening_mm"]["final_mean"], "settle": s["settle"],
                      "inverted_tets_deformed": s["inverted_tets_deformed"], "warnings": s["warnings"],
-                     "relaxation_wall_s": s["time_per_task_s"]["relaxation"],
+                     "relaxation_wall_s": s["time_per_task_s"]["relaxation"], "newton_rest_steps": rest_steps,
                      **{k: rs[k] for k in ("polish_iterations_total", "polished_steps", "polish_calls", "polish_s",
                                            "resting_steps", "rest_rtol") if k in rs}}
         if static:
@@ -226,6 +232,30 @@ def knee_solvers(model, solvers=("newton", "vbd"), hold_s: float = 1.0, rtol: fl
     if from_closed:
         out["to_residual_from_closed"] = _to_residual(em, closed_wound(model, cut_model), scale, rtol, cap_s)
     return out
+
+
+@contextlib.contextmanager
+def timed_rest_steps():
+    """A list that gets, for each resting step that makes a Newton iteration while the context is open,
+    ``{"wall_s", "newton_iterations", "cg_iterations", "sweeps"}`` (``cutkit.relax.newton.rest_step``
+    wrapped: the runtime imports it where it calls it)."""
+    from cutkit.relax import newton
+
+    steps, plain = [], newton.rest_step
+
+    def timed(em, state, h, f_ext, **kw):
+        cg, t0 = kw["solver"].counts["cg_iterations"], time.perf_counter()
+        info, swept = plain(em, state, h, f_ext, **kw)
+        if info.iterations:
+            steps.append({"wall_s": time.perf_counter() - t0, "newton_iterations": int(info.iterations),
+                          "cg_iterations": int(kw["solver"].counts["cg_iterations"] - cg), "sweeps": int(swept)})
+        return info, swept
+
+    newton.rest_step = timed
+    try:
+        yield steps
+    finally:
+        newton.rest_step = plain
 
 
 def closed_wound(model, cut_model) -> np.ndarray:
@@ -446,7 +476,13 @@ def main(argv=None):
                     help="the --solvers comparison on gmsh's Delaunay mesh of the same slab (an imported mesh)")
     ap.add_argument("--knee-paths", type=int, default=KNEE_PATHS,
                     help="incisions of knee.simulate, each shifted by 1 um more (the stalls vary from path to path)")
+    ap.add_argument("--rest-smoothing", type=int, default=None,
+                    help="with --solvers: sweeps between a resting step's Newton iterations (default the runtime's)")
     args = ap.parse_args(argv)
+    if args.rest_smoothing is not None:
+        from cutkit.relax import elastic_tissue
+
+        elastic_tissue.REST_SMOOTHING_SWEEPS = args.rest_smoothing
     out = {}
     slabs = {"gmsh_slab": (args.gmsh_slab_solvers, gmsh_slab_solvers), "slab": (args.slab_solvers, slab_solvers)}
     for key, (asked, solve) in slabs.items():

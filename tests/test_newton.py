@@ -412,6 +412,66 @@ def test_a_waiting_cut_stops_the_assembly_and_the_resting_sweeps():
     assert not info.taken and swept == 0 and np.array_equal(st.positions, p) and st.time == 0.0
 
 
+def _step_residual(em, x, x0, h, f):
+    """(n, 3) N: the backward Euler residual at x of a step of h s from x0 at rest, written here
+    (elastic forces and load less inertia and damping, 0 at held dofs)."""
+    m = em.masses[:, None]
+    r = elastic_forces(em, x) + f - m / (h * h) * (x - x0) - em.damping[:, None] * m / h * (x - x0)
+    r[em.fixed] = 0.0
+    return r
+
+
+def test_a_resting_step_sweeps_between_its_newton_iterations_and_ends_on_the_true_residual():
+    """rest_step's smoothing: sweeps after a Newton iteration that leaves the step out of balance.
+    With and without them the step ends within atol by the residual written here, at the same
+    positions (to what atol leaves), and the sweeps spare Newton iterations, never add one."""
+    from cutkit.relax.newton import rest_step
+
+    p, em, f, tip = cantilever()
+    h = 0.02
+    atol = 1e-7 * float(np.linalg.norm(_step_residual(em, p, p, h, f)))
+    runs = {}
+    for smoothing in (0, 5):
+        st = ElementState(p.copy(), np.zeros_like(p))
+        info, swept = rest_step(em, st, h, f, atol=atol, sweeps=0, max_iterations=30, solver=NewtonSolver(em),
+                                smoothing=smoothing)
+        true = float(np.linalg.norm(_step_residual(em, st.positions, p, h, f)))
+        assert info.converged and true <= atol and true == pytest.approx(info.residual, rel=1e-6)
+        np.testing.assert_allclose(st.velocities, (st.positions - p) / h)
+        runs[smoothing] = (st.positions, info.iterations, swept)
+    assert runs[0][2] == 0 and runs[5][2] > 0
+    assert runs[5][1] < runs[0][1]
+    moved = float(np.abs(runs[0][0] - p).max())
+    assert moved > 1.0 and np.abs(runs[5][0] - runs[0][0]).max() <= 1e-6 * moved
+
+
+def test_a_smoother_that_moves_the_iterate_never_hides_the_residual_it_leaves():
+    """NewtonSolver.solve's smoother is called only while the residual is above atol, and the
+    residual the solve reports is the one at the positions it ends at (evaluated afresh after the
+    smoother), not the one the last Newton iteration left."""
+    import cutkit.relax.newton as N
+
+    p, em, f, tip = cantilever()
+    h = 0.02
+    terms = N._free_terms(em, p, h, f, None, p.copy())
+    free = ~em.fixed
+    calls = []
+
+    def push(x):  # a bad smoother: it moves every free node 1 um along x
+        calls.append(float(np.linalg.norm(_step_residual(em, x, p, h, f))))
+        x[free[:, 0], 0] += 1e-3
+        return True
+
+    x = p.copy()
+    info = NewtonSolver(em).solve(x, terms, atol=1e-12, max_iterations=3, smoother=push)
+    assert len(calls) == info.iterations == 3 and not info.converged
+    assert info.residual == pytest.approx(float(np.linalg.norm(_step_residual(em, x, p, h, f))), rel=1e-9)
+    x = p.copy()
+    loose = 10.0 * float(np.linalg.norm(_step_residual(em, p, p, h, f)))
+    calls.clear()
+    assert NewtonSolver(em).solve(x, terms, atol=loose, smoother=push).converged and calls == []
+
+
 def _held_matrix(em, x):
     """The projected Newton matrix of (em, x) with a few held dofs (scipy CSR), and its solver."""
     n = em.n_nodes

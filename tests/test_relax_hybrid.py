@@ -272,11 +272,12 @@ def test_a_resting_step_is_the_backward_euler_step_of_a_reference_minimiser(monk
     assert np.abs(ref - x0).max() > 1e-3  # the first step left it out of balance: the resting one moved
     np.testing.assert_array_equal(hyb.velocities[~hyb.em.fixed], ((hyb.positions - x0) / H)[~hyb.em.fixed])
     rep = hyb.relax_report()
-    from cutkit.relax.elastic_tissue import REST_SWEEPS
+    from cutkit.relax.elastic_tissue import REST_SMOOTHING_SWEEPS, REST_SWEEPS
 
     assert rep["resting"] == [False, True] and rep["resting_steps"] == 1
-    assert rep["iterations"][1] == REST_SWEEPS  # the sweeps could not reach 1e-9: Newton finished
     assert rep["polish_iterations"][1] > 0 and rep["rest_rtol"] == 1e-9
+    # the sweeps could not reach 1e-9: Newton finished, with at most REST_SMOOTHING_SWEEPS after each iteration
+    assert REST_SWEEPS <= rep["iterations"][1] <= REST_SWEEPS + REST_SMOOTHING_SWEEPS * rep["polish_iterations"][1]
     assert signed_volumes(hyb.positions, hyb.cm.tets).min() > 0
 
 

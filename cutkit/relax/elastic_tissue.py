@@ -82,8 +82,8 @@ REST_RTOL = 1e-4
 REST_FIRST_RTOL = 3e-4
 #: The first resting step of a tissue the blade has left (no load) ends at this fraction of the
 #: force scale (or at the rest tolerance, where looser), the resting steps after it go on to the rest
-#: tolerance: the first one's Newton solve carries the wound's opening (two iterations on the demo
-#: knee whatever it is asked), and asked 1e-3 instead of 3e-4 its conjugate gradients stop sooner
+#: tolerance: the first one's Newton solve carries the wound's opening (one Newton iteration on the
+#: demo knee whatever it is asked, then REST_SMOOTHING_SWEEPS sweeps), and asked 1e-3 instead of 3e-4 its conjugate gradients stop sooner
 #: (the first solve about 115 iterations instead of 195), so a live wound is within 1e-3 sooner and
 #: a live session's rebase, which waits for a step at rest, starts sooner (docs/live.md).
 REST_UNLOADED_FIRST_RTOL = 1e-3
@@ -98,6 +98,14 @@ REST_CG_RTOL = 0.03
 #: core, where a Newton iteration costs 0.5-0.7 s; the wound a blade has left needs Newton and pays
 #: the sweeps for nothing (:func:`~cutkit.relax.newton.rest_step`).
 REST_SWEEPS = 5
+#: Whole-model sweeps a resting step makes after each Newton iteration that leaves it out of balance,
+#: before another Newton iteration (:func:`~cutkit.relax.newton.rest_step`'s ``smoothing``).  After the
+#: blade has left the demo knee, the first Newton iteration of the first resting step carries the
+#: wound's opening but leaves a short-range rest its linear model missed (the residual 0.16 of 0.18 N);
+#: a second Newton iteration removed it in 13 CG iterations but cost a matrix assembly, 0.3 s on one
+#: core, where 4 sweeps (67 ms) brought the step within its tolerance (docs/relaxation.md, "Resting
+#: steps").
+REST_SMOOTHING_SWEEPS = 5
 #: The Hessian of a resting step's Newton iterations (:data:`~cutkit.relax.newton.HESSIANS`): the exact
 #: one, and the projected one only where conjugate gradients meet negative curvature.  The wound's
 #: gaping bends the flaps, whose curvature the projection drops: on a live knee's first resting step
@@ -582,7 +590,7 @@ class ElasticTissue(TissueBase):
             return SolveInfo(0, res, res, True, 0), res, 0
         info, swept = rest_step(self.em, self.state, self.step_s, f_ext, atol=atol, sweeps=sweeps,
                                 max_iterations=NEWTON_STEP_MAX_ITERATIONS, solver=self._whole_model_newton(REST_HESSIAN),
-                                stop=stop)
+                                stop=stop, smoothing=REST_SMOOTHING_SWEEPS)
         if not info.taken:
             return info, 0.0, 0
         r = self._residual(x0, v0, f_ext)

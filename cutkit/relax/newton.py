@@ -316,7 +316,7 @@ class NewtonSolver:
 
     # ------------------------------------------------------------ the iterations
     def solve(self, x: np.ndarray, terms: KE.NodeTerms, *, atol: float,
-              max_iterations: int = DEFAULT_MAX_ITERATIONS, stop=None) -> SolveInfo:
+              max_iterations: int = DEFAULT_MAX_ITERATIONS, stop=None, smoother=None) -> SolveInfo:
         """Minimise G (of ``terms``) over x (n, 3) in place until ``||r|| <= atol`` (N).
 
         Parameters
@@ -336,6 +336,14 @@ class NewtonSolver:
             linear solve it stops is abandoned, so a waiting cut waits for one
             product with the matrix, not for a Newton iteration).  Stopped
             before its first iteration is done, the result says ``taken`` False.
+        smoother : callable, optional
+            ``smoother(x) -> bool``: called after each Newton iteration that leaves the
+            residual above ``atol``; moves x in place (keeping every upright element
+            upright) and says whether it moved it.  The residual is then evaluated
+            afresh, so the solve still stops on the true residual (a composite
+            nonlinear solver: Newton, then nonlinear Gauss-Seidel; Brune, Knepley,
+            Smith & Tu 2015, "Composing scalable nonlinear algebraic solvers", SIAM
+            Review 57(4), section 4).
 
         Returns
         -------
@@ -343,10 +351,10 @@ class NewtonSolver:
             ``iterations`` Newton iterations, ``residual`` the true final residual norm.
         """
         with one_blas_thread():  # the same sums, hence the same iterates, on every machine
-            return self._solve(x, terms, atol=atol, max_iterations=max_iterations, stop=stop)
+            return self._solve(x, terms, atol=atol, max_iterations=max_iterations, stop=stop, smoother=smoother)
 
     def _solve(self, x: np.ndarray, terms: KE.NodeTerms, *, atol: float, max_iterations: int,
-               stop) -> SolveInfo:
+               stop, smoother=None) -> SolveInfo:
         """:meth:`solve` with BLAS already on one thread."""
         em = self.em
         free = ~terms.fixed & (em.adj_degree > 0)[:, None]
@@ -385,6 +393,9 @@ class NewtonSolver:
                 if local:
                     continue  # the rings were doubled above: the next iteration solves a wider region
                 break
+            if smoother is not None and res > atol and smoother(x):
+                r = problem.residual(x)
+                res, g = float(np.linalg.norm(r)), None
         return SolveInfo(it, r0, res, res <= atol)
 
     def _local_direction(self, x, r, free, diagonal_add, atol: float, rings: int):
@@ -828,11 +839,15 @@ def newton_step(em: ElementModel, state: ElementState, h: float, f_ext=None, gra
 
 
 def rest_step(em: ElementModel, state: ElementState, h: float, f_ext, *, atol: float, sweeps: int,
-              max_iterations: int, solver: NewtonSolver, stop=None) -> tuple[SolveInfo, int]:
+              max_iterations: int, solver: NewtonSolver, stop=None, smoothing: int = 0) -> tuple[SolveInfo, int]:
     """One backward Euler step of ``h`` s from ``state``, for a tissue at rest: up to ``sweeps``
     vertex block descent sweeps of the whole model (:func:`~cutkit.relax.vbd.iterate`), which
     settle a small local change in milliseconds, then projected Newton on the same step until the
-    whole model's true residual is at most ``atol`` (N), which the soft global modes need.
+    whole model's true residual is at most ``atol`` (N), which the soft global modes need.  After
+    each Newton iteration that leaves the step out of balance, up to ``smoothing`` more sweeps
+    (fewer where they bring it within ``atol``): the Newton step carries the soft modes, the sweeps
+    the short-range rest its linear model missed, which another Newton iteration would cost a
+    matrix assembly and a linear solve to remove (:data:`~cutkit.relax.elastic_tissue.REST_SMOOTHING_SWEEPS`).
 
     Parameters
     ----------
@@ -852,6 +867,8 @@ def rest_step(em: ElementModel, state: ElementState, h: float, f_ext, *, atol: f
     solver : NewtonSolver
     stop : (1,) int64, optional
         Read before every sweep and as :meth:`NewtonSolver.solve` reads it.
+    smoothing : int
+        Sweeps at most after each Newton iteration that leaves the residual above ``atol``.
 
     Returns
     -------
@@ -859,22 +876,36 @@ def rest_step(em: ElementModel, state: ElementState, h: float, f_ext, *, atol: f
         The Newton solve's (``iterations`` Newton iterations, ``residual`` the true one);
         ``taken`` False where nothing moved.
     swept : int
-        The sweeps made.
+        The sweeps made, before Newton and between its iterations.
     """
     x0 = state.positions.copy()
     free = ~em.fixed
     terms = _free_terms(em, x0, h, f_ext, None, np.where(free, x0 + h * state.velocities, x0))
-    swept = 0
-    while swept < sweeps and not (stop is not None and stop[0]):
-        swept += 1
-        if iterate(em, state.positions, terms, rtol=0.0, atol=float(atol), max_iterations=1, stop=stop).converged:
-            break
-    info = solver.solve(state.positions, terms, atol=float(atol), max_iterations=int(max_iterations), stop=stop)
-    if not info.taken and swept == 0:
+    swept = [_sweeps(em, state.positions, terms, atol, sweeps, stop)]
+
+    def smoother(x) -> bool:
+        made = _sweeps(em, x, terms, atol, smoothing, stop)
+        swept[0] += made
+        return made > 0
+
+    info = solver.solve(state.positions, terms, atol=float(atol), max_iterations=int(max_iterations), stop=stop,
+                        smoother=smoother if smoothing > 0 else None)
+    if not info.taken and swept[0] == 0:
         return info, 0
     state.velocities[:] = np.where(free, (state.positions - x0) / h, 0.0)
     state.time += h
-    return SolveInfo(info.iterations, info.initial_residual, info.residual, info.converged), swept
+    return SolveInfo(info.iterations, info.initial_residual, info.residual, info.converged), swept[0]
+
+
+def _sweeps(em: ElementModel, x: np.ndarray, terms: KE.NodeTerms, atol: float, most: int, stop) -> int:
+    """Up to ``most`` vertex block descent sweeps of the whole model on x (in place), fewer where one
+    brings the sweeps' residual within ``atol`` (N) or ``stop`` is raised; returns the sweeps made."""
+    made = 0
+    while made < most and not (stop is not None and stop[0]):
+        made += 1
+        if iterate(em, x, terms, rtol=0.0, atol=float(atol), max_iterations=1, stop=stop).converged:
+            break
+    return made
 
 
 def finish_step(em: ElementModel, state: ElementState, x0: np.ndarray, v0: np.ndarray, h: float, f_ext, *,
