@@ -17,7 +17,8 @@ Prints one JSON object with ``--json``:
   element_sweep_ms_1m_tets              one vertex block descent sweep of the element model, same grid
   element_over_spring_sweep             element sweep / spring Gauss-Seidel sweep (goal <= 3)
   knee (with --knee MODEL.h5): wall time to a relative residual of 1e-4 of the settle problem
-  (prestress and boundary conditions, from rest), for the element model (vertex block descent)
+  (prestress and boundary conditions, from rest), for the element model (projected Newton, the
+  hybrid's settle; modified Newton with AMG-CG, the vbd solver's; vertex block descent)
   and the springs (uniform Gauss-Seidel steps and adaptive node lists), and the sweeps or node
   updates each took: the equal-accuracy comparison of docs/relaxation.md; and ``simulate``'s
   simulated/wall on it with the shipped incision, for both material models (knee.simulate), and
@@ -395,6 +396,7 @@ def knee_to_residual(model, rtol: float) -> dict:
     from cutkit.relax.elastic import build_element_model, initial_element_state
     from cutkit.relax.equilibrium import static_solve
     from cutkit.relax.vbd import elastic_forces
+    from cutkit.relax.newton import newton_static
     from cutkit.relax.settle import settle_static
 
     res = {"tets": model.n_tets, "rtol": rtol}
@@ -402,12 +404,14 @@ def knee_to_residual(model, rtol: float) -> dict:
     st = initial_element_state(model)
     static_solve(em, st.positions.copy(), max_iterations=2, solver="vbd")  # compile
     free = ~em.fixed
-    for name in ("element_newton_amg", "element_vbd"):
+    for name in ("element_projected_newton", "element_newton_amg", "element_vbd"):
         x = st.positions.copy()
         t0 = time.perf_counter()
         if name == "element_vbd":
             info = static_solve(em, x, rtol=rtol, atol=0.0, max_iterations=2000, chebyshev=0.9, solver="vbd")
-        else:
+        elif name == "element_projected_newton":  # the hybrid's and the newton solver's settle
+            info = newton_static(em, x, rtol=rtol, atol=0.0)
+        else:  # the vbd solver's settle: modified Newton with the linear stiffness, AMG-CG
             info = settle_static(em, x, rtol=rtol)
         wall = time.perf_counter() - t0
         r0 = np.linalg.norm(elastic_forces(em, st.positions)[free])

@@ -96,6 +96,28 @@ def test_the_newton_settle_converges():
     assert rep["converged"] and rep["relative_residual"] <= 1e-6
 
 
+def test_the_hybrid_settles_by_projected_newton_as_the_newton_solver_does(monkeypatch):
+    """The default solver's settle is the newton solver's projected Newton solve: the same positions
+    to the bit (so one cached settle serves both), solved here with the cache off; the vbd solver's
+    modified Newton with the linear stiffness reaches the same equilibrium within what the tolerance
+    leaves, and the residual, written out here, is within the tolerance asked."""
+    from cutkit.relax.vbd import elastic_forces
+
+    monkeypatch.setenv("CUTKIT_CACHE_DIR", "off")
+    settled = {}
+    for solver in ("hybrid", "newton", "vbd"):
+        tis = slab(solver=solver)
+        em, x0 = tis.em, tis.positions.copy()
+        rep = tis.settle(50, rtol=1e-5)
+        free = ~em.fixed & (em.adj_degree > 0)[:, None]
+        r0, r = (float(np.linalg.norm(elastic_forces(em, y)[free])) for y in (x0, tis.positions))
+        assert rep["converged"] and not rep["cached"] and r <= 1e-5 * r0
+        settled[solver] = tis.positions.copy()
+    assert np.array_equal(settled["hybrid"], settled["newton"])
+    moved = float(np.abs(settled["hybrid"] - x0).max())
+    assert moved > 0.01 and np.abs(settled["vbd"] - settled["hybrid"]).max() <= 1e-4 * moved
+
+
 def test_an_unknown_solver_is_refused():
     with pytest.raises(CutkitError):
         SimulateOptions(solver="jacobi").check()

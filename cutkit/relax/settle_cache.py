@@ -1,8 +1,10 @@
 """A cache of settled states: a model settles once, not at the start of every run.
 
 The element model's settle (a static solve under prestress and boundary
-conditions, :func:`cutkit.relax.settle.settle_static`) takes about 7 s on
-the demo knee, and every ``simulate`` run, sweep job and live session on
+conditions: :func:`cutkit.relax.newton.newton_static`, or
+:func:`cutkit.relax.settle.settle_static` for the ``vbd`` solver) takes
+about 2 s (8 s) on the demo knee on one core, and every ``simulate`` run,
+sweep job and live session on
 the same model and materials makes the same one.  Its result is kept under
 a key of everything it reads: the elements (``tets``, ``Dminv``,
 ``volume``, ``mu``, ``lam``), the fixed nodes, the start and rest
