@@ -83,9 +83,10 @@ REST_FIRST_RTOL = 3e-4
 #: The first resting step of a tissue the blade has left (no load) ends at this fraction of the
 #: force scale (or at the rest tolerance, where looser), the resting steps after it go on to the rest
 #: tolerance: the first one's Newton solve carries the wound's opening (one Newton iteration on the
-#: demo knee whatever it is asked, then REST_SMOOTHING_SWEEPS sweeps), and asked 1e-3 instead of 3e-4 its conjugate gradients stop sooner
-#: (the first solve about 115 iterations instead of 195), so a live wound is within 1e-3 sooner and
-#: a live session's rebase, which waits for a step at rest, starts sooner (docs/live.md).
+#: demo knee whatever it is asked, then REST_SMOOTHING_SWEEPS sweeps), and asked 1e-3 instead of 3e-4
+#: its conjugate gradients stop sooner (the first solve about 115 iterations instead of 195), so a
+#: live wound is within 1e-3 sooner and a live session's rebase, which waits for a step at rest,
+#: starts sooner (docs/live.md).
 REST_UNLOADED_FIRST_RTOL = 1e-3
 #: The relative tolerance of a resting step's conjugate gradients (inexact Newton; looser near the
 #: end of a solve, :data:`~cutkit.relax.newton.NO_OVERSOLVE`).  On the demo knee's hold with the
@@ -441,7 +442,7 @@ class ElasticTissue(TissueBase):
         take up), modified Newton with the linear stiffness
         (:func:`cutkit.relax.settle.settle_static`) with ``"vbd"``: ``max_iterations``
         bounds its Newton steps.  On the demo knee, uncached, projected Newton takes 3
-        iterations, about 1.8 s on one core, where modified Newton took 4 and 8 s (most of
+        iterations, about 2 s on one core, where modified Newton takes 4 and 8 s (most of
         it the multigrid setup; docs/relaxation.md).  The result is kept in the settle cache
         (:mod:`cutkit.relax.settle_cache`): a model and materials settled before are not
         solved again, and the positions are the very ones the solve gives.  The report says
