@@ -79,6 +79,26 @@ def test_a_wall_clock_session_cuts_records_and_replays(model, tmp_path):
     assert r["cut_tets"] > 0
 
 
+def test_a_wall_clock_session_starts_its_clock_with_the_tissue_at_rest(model, tmp_path, monkeypatch):
+    """Before its clock starts a live session steps its settled tissue through the resting stages
+    (PRE_CLOCK_STEPS): when the clock starts, the last step rested and ended within the rest
+    tolerance, so no resting solve is left to hold the relaxation while the blade comes in."""
+    import cutkit.simulate.live_loop as LL
+
+    at_start = []
+
+    class Watched(LL.RelaxThread):
+        def __init__(self, session, *args, **kw):
+            at_start.append(session.tis.relax_report())
+            super().__init__(session, *args, **kw)
+
+    monkeypatch.setattr(LL, "RelaxThread", Watched)
+    run_live(model, TrajectoryPoseSource(_incision()), [], tmp_path / "live", max_seconds=60, idle_end_s=0.5)
+    rep = at_start[0]
+    assert rep["count"] == LL.PRE_CLOCK_STEPS and rep["resting"][-1]
+    assert rep["relative_residual"][-1] <= rep["rest_rtol"] < rep["rest_unloaded_first_rtol"]
+
+
 def test_a_stepped_session_and_the_replay_of_its_recording_cut_the_same_tets(model, stepped, tmp_path):
     """On a stepped clock each loop pass is cutkit simulate's tick: the same poses, forces, cuts and
     relaxation steps in the same order, so the same cut model to the bit."""

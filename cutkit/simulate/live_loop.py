@@ -31,6 +31,13 @@ REBASE_WAIT_MAX_S = 2.0
 MAX_SKIPPED_SWEEP_MM = 1.0
 #: A cut is preceded by a frame when the newest frame is older than this many frame periods.
 PRE_CUT_FRAME_AGE = 0.5
+#: Relaxation steps a live session makes before its clock starts: the settled tissue's resting steps
+#: go on in stages to the rest tolerance (docs/relaxation.md, "Resting steps"), and a stage that
+#: needs a Newton solve made after the clock started held the relaxation until the first cut
+#: stopped it (on the demo knee 1.4 s, so the tissue ran that far behind the blade all through the
+#: first stroke).  Three steps: the first (it has no last load to compare with, so it does not rest),
+#: the first resting stage, and the last.
+PRE_CLOCK_STEPS = 3
 
 
 class OuterBoundary:
@@ -172,7 +179,8 @@ class LiveLoop:
         # middle of the first cut: a tiny cut with this material model, one step of this tissue
         warm_up(outputs=False, material_model=s.material_model)
         if not self.stepped:  # a stepped session's tissue starts where cutkit simulate's does
-            s.relax.advance(np.zeros((s.tis.n_nodes, 3)), s.tis.time + chunk)
+            for _ in range(PRE_CLOCK_STEPS):
+                s.relax.advance(np.zeros((s.tis.n_nodes, 3)), s.tis.time + chunk)
         s.tis.prepare_resting()  # the first stroke's wound then comes to rest without building it
         self.t0 = self.clock.now() - s.tis.time
         self._frame(None)  # views build their windows before the clock starts
