@@ -363,10 +363,11 @@ class ElasticTissue(TissueBase):
         self.kept_forces = KeptForces()  # the true residual of each step, at the cost of what it moved
         self.kept_ratios = KeptVolumeRatios()  # each step's smallest J, at the cost of what it moved
 
-    def _newton_solver(self):
-        """A fresh :class:`~cutkit.relax.newton.NewtonSolver` of the element model (None for vbd and
-        the hybrid, whose polish keeps no pattern)."""
-        if self.solver != "newton":
+    def _newton_solver(self, always: bool = False):
+        """A fresh :class:`~cutkit.relax.newton.NewtonSolver` of the element model, the ``newton``
+        solver's steps' (None for vbd and the hybrid, whose polish keeps no pattern, unless
+        ``always``: the settle's, which the hybrid shares)."""
+        if self.solver != "newton" and not always:
             return None
         from cutkit.relax.newton import NewtonSolver
 
@@ -461,12 +462,11 @@ class ElasticTissue(TissueBase):
             report = dict(hit[1], cached=True)
         else:
             if self.solver in ("newton", "hybrid"):
-                from cutkit.relax.newton import NewtonSolver, newton_static
+                from cutkit.relax.newton import newton_static
 
-                solver = self._newton or NewtonSolver(self.em, region_rings=NEWTON_REGION_RINGS,
-                                                      pattern=self.hessian_pattern)
                 info = newton_static(self.em, self.state.positions, rtol=rtol, atol=DEFAULT_ATOL_N,
-                                     max_iterations=params["max_iterations"], solver=solver)
+                                     max_iterations=params["max_iterations"],
+                                     solver=self._newton or self._newton_solver(always=True))
             else:
                 info = settle_static(self.em, self.state.positions, rtol=rtol, atol=DEFAULT_ATOL_N,
                                      max_iterations=params["max_iterations"])

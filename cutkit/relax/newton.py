@@ -881,20 +881,21 @@ def rest_step(em: ElementModel, state: ElementState, h: float, f_ext, *, atol: f
     x0 = state.positions.copy()
     free = ~em.fixed
     terms = _free_terms(em, x0, h, f_ext, None, np.where(free, x0 + h * state.velocities, x0))
-    swept = [_sweeps(em, state.positions, terms, atol, sweeps, stop)]
+    swept = _sweeps(em, state.positions, terms, atol, sweeps, stop)
 
     def smoother(x) -> bool:
+        nonlocal swept
         made = _sweeps(em, x, terms, atol, smoothing, stop)
-        swept[0] += made
+        swept += made
         return made > 0
 
     info = solver.solve(state.positions, terms, atol=float(atol), max_iterations=int(max_iterations), stop=stop,
                         smoother=smoother if smoothing > 0 else None)
-    if not info.taken and swept[0] == 0:
+    if not info.taken and swept == 0:
         return info, 0
     state.velocities[:] = np.where(free, (state.positions - x0) / h, 0.0)
     state.time += h
-    return SolveInfo(info.iterations, info.initial_residual, info.residual, info.converged), swept[0]
+    return SolveInfo(info.iterations, info.initial_residual, info.residual, info.converged), swept
 
 
 def _sweeps(em: ElementModel, x: np.ndarray, terms: KE.NodeTerms, atol: float, most: int, stop) -> int:
