@@ -323,6 +323,26 @@ def test_a_cut_or_a_new_load_ends_the_rest_and_the_rest_tolerance_is_checked():
             ElasticTissue(model, step_s=H, solver="hybrid", rest_rtol=bad)
 
 
+def test_the_step_the_load_is_taken_off_in_rests_even_when_the_blade_cut_on_its_way_out():
+    """A cut since the last step ends the rest, except in the step the blade's load goes to zero in:
+    that step is solved on the whole model, to REST_UNLOADED_FIRST_RTOL by a residual written here; a
+    cut while nothing loads the tissue still makes a step that does not rest."""
+    from cutkit.relax.elastic_tissue import REST_UNLOADED_FIRST_RTOL
+
+    hyb, f = pressed("hybrid", 0.1, rest_rtol=1e-6)
+    none = np.zeros_like(f)
+    hyb.advance(f, H)
+    hyb.advance(f, 2 * H)
+    hyb._cut_since_step = True  # the blade's last pose in the tissue cut
+    x0, v0 = hyb.positions.copy(), hyb.velocities.copy()
+    hyb.advance(none, 3 * H)  # ... and the next one is out: no load
+    assert true_residual(hyb.em, hyb.positions, x0, v0, none) <= REST_UNLOADED_FIRST_RTOL * hyb.force_scale
+    hyb.advance(none, 4 * H)
+    hyb._cut_since_step = True  # a cut with no load before or after it
+    hyb.advance(none, 5 * H)
+    assert hyb.relax_report()["resting"] == [False, True, True, True, False]
+
+
 def test_what_is_written_does_not_change_a_hybrid_run_with_resting_steps(tmp_path):
     """The hybrid's resting steps depend on the load and the cuts, never on the frames: a run
     writing 1 frame a second and one writing 30 cut the same model and write the same forces."""
