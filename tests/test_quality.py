@@ -33,6 +33,26 @@ def test_random_tets_match_twin():
     np.testing.assert_allclose(min_dihedral_angles(p, t), twin.dihedral_angles(p, t).min(axis=1), atol=1e-6)
 
 
+@pytest.mark.parametrize("extra", [-1, 0, 1000])
+def test_small_and_large_sets_give_the_same_bits_on_either_side_of_the_serial_bound(extra):
+    """Below SERIAL_MAX_TETS the measures run on the calling thread, from it on in the parallel
+    kernels: both give the same bits (the same per-tet primitive), and both match the twin."""
+    from cutkit.mesh import _quality_kernels as Q
+    from cutkit.mesh.quality import SERIAL_MAX_TETS
+
+    rng = np.random.default_rng(11)
+    p = rng.normal(size=(300, 3))
+    m = SERIAL_MAX_TETS + extra
+    t = np.argsort(rng.random((m, 300)), axis=1)[:, :4].astype(np.int64)
+    np.testing.assert_array_equal(signed_volumes(p, t), Q.signed_volumes(p, t))
+    np.testing.assert_array_equal(dihedral_angles(p, t), Q.dihedral_angles(p, t))
+    head = slice(0, 300)
+    np.testing.assert_array_equal(signed_volumes(p, t[head]), Q.signed_volumes(p, t[head]))
+    np.testing.assert_array_equal(dihedral_angles(p, t[head]), Q.dihedral_angles(p, t[head]))
+    np.testing.assert_allclose(signed_volumes(p, t), twin.signed_volumes(p, t), rtol=1e-10, atol=1e-13)
+    np.testing.assert_allclose(dihedral_angles(p, t), twin.dihedral_angles(p, t), atol=1e-6)
+
+
 def test_box_angles_and_sum_of_volumes():
     p, t = box_mesh((2, 2, 2), spacing=(1.0, 2.0, 0.5))
     assert signed_volumes(p, t).sum() == pytest.approx(2 * 4 * 1)

@@ -6,7 +6,15 @@ import numpy as np
 
 from cutkit.errors import MeshError
 from cutkit.mesh import _quality_kernels as _k
+from cutkit.mesh.geometry import signed_volumes_serial
 from cutkit.mesh.topology import _check_tets
+
+#: Below this many tets the per-tet measures run on the calling thread: the parallel kernels split
+#: their work into chunks of this size (``_quality_kernels._CHUNK``), so a smaller set gains nothing
+#: from the threads and pays a thread-pool start per call (the cut's vertex smoothing looks at one
+#: tet to a few hundred per call, thousands of calls on a long incision; on a loaded 2-core machine
+#: a one-tet call to the parallel kernel took 11 ms).  The same values to the bit either way.
+SERIAL_MAX_TETS = _k._CHUNK
 
 __all__ = ["signed_volumes", "dihedral_angles", "min_dihedral_angles"]
 
@@ -35,6 +43,8 @@ def signed_volumes(points, tets):
         ``det[p1 - p0, p2 - p0, p3 - p0] / 6``; positive for a positively oriented tet.
     """
     pts, tets = _check(points, tets)
+    if tets.shape[0] < SERIAL_MAX_TETS:
+        return signed_volumes_serial(pts, tets)
     return _k.signed_volumes(pts, tets)
 
 
@@ -56,6 +66,8 @@ def dihedral_angles(points, tets):
         orientation.
     """
     pts, tets = _check(points, tets)
+    if tets.shape[0] < SERIAL_MAX_TETS:
+        return _k.dihedral_angles_serial(pts, tets)
     return _k.dihedral_angles(pts, tets)
 
 
