@@ -319,6 +319,39 @@ def test_an_iteration_after_a_step_cut_short_solves_its_system_loosely_and_the_s
     assert after_long and min(after_long) < N.BOUNDED_CG_RTOL  # the rule is selective
 
 
+def test_no_oversolving_stops_each_linear_solve_at_its_share_of_the_tolerance(monkeypatch):
+    """NewtonSolver's ``no_oversolve``: an iteration from residual res (the true one, written here)
+    solves its system to no_oversolve * atol / res where that is looser than cg_rtol (never looser
+    than CG_RTOL_MAX); a larger factor solves more loosely and the step still ends within atol by the
+    residual written here.  A factor outside (0, 1] is refused by name."""
+    import cutkit.relax.newton as N
+
+    p, em, f, tip = cantilever()
+    h, seen = 0.02, []
+    atol = 1e-4 * float(np.linalg.norm(_step_residual(em, p, p, h, f)))
+    solve_linear = NewtonSolver._solve_linear
+
+    def watched(self, A, r, x, free, rtol, halt=None):
+        res = float(np.linalg.norm(_step_residual(em, x, p, h, f)))
+        seen.append((self.no_oversolve, rtol, min(N.CG_RTOL_MAX, max(self.cg_rtol, self.no_oversolve * atol / res))))
+        return solve_linear(self, A, r, x, free, rtol, halt)
+
+    monkeypatch.setattr(NewtonSolver, "_solve_linear", watched)
+    for factor in (0.5, 1.0):
+        st = ElementState(p.copy(), np.zeros_like(p))
+        solver = NewtonSolver(em, linear="cg", cg_rtol=1e-3, no_oversolve=factor)
+        assert newton_step(em, st, h, f, atol=atol, max_iterations=30, solver=solver).converged
+        assert float(np.linalg.norm(_step_residual(em, st.positions, p, h, f))) <= atol
+    for factor, rtol, want in seen:
+        assert rtol == pytest.approx(want, rel=1e-6)
+    last = {factor: rtol for factor, rtol, _ in seen}
+    assert last[1.0] > 1e-3 and last[0.5] > 1e-3  # the last solve of each was loosened ...
+    assert last[1.0] > last[0.5]  # ... the more so by the larger factor
+    for bad in (0.0, 1.5, float("nan")):
+        with pytest.raises(InputError, match=r"no_oversolve must be in \(0, 1\]"):
+            NewtonSolver(em, no_oversolve=bad)
+
+
 @pytest.mark.parametrize("preconditioner", PRECONDITIONERS)
 def test_the_cg_solves_reach_the_same_static_answer(preconditioner):
     """Preconditioned CG (what models above CHOLESKY_MAX_DOFS use) against the factorisation."""

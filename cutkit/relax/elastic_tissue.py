@@ -94,6 +94,15 @@ REST_UNLOADED_FIRST_RTOL = 1e-3
 #: step to 1e-3 of the force scale in 2 Newton iterations (219 CG iterations, 1.2 s on one core)
 #: where 0.1 took 3 (210, 1.6 s); with the blade held in the two cost the same.
 REST_CG_RTOL = 0.03
+#: The no-oversolving factor of the hybrid's resting steps' and finishes' Newton iterations
+#: (:class:`~cutkit.relax.newton.NewtonSolver`'s ``no_oversolve``): their conjugate gradients stop at
+#: this fraction of the tolerance over the residual, where the other solves stop at
+#: :data:`~cutkit.relax.newton.NO_OVERSOLVE` = 0.5.  On the demo knee's lifted incision
+#: (``benchmarks/relax.py --knee-simulate knee.h5 --lift``) every resting step took as many Newton
+#: iterations at 0.75 as at 0.5 and 9-17 % fewer CG iterations (the first step after the lift 191
+#: against 223), each ending at 0.62-0.86 of its tolerance; at 1.0 one ended at 0.99 of it
+#: (docs/relaxation.md, "Resting steps").
+REST_NO_OVERSOLVE = 0.75
 #: Whole-model vertex block descent sweeps a resting step makes before its Newton solve: a small
 #: change (the blade pausing mid incision) settles in a few sweeps, 13 ms each on the knee on one
 #: core, where a Newton iteration costs 0.5-0.7 s; the wound a blade has left needs Newton and pays
@@ -710,7 +719,8 @@ class ElasticTissue(TissueBase):
         solver = self._whole_newton.get(hessian)
         if solver is None:
             solver = self._whole_newton[hessian] = NewtonSolver(self.em, hessian=hessian, cg_rtol=REST_CG_RTOL,
-                                                                pattern=self.hessian_pattern)
+                                                                pattern=self.hessian_pattern,
+                                                                no_oversolve=REST_NO_OVERSOLVE)
         return solver
 
     def _true_residual(self, x0: np.ndarray, v0: np.ndarray, f_ext: np.ndarray) -> float:

@@ -137,6 +137,10 @@ class NewtonSolver:
         Relative residual each conjugate-gradient solve stops at (inexact
         Newton; default :data:`CG_RTOL`), or looser near the end of a solve
         (:data:`NO_OVERSOLVE`).
+    no_oversolve : float
+        An iteration from residual ``res`` solves its system only to
+        ``no_oversolve * atol / res`` where that is looser than ``cg_rtol``
+        (default :data:`NO_OVERSOLVE`), in (0, 1].
     region_rings : int, optional
         None: every iteration solves the whole model.  k >= 0: each iteration
         solves on :func:`newton_region` grown by k rings (doubled after an
@@ -148,7 +152,8 @@ class NewtonSolver:
 
     def __init__(self, em: ElementModel, *, linear: str = "auto", hessian: str = "auto",
                  preconditioner: str = "block_jacobi", region_rings: int | None = None,
-                 cg_rtol: float = CG_RTOL, pattern: HessianPattern | None = None):
+                 cg_rtol: float = CG_RTOL, pattern: HessianPattern | None = None,
+                 no_oversolve: float = NO_OVERSOLVE):
         if linear not in LINEAR_SOLVERS:
             raise InputError(f"linear solver must be one of {', '.join(LINEAR_SOLVERS)}, not {linear!r}")
         if hessian not in HESSIANS:
@@ -159,8 +164,11 @@ class NewtonSolver:
             raise InputError(f"region_rings must be None or a non-negative integer, not {region_rings!r}")
         if not (np.isfinite(cg_rtol) and 0.0 < cg_rtol < 1.0):
             raise InputError(f"cg_rtol must be in (0, 1), not {cg_rtol!r}")
+        if not (np.isfinite(no_oversolve) and 0.0 < no_oversolve <= 1.0):
+            raise InputError(f"no_oversolve must be in (0, 1], not {no_oversolve!r}")
         self.em = em
         self.cg_rtol = float(cg_rtol)
+        self.no_oversolve = float(no_oversolve)
         self.region_rings = None if region_rings is None else int(region_rings)
         #: dofs of each local iteration's region (0: that iteration solved the whole model)
         self.region_log: list[int] = []
@@ -375,7 +383,7 @@ class NewtonSolver:
                 d = self._local_direction(x, r, free, terms.inertia + terms.damping, atol, rings)
             local = d is not None
             if d is None:
-                rtol = min(CG_RTOL_MAX, max(self.cg_rtol, NO_OVERSOLVE * atol / res))
+                rtol = min(CG_RTOL_MAX, max(self.cg_rtol, self.no_oversolve * atol / res))
                 rtol = max(rtol, BOUNDED_CG_RTOL) if cut_short else rtol
                 d = self._direction(x, r, free, terms.inertia + terms.damping, rtol, stop)
                 self.counts["global_iterations"] += 1
