@@ -18,6 +18,9 @@ from cutkit.haptics import protocol as P
 from cutkit.scalpel import CUT_FIELDS, CUTTING, FREE, STATIC, WITHDRAWING, ScalpelParams
 
 A, N, B = (1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0)
+#: Longest wait for a frame or a reply (s): a bound for a loaded machine (the service ticks every
+#: millisecond), never waited out when a test passes.
+WAIT_S = 30.0
 
 
 @pytest.fixture(scope="module")
@@ -26,7 +29,7 @@ def server():
         yield host, port, proc
         assert proc.poll() is None, "the server died during the tests"
         proc.send_signal(signal.SIGTERM)
-        out, err = proc.communicate(timeout=10)
+        out, err = proc.communicate(timeout=60)
         assert proc.returncode == 0, err
         # every rejected frame was logged, and counted in the shutdown line
         n_rejected = int(out.split(" rejected frames")[0].rsplit(" ", 1)[1])
@@ -34,7 +37,7 @@ def server():
 
 
 def _raw(host, port, hello_role=None):
-    s = socket.create_connection((host, port), timeout=3.0)
+    s = socket.create_connection((host, port), timeout=WAIT_S)
     if hello_role is not None:
         s.sendall(P.frame(P.HELLO, P.HELLO_PAYLOAD.pack(hello_role)))
         _read_frame(s)  # WELCOME
@@ -64,7 +67,7 @@ def _expect_error_then_close(s, code):
         if ftype == P.ERROR:
             assert P.ERROR_HEAD.unpack_from(payload)[0] == code, payload
             break
-    s.settimeout(3.0)
+    s.settimeout(WAIT_S)
     assert s.recv(1) == b""  # orderly close, not a reset
     s.close()
 
@@ -73,7 +76,7 @@ def _bench():
     """One 3 s run of `cutkit haptics bench --spawn` (the device loop against a spawned service)."""
     cmd = [sys.executable, "-m", "cutkit.cli.main", "haptics", "bench", "--spawn", "--seconds", "3", "--json",
            "--priority", "realtime"]  # the paper's server controls its priority; falls back to nice -10
-    res = subprocess.run(cmd, capture_output=True, text=True, timeout=90)
+    res = subprocess.run(cmd, capture_output=True, text=True, timeout=600)  # two process starts and 3 s
     assert res.returncode == 0, res.stderr
     r = json.loads(res.stdout)
     print(r)
@@ -95,7 +98,7 @@ def test_device_gets_force_frames_every_tick(server):
     host, port, _ = server
     with HapticsClient(host, port, "device") as c:
         assert c.rate_hz == 1000
-        frames = [c.read_force(2.0) for _ in range(50)]
+        frames = [c.read_force(WAIT_S) for _ in range(50)]
     ticks = np.array([f.tick for f in frames])
     assert np.all(np.diff(ticks) >= 1)
     assert all(f.type == P.FORCE for f in frames)
@@ -177,10 +180,10 @@ def test_watchdog_ramps_force_to_zero_when_the_simulation_stops(server):
         assert f.force[2] < -1.0  # the plane spring pushes back
         full = f.force[2]
         # the simulation goes quiet: the gain ramps down, one step per tick at most
-        frames = [dev.read_force(1.0)]
-        t_end = time.monotonic() + 30.0
+        frames = [dev.read_force(WAIT_S)]
+        t_end = time.monotonic() + WAIT_S
         while frames[-1].gain > 0.0 and time.monotonic() < t_end:
-            frames.append(dev.read_force(1.0))
+            frames.append(dev.read_force(WAIT_S))
         gains = np.array([fr.gain for fr in frames])
         ticks = np.array([fr.tick for fr in frames])
         assert gains[-1] == 0.0 and frames[-1].force == (0.0, 0.0, 0.0)
@@ -197,7 +200,7 @@ def test_watchdog_ramps_force_to_zero_when_the_simulation_stops(server):
 def test_newest_pose_wins(server):
     host, port, _ = server
     with HapticsClient(host, port, "device") as dev:
-        dev.read_force(2.0)
+        dev.read_force(WAIT_S)
         burst = b""
         for i in range(1, 21):
             payload = P.POSE_PAYLOAD.pack(float(i), 0.0, 0.0, *A, *N, 0)
@@ -206,7 +209,7 @@ def test_newest_pose_wins(server):
         echoes, f = [], None
         t_end = time.monotonic() + 30.0
         while time.monotonic() < t_end:
-            f = dev.read_force(2.0)
+            f = dev.read_force(WAIT_S)
             echoes.append(f.echo_seq)
             if f.echo_seq == 1020:
                 break
@@ -229,7 +232,7 @@ def test_newest_simulation_update_wins(server):
         sim.send_raw(burst)
         states = []
         while not states or states[-1].echo_seq != 510:
-            states.append(sim.read_force(2.0))
+            states.append(sim.read_force(WAIT_S))
         assert len(states) <= 3  # one STATE per tick, not one per update
         assert states[-1].proxy == pytest.approx((1.0, 2.0, 1.0))  # on the newest plane z = 1.0
         sim.send_sim((0, 0, 0), B, contact=False)
@@ -261,7 +264,7 @@ class _GoodDevice(threading.Thread):
         try:
             while not self.stop.is_set():
                 self.client.send_pose((0.0, 0.0, 0.0), A, N)
-                self.ticks.append(self.client.read_force(2.0).tick)
+                self.ticks.append(self.client.read_force(WAIT_S).tick)
         except Exception as err:  # reported by the test
             self.error = err
 
@@ -279,6 +282,7 @@ def test_malformed_frames_and_abusive_clients_never_stop_the_service(server):
     good = _GoodDevice(host, port)
     good.start()
     try:
+        assert good.progress(100) >= 100, good.error  # served before the abuse, and after it below
         for name, make, code in MALFORMED:
             s = _raw(host, port, P.ROLE_DEVICE)
             s.sendall(make())
@@ -315,10 +319,11 @@ def test_malformed_frames_and_abusive_clients_never_stop_the_service(server):
             s.close()
     finally:
         good.stop.set()
-        good.join(5)
+        good.join(WAIT_S)
     assert good.error is None
     ticks = np.array(good.ticks)
-    assert ticks.size > 200 and np.all(np.diff(ticks) >= 1)
+    # how many frames the device read during the abuse is the machine's: 100 before it, 100 after it
+    assert ticks.size >= 200 and np.all(np.diff(ticks) >= 1)
 
 
 def test_a_frame_left_incomplete_is_dropped_after_the_timeout(server):
@@ -326,8 +331,8 @@ def test_a_frame_left_incomplete_is_dropped_after_the_timeout(server):
 
     host, port, _ = server
     s = _raw(host, port, P.ROLE_SIMULATION)
+    t0 = time.monotonic()  # before the send: a stall after it would shorten the time measured here
     s.sendall(P.frame(P.SIM_UPDATE, bytes(P.SIM_PAYLOAD.size))[:30])  # slow loris: never finished
-    t0 = time.monotonic()
     s.settimeout(PARTIAL_FRAME_TIMEOUT_S + 60.0)  # a bound for a loaded machine, not a timing
     _expect_error_then_close(s, P.E_TIMEOUT)
     assert PARTIAL_FRAME_TIMEOUT_S <= time.monotonic() - t0  # never dropped before its timeout
@@ -336,13 +341,13 @@ def test_a_frame_left_incomplete_is_dropped_after_the_timeout(server):
 def test_server_shuts_down_cleanly_on_sigint():
     with spawned_server() as (host, port, proc):
         c = HapticsClient(host, port, "device")
-        c.read_force(2.0)
+        c.read_force(WAIT_S)
         proc.send_signal(signal.SIGINT)
         with pytest.raises(ProtocolError, match="BYE|closed"):
             for _ in range(5000):
-                c.read_force(2.0)
+                c.read_force(WAIT_S)
         c.sock.close()
-        out, err = proc.communicate(timeout=10)
+        out, err = proc.communicate(timeout=60)
         assert proc.returncode == 0, err
         assert "Traceback" not in err and "stopped after" in out
 
@@ -378,10 +383,9 @@ def test_huge_finite_values_do_not_poison_the_scalpel(server):
     with HapticsClient(host, port, "device") as dev, HapticsClient(host, port, "simulation") as sim:
         f = _step(dev, sim, (1e300, -1e300, 1e300), f_ext=(1e308, 1e308, 0), material=(1e300,) * 9)
         assert all(np.isfinite(f.force)) and all(np.isfinite(f.proxy))
-        sim.send_sim((0, 0, 0), B, contact=False)
-        dev.send_pose((1.0, 2.0, 3.0), A, N)
-        time.sleep(0.02)
-        f = dev.latest()
+        # out of contact, then a pose: the frame the service computed from them (20 ms of sleep before
+        # reading the newest frame was a timing: a stalled service had not acted on them yet)
+        f = _step(dev, sim, (1.0, 2.0, 3.0), contact=False)
         assert f.state == FREE and f.proxy == (1.0, 2.0, 3.0)
         # restore the default material for later tests
         sim.send_sim((0, 0, 0), B, material=ScalpelParams().material(), contact=False)

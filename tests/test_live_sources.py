@@ -118,7 +118,11 @@ def test_keys_set_depth_and_bevel():
 pyigtl = pytest.importorskip("pyigtl")
 
 
-def _wait(cond, seconds=60.0):  # a bound for a loaded machine, not a timing
+#: Longest wait for the endpoint (s): a bound for a loaded machine, never waited out when a test passes.
+WAIT_S = 60.0
+
+
+def _wait(cond, seconds=WAIT_S):  # a bound for a loaded machine, not a timing
     t_end = time.monotonic() + seconds
     while time.monotonic() < t_end:
         if cond():
@@ -206,7 +210,7 @@ def test_igtl_malformed_messages_are_dropped_with_one_line(igtl_source, caplog):
     header = bytearray(good[:58])
     header[42:50] = struct.pack(">Q", 7)  # a TRANSFORM body of 7 bytes cannot be decoded
     header[50:58] = struct.pack(">Q", pyigtl.messages.CRC64(b"1234567"))  # its CRC is right
-    s = socket.create_connection(("127.0.0.1", src.endpoint.port), timeout=5.0)
+    s = socket.create_connection(("127.0.0.1", src.endpoint.port), timeout=WAIT_S)
     try:
         with caplog.at_level("WARNING", logger="cutkit.live"):
             s.sendall(bytes(header) + b"1234567" + good)
@@ -216,12 +220,12 @@ def test_igtl_malformed_messages_are_dropped_with_one_line(igtl_source, caplog):
         assert len(lines) == 1 and "\n" not in lines[0] and "TRANSFORM" in lines[0]
         # a header that cannot start a message ends the connection, not the server
         s.sendall(b"\x00\x07" + bytes(56))
-        s.settimeout(5.0)
+        s.settimeout(WAIT_S)
         while s.recv(1 << 16):  # STATUS messages, then the end of the stream
             pass
     finally:
         s.close()
-    s = socket.create_connection(("127.0.0.1", src.endpoint.port), timeout=5.0)
+    s = socket.create_connection(("127.0.0.1", src.endpoint.port), timeout=WAIT_S)
     s.sendall(good)
     assert _wait(lambda: src.poll() is not None), "the endpoint stopped serving"
     s.close()

@@ -173,10 +173,11 @@ def test_window_turns_a_mouse_drag_into_blade_poses(window):
     np.testing.assert_allclose(drag.tip, p2 + [0.0, 0.0, -3.0], atol=0.3)
     np.testing.assert_allclose(drag.n, [1.0, 0.0, 0.0], atol=0.05)
     np.testing.assert_allclose(release.tip, p2 + [0.0, 0.0, 5.0], atol=0.3)
-    # a frame rate cap skips frames that come too soon
+    # a frame rate cap skips frames that come too soon (a frame an hour: a stalled machine cannot
+    # let a second one through, as with 1 fps a stall of a second between two calls would)
     from cutkit.live.window import WindowView
 
-    capped = WindowView(off_screen=True, window_size=(200, 150), max_fps=1.0)
+    capped = WindowView(off_screen=True, window_size=(200, 150), max_fps=1.0 / 3600.0)
     try:
         for _ in range(5):
             capped.show(frame)

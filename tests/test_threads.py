@@ -51,7 +51,6 @@ def test_a_load_that_has_ended_does_not_count(monkeypatch):
 
 def test_busy_cores_now_reads_the_processor_counters(tmp_path):
     import threading
-    import time
 
     from cutkit.threads import _cpu_times, busy_cores_now
 
@@ -61,11 +60,12 @@ def test_busy_cores_now_reads_the_processor_counters(tmp_path):
     assert busy_cores_now(0.01, tmp_path / "missing") is None
     stat.write_text("intr 1 2 3\n")
     assert busy_cores_now(0.01, stat) is None
-    # a thread spinning through the sample keeps at least half a core busy, whatever else runs
-    stop = time.monotonic() + 0.6
+    # a thread spinning through the sample keeps at least half a core busy, whatever else runs (it
+    # spins until the sample is taken, not for a time that a stall before the sample could use up)
+    stop = threading.Event()
 
     def spin():
-        while time.monotonic() < stop:
+        while not stop.is_set():
             pass
 
     th = threading.Thread(target=spin)
@@ -73,6 +73,7 @@ def test_busy_cores_now_reads_the_processor_counters(tmp_path):
     try:
         busy = busy_cores_now(0.3)
     finally:
+        stop.set()
         th.join()
     assert busy is not None and busy >= 0.5, busy
 
