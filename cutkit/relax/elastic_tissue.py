@@ -99,7 +99,7 @@ REST_CG_RTOL = 0.03
 #: this fraction of the tolerance over the residual, where the other solves stop at
 #: :data:`~cutkit.relax.newton.NO_OVERSOLVE` = 0.5.  On the demo knee's lifted incision
 #: (``benchmarks/relax.py --knee-simulate knee.h5 --lift``) every resting step took as many Newton
-#: iterations at 0.75 as at 0.5 and 9-17 % fewer CG iterations (the first step after the lift 191
+#: iterations at 0.75 as at 0.5 and 9-14 % fewer CG iterations (the first step after the lift 191
 #: against 223), each ending at 0.62-0.86 of its tolerance; at 1.0 one ended at 0.99 of it
 #: (docs/relaxation.md, "Resting steps").
 REST_NO_OVERSOLVE = 0.75
