@@ -393,11 +393,11 @@ class FlagInCG(NewtonSolver):
         super().__init__(em, linear="cg")
         self.flag, self.solve_at, self.solves = flag, solve, 0
 
-    def _block_cg(self, A, r, rtol, halt=None):
+    def _block_cg(self, A, r, rtol, halt=None, x=None, free=None):
         self.solves += 1
         if self.solves == self.solve_at:
             self.flag[0] = 1
-        return super()._block_cg(A, r, rtol, halt)
+        return super()._block_cg(A, r, rtol, halt, x, free)
 
 
 def test_a_waiting_cut_stops_the_conjugate_gradients_and_the_iteration_is_abandoned():

@@ -34,6 +34,7 @@ from collections import namedtuple
 import numpy as np
 from numba import njit, prange
 
+from cutkit.relax._coarse_kernels import add_correction
 from cutkit.relax._stop_flag import flag_up
 
 #: The symmetric block form of a Newton matrix: ``diag`` (n, 3, 3) float64 the diagonal blocks;
@@ -250,6 +251,16 @@ def _precondition(inv, r, z, part):
     return _sum(part)
 
 
+@njit(cache=True, nogil=True)
+def _preconditioned(inv, r, z, part, coarse):
+    """z = M r by block Jacobi, plus the coarse correction where ``coarse`` is given; returns r . z."""
+    if coarse is None:
+        return _precondition(inv, r, z, part)
+    _precondition(inv, r, z, part)
+    add_correction(coarse, r, z)
+    return _dot(r, z, part)
+
+
 @njit(cache=True, nogil=True, inline="always")
 def _sum(part):
     acc = 0.0
@@ -294,7 +305,7 @@ def _direction(p, z, beta):
 
 
 @njit(cache=True, nogil=True)
-def block_pcg(A, inv, b, rtol, max_iterations, halt, d, rows):
+def block_pcg(A, inv, b, rtol, max_iterations, halt, d, rows, coarse=None):
     """Block-Jacobi preconditioned conjugate gradients for A d = b (Hestenes & Stiefel 1952; the
     preconditioned form of Saad, *Iterative Methods for Sparse Linear Systems*, 2003, Alg. 9.1),
     stopped at ``||b - A d|| <= rtol ||b||`` (the recursively updated residual) or after
@@ -315,6 +326,9 @@ def block_pcg(A, inv, b, rtol, max_iterations, halt, d, rows):
     rows : bool
         Products row by row in parallel (:func:`block_product_rows`; more than one thread) or by
         scattering (:func:`block_product`; one): the same bits either way.
+    coarse : Coarse, optional
+        A coarse space (:mod:`cutkit.relax._coarse_kernels`) whose correction the block-Jacobi
+        preconditioner adds (two-level, additive); None: block Jacobi alone.
 
     Returns
     -------
@@ -326,7 +340,7 @@ def block_pcg(A, inv, b, rtol, max_iterations, halt, d, rows):
     Ap = np.empty((n, 3))
     part = np.empty(CG_CHUNKS)
     d[:] = 0.0
-    rz = _precondition(inv, r, z, part)
+    rz = _preconditioned(inv, r, z, part, coarse)
     p = z.copy()
     stop2 = rtol * rtol * _dot(b, b, part)
     for k in range(max_iterations):
@@ -344,6 +358,6 @@ def block_pcg(A, inv, b, rtol, max_iterations, halt, d, rows):
         if rr <= stop2:
             return CG_DONE, k + 1
         rz_old = rz
-        rz = _precondition(inv, r, z, part)
+        rz = _preconditioned(inv, r, z, part, coarse)
         _direction(p, z, rz / rz_old)
     return CG_DONE, max_iterations

@@ -103,6 +103,11 @@ REST_CG_RTOL = 0.03
 #: against 223), each ending at 0.62-0.86 of its tolerance; at 1.0 one ended at 0.99 of it
 #: (docs/relaxation.md, "Resting steps").
 REST_NO_OVERSOLVE = 0.75
+#: The preconditioner of the hybrid's resting steps' and finishes' conjugate gradients
+#: (:data:`~cutkit.relax.newton.PRECONDITIONERS`): block Jacobi plus a coarse space of the rigid
+#: motions of aggregates that a crack splits (:func:`~cutkit.relax.newton.coarse_space`), which
+#: carries the wound's opening, the soft mode block Jacobi alone converges slowest on.
+REST_PRECONDITIONER = "two_level"
 #: Whole-model vertex block descent sweeps a resting step makes before its Newton solve: a small
 #: change (the blade pausing mid incision) settles in a few sweeps, 13 ms each on the knee on one
 #: core, where a Newton iteration costs 0.5-0.7 s; the wound a blade has left needs Newton and pays
@@ -720,7 +725,8 @@ class ElasticTissue(TissueBase):
         if solver is None:
             solver = self._whole_newton[hessian] = NewtonSolver(self.em, hessian=hessian, cg_rtol=REST_CG_RTOL,
                                                                 pattern=self.hessian_pattern,
-                                                                no_oversolve=REST_NO_OVERSOLVE)
+                                                                no_oversolve=REST_NO_OVERSOLVE,
+                                                                preconditioner=REST_PRECONDITIONER)
         return solver
 
     def _true_residual(self, x0: np.ndarray, v0: np.ndarray, f_ext: np.ndarray) -> float:
