@@ -137,3 +137,25 @@ def test_a_waiting_cut_stops_the_coarse_space_and_the_iteration_is_abandoned():
     assert solver._solve_linear(A, r, x, free, 1e-6, up) is None
     d = solver._solve_linear(A, r, x, free, 1e-10, np.zeros(1, np.int64))
     np.testing.assert_allclose(d, spla.spsolve(A.tocsc(), r), rtol=1e-7, atol=1e-8 * np.abs(d).max())
+
+
+def test_aggregates_are_the_connected_pieces_of_each_cell():
+    """The union-find of ``aggregates`` against scipy's connected components of the same graph (the
+    matrix's blocks between movable nodes of one cell), numbered by first node as the kernel does."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    em, x, free, A, blocks, inv = bent_bar()
+    n = em.n_nodes
+    rng = np.random.default_rng(2)
+    cell = rng.integers(0, 6, n).astype(np.int64)
+    movable = free.any(axis=1)
+    agg, k = KC.aggregates(blocks.ptr, blocks.col, cell, movable)
+    rows = np.repeat(np.arange(n), np.diff(blocks.ptr))
+    keep = movable[rows] & movable[blocks.col] & (cell[rows] == cell[blocks.col])
+    graph = coo_matrix((np.ones(keep.sum()), (rows[keep], blocks.col[keep])), shape=(n, n))
+    _, label = connected_components(graph, directed=False)
+    want, seen = np.full(n, -1), {}
+    for i in np.flatnonzero(movable):
+        want[i] = seen.setdefault(label[i], len(seen))
+    assert k == len(seen) > 6 and np.array_equal(agg, want)
