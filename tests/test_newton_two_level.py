@@ -17,7 +17,8 @@ from test_newton import _block_system, cut_slab, model_of  # noqa: E402
 from cutkit.relax import _block_cg_kernels as KB  # noqa: E402
 from cutkit.relax import _coarse_kernels as KC  # noqa: E402
 from cutkit.relax.elastic import build_element_model  # noqa: E402
-from cutkit.relax.newton import COARSE_MIN_TURNING_NODES, NewtonSolver, block_system, coarse_space  # noqa: E402
+from cutkit.relax.newton import (COARSE_MIN_TURNING_NODES, NewtonSolver, block_system, cell_aggregates,  # noqa: E402
+                                 coarse_space)
 
 
 def basis_twin(c, n):
@@ -140,8 +141,8 @@ def test_a_waiting_cut_stops_the_coarse_space_and_the_iteration_is_abandoned():
 
 
 def test_aggregates_are_the_connected_pieces_of_each_cell():
-    """The union-find of ``aggregates`` against scipy's connected components of the same graph (the
-    matrix's blocks between movable nodes of one cell), numbered by first node as the kernel does."""
+    """``cell_aggregates`` against scipy's connected components of the same graph (the matrix's
+    blocks between movable nodes of one cell), numbered by first node as it does."""
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
 
@@ -150,7 +151,7 @@ def test_aggregates_are_the_connected_pieces_of_each_cell():
     rng = np.random.default_rng(2)
     cell = rng.integers(0, 6, n).astype(np.int64)
     movable = free.any(axis=1)
-    agg, k = KC.aggregates(blocks.ptr, blocks.col, cell, movable)
+    agg, k = cell_aggregates(blocks, cell, movable)
     rows = np.repeat(np.arange(n), np.diff(blocks.ptr))
     keep = movable[rows] & movable[blocks.col] & (cell[rows] == cell[blocks.col])
     graph = coo_matrix((np.ones(keep.sum()), (rows[keep], blocks.col[keep])), shape=(n, n))

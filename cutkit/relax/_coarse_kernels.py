@@ -29,42 +29,6 @@ from cutkit.relax._stop_flag import flag_up
 Coarse = namedtuple("Coarse", ["agg", "rel", "free", "turns", "inv"])
 
 
-@njit(cache=True, nogil=True)
-def _root(parent, i):
-    while parent[i] != i:
-        parent[i] = parent[parent[i]]
-        i = parent[i]
-    return i
-
-
-@njit(cache=True, nogil=True)
-def aggregates(ptr, col, cell, movable):
-    """(n,) int64 aggregate of each node (-1 where not ``movable``) numbered from 0 by first node,
-    and their count: the movable nodes of one ``cell`` joined through the blocks above the
-    diagonal (``ptr``, ``col``: :class:`~cutkit.relax._block_cg_kernels.BlockMatrix`'s)."""
-    n = cell.shape[0]
-    parent = np.arange(n)
-    for i in range(n):
-        if not movable[i]:
-            continue
-        for q in range(ptr[i], ptr[i + 1]):
-            j = col[q]
-            if movable[j] and cell[j] == cell[i]:
-                a, b = _root(parent, i), _root(parent, j)
-                if a != b:
-                    parent[max(a, b)] = min(a, b)
-    agg = np.full(n, -1, np.int64)
-    k = 0
-    for i in range(n):
-        if movable[i]:
-            r = _root(parent, i)
-            if agg[r] < 0:
-                agg[r] = k
-                k += 1
-            agg[i] = agg[r]
-    return agg, k
-
-
 @njit(cache=True, nogil=True, inline="always")
 def _basis(c, i, B):
     """Node i's 3 x 6 rows of the coarse basis W into B: the translations, then the rotations

@@ -577,7 +577,7 @@ def coarse_space(blocks, x: np.ndarray, free: np.ndarray, halt=NEVER_STOP):
     dims = np.floor(span / h).astype(np.int64) + 1
     ijk = np.clip(np.floor((x - lo) / h).astype(np.int64), 0, dims - 1)
     cell = np.ascontiguousarray((ijk[:, 0] * dims[1] + ijk[:, 1]) * dims[2] + ijk[:, 2])
-    agg, k = KC.aggregates(blocks.ptr, blocks.col, cell, movable)
+    agg, k = cell_aggregates(blocks, cell, movable)
     if 6 * k > COARSE_MAX_DOFS:
         return None
     held = agg < 0
@@ -598,6 +598,41 @@ def coarse_space(blocks, x: np.ndarray, free: np.ndarray, halt=NEVER_STOP):
     if info != 0:
         return None
     return c._replace(inv=np.ascontiguousarray(np.tril(inverse) + np.tril(inverse, -1).T))
+
+
+def cell_aggregates(blocks, cell: np.ndarray, movable: np.ndarray) -> tuple[np.ndarray, int]:
+    """The coarse space's aggregates: the movable nodes of one cell joined through the blocks of a
+    Newton matrix (:func:`~cutkit.relax._graph_kernels.graph_components` of that graph).
+
+    Parameters
+    ----------
+    blocks : BlockMatrix
+    cell : (n,) int64
+        Each node's cell.
+    movable : (n,) bool
+
+    Returns
+    -------
+    agg : (n,) int64
+        Each node's aggregate, numbered by first node; -1 where not movable.
+    k : int
+        Aggregates.
+    """
+    from cutkit.relax._graph_kernels import graph_components
+
+    n = cell.shape[0]
+    rows = np.repeat(np.arange(n), np.diff(blocks.ptr))
+    keep = movable[rows] & movable[blocks.col] & (cell[rows] == cell[blocks.col])
+    src = np.concatenate([rows[keep], blocks.col[keep]])
+    dst = np.concatenate([blocks.col[keep], rows[keep]])
+    offsets = np.zeros(n + 1, np.int64)
+    np.cumsum(np.bincount(src, minlength=n), out=offsets[1:])
+    _, labels = graph_components(offsets, np.ascontiguousarray(dst[np.argsort(src, kind="stable")]))
+    # components are numbered by their smallest node; the movable ones, renumbered in that order
+    kept, agg = np.unique(labels[movable], return_inverse=True)
+    out = np.full(n, -1, np.int64)
+    out[movable] = agg
+    return out, int(kept.size)
 
 
 def reaching_free_dofs(el: KE.Elements, free: np.ndarray) -> KE.Elements:
