@@ -3,7 +3,14 @@
 Each case cuts (and, for ``simulate``, relaxes) a fixed model along a fixed
 incision and compares with the figures stored in ``tests/data/pinned/``:
 the tets cut and the relaxation's counts exactly, the final topology
-exactly, the final positions to :data:`POSITION_ATOL_MM` (0: bit for bit).
+exactly, the final positions bit for bit as they were computed on this kind
+of processor (``positions``: a sha256 per processor, the name and features
+the kernels are compiled for; the arrays in the ``.npz``).  Another kind of
+processor rounds the last bits differently (its BLAS and NumPy's SIMD
+paths, fused multiply-adds), and a long run carries the difference on: a
+processor with no pins of its own is held to the nearest pinned positions
+within :data:`CROSS_CPU_ATOL_MM` of its case, the difference measured
+between an Intel Xeon and an AMD EPYC.
 A restructuring must leave every case as it is; a change meant to move a
 result (a new solver, a new cut rule) writes the pins again with
 
@@ -25,8 +32,13 @@ import numpy as np
 import pytest
 
 PINS = Path(__file__).parent / "data" / "pinned"
-#: Final positions must equal the pinned ones to this, mm: bit for bit.
-POSITION_ATOL_MM = 0.0
+#: Final positions on a processor with no pins of its own: at most this far from the nearest pinned
+#: ones, mm, by case (default :data:`CROSS_CPU_DEFAULT_MM`).  Measured between an Intel Xeon and an
+#: AMD EPYC: 0 to 2e-14 mm, the knee's neo-Hookean run 9.7e-8 mm, the knee's springs 0.61 mm (their
+#: per-node explicit steps carry a rounding difference through 2,095 passes of a cut that is the same
+#: tet for tet).  A change that moves a result on a pinned processor fails bit for bit.
+CROSS_CPU_ATOL_MM = {"knee_simulate_neohookean": 1e-5, "knee_simulate_springs": 2.0}
+CROSS_CPU_DEFAULT_MM = 1e-9
 
 #: The slab of the short simulated incision (tests/test_simulate.py): 32 x 12 x 16 mm, 2 mm cells.
 SLAB_SHAPE, SLAB_H = (16, 6, 8), 2.0
@@ -111,17 +123,36 @@ def fingerprint(result: dict) -> dict:
             "positions_sha256": hashlib.sha256(x.tobytes()).hexdigest()}
 
 
+def host_cpu() -> str:
+    """The processor the kernels are compiled for: its name and a hash of its features (llvmlite's)."""
+    import llvmlite.binding as llvm
+
+    features = llvm.get_host_cpu_features().flatten()
+    return f"{llvm.get_host_cpu_name()}-{hashlib.sha256(features.encode()).hexdigest()[:12]}"
+
+
 def write_pins(names, tmp: Path, knee_folder: Path | None) -> None:
+    """Run each case and pin its result for this processor.  The pins of other processors are kept
+    where this processor's result is unchanged (a restructuring), and dropped where it moved."""
     PINS.mkdir(parents=True, exist_ok=True)
+    cpu = host_cpu()
     for name in names:
         case_dir = tmp / name
         case_dir.mkdir(parents=True, exist_ok=True)
         if knee_folder is not None:
             (case_dir / "knee").symlink_to(knee_folder.resolve(), target_is_directory=True)
         result = CASES[name][1](case_dir)
-        (PINS / f"{name}.json").write_text(json.dumps(fingerprint(result), indent=1) + "\n")
-        np.savez_compressed(PINS / f"{name}.npz", positions=result["positions"])
-        print(name, fingerprint(result)["counts"])
+        pin = fingerprint(result)
+        sha = pin.pop("positions_sha256")
+        old = json.loads((PINS / f"{name}.json").read_text()) if (PINS / f"{name}.json").exists() else {}
+        arrays = dict(np.load(PINS / f"{name}.npz")) if (PINS / f"{name}.npz").exists() else {}
+        kept = old.get("positions", {}) if old.get("positions", {}).get(cpu) == sha else {}
+        pin["positions"] = {**kept, cpu: sha}
+        arrays = {k: arrays[k] for k in kept if k in arrays}
+        arrays[cpu] = np.asarray(result["positions"], np.float64)
+        (PINS / f"{name}.json").write_text(json.dumps(pin, indent=1) + "\n")
+        np.savez_compressed(PINS / f"{name}.npz", **arrays)
+        print(name, pin["counts"], "processors pinned:", sorted(pin["positions"]))
 
 
 def _params():
@@ -140,10 +171,17 @@ def test_pinned_result(name, tmp_path, request):
     assert got["counts"] == pinned["counts"]
     assert got["n_points"] == pinned["n_points"]
     assert got["tets_sha256"] == pinned["tets_sha256"]
-    if got["positions_sha256"] != pinned["positions_sha256"]:
-        ref = np.load(PINS / f"{name}.npz")["positions"]
-        diff = float(np.abs(np.asarray(result["positions"]) - ref).max())
-        assert diff <= POSITION_ATOL_MM, f"final positions moved by up to {diff:.3e} mm"
+    if got["positions_sha256"] in pinned["positions"].values():
+        return  # bit for bit as on a pinned processor
+    cpu = host_cpu()
+    x = np.asarray(result["positions"], np.float64)
+    arrays = np.load(PINS / f"{name}.npz")
+    if cpu in pinned["positions"]:
+        diff = float(np.abs(x - arrays[cpu]).max())
+        raise AssertionError(f"final positions moved by up to {diff:.3e} mm on this processor ({cpu})")
+    diff = min(float(np.abs(x - arrays[k]).max()) for k in pinned["positions"])
+    atol = CROSS_CPU_ATOL_MM.get(name, CROSS_CPU_DEFAULT_MM)
+    assert diff <= atol, f"final positions {diff:.3e} mm from the nearest pinned processor's (no pins for {cpu})"
 
 
 if __name__ == "__main__":
