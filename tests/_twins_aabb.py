@@ -181,3 +181,37 @@ def _tri_tri(T, U):
             return uv.min() >= -1e-10 and uv.sum() <= 1 + 1e-10
         return any(inside(p, T) for p in U) or any(inside(p, U) for p in T)
     return False
+
+
+def blade_entry_twin(bvh, points, p0, q0, p1, q1):
+    """``cutkit.collision.blade_entry`` made of the public queries: (kind, face, point) or None.
+
+    The tip's path, then the blade now, each crossing a face inwards first along the segment
+    (``query_segment``'s order: parameter, then face); then of the faces the swept quad or the
+    blade now meets (``swept_faces``: a face's first point), the one against the mean motion
+    nearest the previous blade, the least face id first among equals."""
+    from cutkit.collision import swept_faces
+
+    def normal(f):
+        x = points[bvh.faces[f]]
+        return np.cross(x[1] - x[0], x[2] - x[0])
+
+    for kind, a, b in (("tip_path", p0, p1), ("blade", q1, p1)):
+        if np.any(a != b):
+            hits = bvh.query_segment(points, a, b)
+            for f, p in zip(hits.face.tolist(), hits.point):
+                if np.dot(normal(f), b - a) < 0:
+                    return kind, f, p
+    faces, pts = swept_faces(bvh, points, p0, q0, p1, q1)
+    motion = 0.5 * ((p1 - p0) + (q1 - q0))
+    best, best_d = None, np.inf
+    for f, p in zip(faces.tolist(), pts):
+        if np.dot(normal(f), motion) >= 0:
+            continue
+        d = p0 - q0
+        dd = float(d @ d)
+        s = 0.0 if dd == 0.0 else min(max(float((p - q0) @ d) / dd, 0.0), 1.0)
+        dist = float(np.linalg.norm(p - (q0 + s * d)))
+        if dist < best_d:
+            best, best_d = ("swept", f, p), dist
+    return best

@@ -213,3 +213,51 @@ def test_the_uncut_edges_line_counts_and_names_them():
     many = line(contact.NAMED_UNCUT_EDGES + 2)
     assert many.startswith(f"{contact.NAMED_UNCUT_EDGES + 2} edges the blade met") and "and stay joined" in many
     assert many.count("(") == 1 + contact.NAMED_UNCUT_EDGES and " and 2 more mm;" in many
+
+
+def _random_poses(rng, n):
+    """Blade moves around and through the block (4 x 4 x 4): entries of every kind, exits, misses,
+    still blades, moves along the blade's own axis (a flat swept quad)."""
+    for k in range(n):
+        p0 = rng.uniform(-2.0, 6.0, 3)
+        a0 = rng.normal(size=3)
+        a0 /= np.linalg.norm(a0)
+        kind = k % 4
+        if kind == 0:  # a still blade
+            p1, a1 = p0.copy(), a0
+        elif kind == 1:  # along its own axis
+            p1, a1 = p0 + rng.uniform(-3.0, 3.0) * a0, a0
+        else:  # a free move and turn
+            p1 = p0 + rng.normal(scale=1.5 if kind == 2 else 0.3, size=3)
+            a1 = a0 + rng.normal(scale=0.3, size=3)
+            a1 /= np.linalg.norm(a1)
+        length = rng.uniform(0.5, 6.0)
+        yield p0, p0 - length * a0, p1, p1 - length * a1
+
+
+def test_blade_entry_kernel_matches_its_twin(block):
+    """The one-call entry kernel against the same tests made of the public queries, on 600 random
+    moves (still, along the axis, free) around, into and through a jittered block."""
+    from _twins_aabb import blade_entry_twin
+
+    p, _, bvh = block
+    kinds = {"tip_path": 0, "blade": 0, "swept": 0, None: 0}
+    for p0, q0, p1, q1 in _random_poses(np.random.default_rng(11), 600):
+        got = blade_entry(bvh, p, p0, q0, p1, q1)
+        ref = blade_entry_twin(bvh, p, p0, q0, p1, q1)
+        if ref is None:
+            assert got is None
+            kinds[None] += 1
+            continue
+        assert got is not None and (got.kind, got.face) == ref[:2]
+        np.testing.assert_array_equal(got.point, ref[2])
+        kinds[got.kind] += 1
+    assert min(kinds.values()) >= 20, kinds  # every kind of answer is met, misses too
+
+
+def test_blade_entry_refuses_points_the_hierarchy_was_not_built_for(block):
+    from cutkit.errors import InputError
+
+    p, _, bvh = block
+    with pytest.raises(InputError, match="rows, expected"):
+        blade_entry(bvh, p[:-1], p[0], p[1], p[2], p[3])

@@ -480,6 +480,9 @@ def test_the_warm_up_loads_the_kernels_a_stroke_needs_that_its_short_cut_misses(
     assert (f2, i1, f1, f1, i2, types.float64, types.int64) in KS.best_cone_apex.signatures
     assert any(sig[0] == f2 and getattr(sig[1], "instance_class", None) is CK.Surface
                and getattr(sig[2], "instance_class", None) is CK.Tree for sig in SK.query_triangle.signatures)
+    assert any(sig[0] == f2 and getattr(sig[1], "instance_class", None) is CK.Surface
+               and getattr(sig[2], "instance_class", None) is CK.Tree and sig[3:7] == (f1,) * 4
+               for sig in SK.blade_entry.signatures)
     for kernel in (KP.touched_nodes, KP.update_node_rows, KP.update_element_blocks):
         assert any(sig[0] == types.int64[:, :] or sig[0] == i2 for sig in kernel.signatures), kernel
     # the unit tet's cone over one face: the regular corner's own angles bound it

@@ -18,7 +18,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from cutkit.collision import _swept_kernels as K
-from cutkit.collision.bvh import SurfaceBVH
+from cutkit.collision.bvh import SurfaceBVH, _points, _vec3
+from cutkit.errors import InputError
 
 #: First guess of the number of faces one swept triangle meets.
 _HIT_ROOM = 64
@@ -26,6 +27,8 @@ _HIT_ROOM = 64
 #: flat (the blade pushed along its own axis sweeps no area); the blade
 #: segment query covers it.
 FLAT_TRIANGLE_EPS = 1e-12
+#: The kinds of :class:`Contact` by the kernel's entry codes.
+_ENTRY_KINDS = {K.ENTRY_TIP_PATH: "tip_path", K.ENTRY_BLADE: "blade", K.ENTRY_SWEPT: "swept"}
 
 
 @dataclass
@@ -85,36 +88,26 @@ def blade_entry(bvh: SurfaceBVH, points, p0, q0, p1, q1) -> Contact | None:
     (e.g. the surface moved past a resting tip); any face the swept quad
     meets whose outward normal faces against the blade's motion (an edge-first
     entry: cleaver, through-cut with the tip outside), the one nearest to
-    the previous blade first.
+    the previous blade first.  One kernel call (``_swept_kernels.blade_entry``;
+    its twin, the same tests made with :meth:`SurfaceBVH.query_segment` and
+    :func:`swept_faces`, is in the tests): a live session makes it for every
+    pose of a blade outside the tissue, a thousand times a second.
+
+    Parameters
+    ----------
+    bvh : SurfaceBVH
+    points : (n, 3) float64
+        The positions last passed to ``bvh.update``.
+    p0, q0, p1, q1 : (3,) float64
+        The blade's tip and back before and now, mm.
     """
-    p0, q0, p1, q1 = (np.asarray(v, np.float64) for v in (p0, q0, p1, q1))
-    for kind, a, b in (("tip_path", p0, p1), ("blade", q1, p1)):
-        if np.any(a != b):
-            hits = bvh.query_segment(points, a, b)
-            for f, p in zip(hits.face.tolist(), hits.point):
-                if np.dot(_normal(bvh, points, f), b - a) < 0:
-                    return Contact(int(f), np.asarray(p, np.float64).copy(), kind)
-    faces, pts = swept_faces(bvh, points, p0, q0, p1, q1)
-    if faces.size == 0:
+    points = _points(points, check_finite=False)
+    if points.shape[0] != bvh.tol_min.shape[0]:
+        raise InputError(f"points: {points.shape[0]} rows, expected {bvh.tol_min.shape[0]} (call update first)")
+    p0, q0, p1, q1 = (_vec3(v, name) for v, name in ((p0, "p0"), (q0, "q0"), (p1, "p1"), (q1, "q1")))
+    point = np.empty(3)
+    code, face = K.blade_entry(points, bvh.kernel_surface(), bvh.kernel_tree(), p0, q0, p1, q1,
+                               FLAT_TRIANGLE_EPS, point)
+    if code == K.ENTRY_NONE:
         return None
-    motion = 0.5 * ((p1 - p0) + (q1 - q0))
-    best, best_d = None, np.inf
-    for f, p in zip(faces.tolist(), pts):
-        if np.dot(_normal(bvh, points, f), motion) >= 0:
-            continue
-        d = _segment_distance(p, q0, p0)
-        if d < best_d:
-            best, best_d = Contact(int(f), np.asarray(p, np.float64).copy(), "swept"), d
-    return best
-
-
-def _normal(bvh, points, f):
-    x = points[bvh.faces[f]]
-    return np.cross(x[1] - x[0], x[2] - x[0])
-
-
-def _segment_distance(p, a, b):
-    d = b - a
-    dd = float(d @ d)
-    s = 0.0 if dd == 0.0 else min(max(float((p - a) @ d) / dd, 0.0), 1.0)
-    return float(np.linalg.norm(p - (a + s * d)))
+    return Contact(int(face), point, _ENTRY_KINDS[code])

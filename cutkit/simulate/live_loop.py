@@ -24,7 +24,10 @@ LOOP_IDLE_S = 0.0005
 #: hybrid's resting step ended within its tolerance), the blade touches the tissue again, or this
 #: many seconds have passed: the rebase holds the relaxation for about a second on the knee, so
 #: started at once it kept the wound from its equilibrium that long (docs/live.md, "Between strokes").
-REBASE_WAIT_MAX_S = 2.0
+#: The rebase stops the step in flight, so a bound shorter than the first resting step's solve (up to
+#: 2 s on the demo knee with the session's drawing beside it) threw that solve away and made the
+#: knee's coming to balance 4.4-4.8 s instead of about 2-3 s.
+REBASE_WAIT_MAX_S = 4.0
 #: Behind the poses (a backlog after a rebase, or slow cut steps), a due pose gets its own cut only
 #: once the blade has moved this far since the last cut, mm: the cut of the newest then sweeps at most
 #: about this far (one sweep from a held stroke's first pose to one 8 mm deep went through uncut).

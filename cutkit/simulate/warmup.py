@@ -66,10 +66,11 @@ def warm_up_missed_kernels() -> None:
     has left (:func:`~cutkit.cutting.resubdivision.load_cone_kernel`), the fairing's search
     (:func:`~cutkit.cutting.fairing.load_fair_kernels`), the vertex smoothing's search
     (:func:`~cutkit.cutting.smoothing.load_smooth_kernels`), the swept blade's
-    triangle against the surface hierarchy (an entry edge first) and the update of the Newton
+    triangle against the surface hierarchy (an entry edge first), the blade's entry test
+    (every pose of a blade outside the tissue) and the update of the Newton
     matrix's pattern after a stroke (the short cut rebases before any resting step); 10-30 ms each
     at a first call."""
-    from cutkit.collision import SurfaceBVH, query_triangle
+    from cutkit.collision import SurfaceBVH, blade_entry, query_triangle
     from cutkit.cutting.fairing import load_fair_kernels
     from cutkit.cutting.resubdivision import load_cone_kernel
     from cutkit.cutting.smoothing import load_smooth_kernels
@@ -80,6 +81,7 @@ def warm_up_missed_kernels() -> None:
     points = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
     bvh = SurfaceBVH.build(points, np.array([[0, 1, 2]], np.int64))
     query_triangle(bvh, points, np.array([[0.2, 0.2, -1.0], [0.2, 0.2, 1.0], [0.3, 0.3, 1.0]]))
+    blade_entry(bvh, points, points[0] + 1.0, points[0] + 2.0, points[0] + 1.5, points[0] + 2.5)
     warm_up_pattern_update()
 
 
