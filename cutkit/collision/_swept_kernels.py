@@ -120,15 +120,14 @@ def _segment_hits(points, surface, tree, a, b):
 
 
 @njit(cache=True, nogil=True)
-def _first_inward(points, surface, tree, a, b, point):
-    """The face the segment a-b crosses inwards first (least parameter, then least face id), its
-    point in ``point``; -1 where it crosses none inwards."""
-    hits, count = _segment_hits(points, surface, tree, a, b)
+def _first_inward(points, faces, hits, count, a, b, point):
+    """Of the ``count`` hits of the segment a-b, the face it crosses inwards first (least parameter,
+    then least face id), its point in ``point``; -1 where it crosses none inwards."""
     best, best_t = -1, np.inf
     for i in range(count):
         f, t = hits.face[i], hits.param[i, 0]
         if (t < best_t or (t == best_t and f < best)) and \
-                _against(points, surface.faces, f, b[0] - a[0], b[1] - a[1], b[2] - a[2]):
+                _against(points, faces, f, b[0] - a[0], b[1] - a[1], b[2] - a[2]):
             best, best_t = f, t
             for d in range(3):
                 point[d] = hits.param[i, 1 + d]
@@ -205,11 +204,18 @@ def blade_entry(points, surface, tree, p0, q0, p1, q1, flat_eps, point):
     code : int  ENTRY_NONE, ENTRY_TIP_PATH, ENTRY_BLADE or ENTRY_SWEPT
     face : int  the face met (-1 with ENTRY_NONE)
     """
-    for code, a, b in ((ENTRY_TIP_PATH, p0, p1), (ENTRY_BLADE, q1, p1)):
-        if a[0] != b[0] or a[1] != b[1] or a[2] != b[2]:
-            f = _first_inward(points, surface, tree, a, b, point)
-            if f >= 0:
-                return code, f
+    if p0[0] != p1[0] or p0[1] != p1[1] or p0[2] != p1[2]:
+        hits, count = _segment_hits(points, surface, tree, p0, p1)
+        f = _first_inward(points, surface.faces, hits, count, p0, p1, point)
+        if f >= 0:
+            return ENTRY_TIP_PATH, f
+    # the blade now (q1-p1): its hits serve its own test and the swept faces below, queried once
+    blade, n_blade = HitRoom(np.empty(0, np.int64), np.empty(0, np.int64), np.empty((0, 4))), 0
+    if q1[0] != p1[0] or q1[1] != p1[1] or q1[2] != p1[2]:
+        blade, n_blade = _segment_hits(points, surface, tree, q1, p1)
+        f = _first_inward(points, surface.faces, blade, n_blade, q1, p1, point)
+        if f >= 0:
+            return ENTRY_BLADE, f
     quad = np.empty((2, 3, 3))  # the swept quad as the triangles (p0, q0, q1) and (p0, q1, p1)
     for d in range(3):
         quad[0, 0, d], quad[0, 1, d], quad[0, 2, d] = p0[d], q0[d], q1[d]
@@ -217,17 +223,15 @@ def blade_entry(points, surface, tree, p0, q0, p1, q1, flat_eps, point):
     faces, pts = np.empty(64, np.int64), np.empty((64, 3))
     faces, pts, n = _swept_triangle(points, surface, tree, quad[0], flat_eps, faces, pts, 0)
     faces, pts, n = _swept_triangle(points, surface, tree, quad[1], flat_eps, faces, pts, n)
-    if p1[0] != q1[0] or p1[1] != q1[1] or p1[2] != q1[2]:
-        hits, count = _segment_hits(points, surface, tree, q1, p1)
-        if n + count > faces.shape[0]:
-            grown_f, grown_p = np.empty(n + count, np.int64), np.empty((n + count, 3))
-            grown_f[:n], grown_p[:n] = faces[:n], pts[:n]
-            faces, pts = grown_f, grown_p
-        for i in range(count):
-            faces[n + i] = hits.face[i]
-            for d in range(3):
-                pts[n + i, d] = hits.param[i, 1 + d]
-        n += count
+    if n + n_blade > faces.shape[0]:
+        grown_f, grown_p = np.empty(n + n_blade, np.int64), np.empty((n + n_blade, 3))
+        grown_f[:n], grown_p[:n] = faces[:n], pts[:n]
+        faces, pts = grown_f, grown_p
+    for i in range(n_blade):
+        faces[n + i] = blade.face[i]
+        for d in range(3):
+            pts[n + i, d] = blade.param[i, 1 + d]
+    n += n_blade
     motion = 0.5 * ((p1 - p0) + (q1 - q0))
     f = _nearest_swept(points, surface, faces, pts, n, p0, q0, motion, point)
     return (ENTRY_SWEPT, f) if f >= 0 else (ENTRY_NONE, -1)

@@ -295,7 +295,7 @@ class NewtonSolver:
         d = np.empty((n, 3))
         b = np.ascontiguousarray(r.reshape(n, 3))
         rows = numba_threads_here() > 1
-        if coarse is None:
+        if coarse is None:  # the argument left out, not None: the kernel's block-Jacobi signature, compiled once
             status, its = KB.block_pcg(blocks, inv, b, rtol, CG_MAX_ITERATIONS, flag, d, rows)
         else:
             status, its = KB.block_pcg(blocks, inv, b, rtol, CG_MAX_ITERATIONS, flag, d, rows, coarse)
@@ -618,16 +618,14 @@ def cell_aggregates(blocks, cell: np.ndarray, movable: np.ndarray) -> tuple[np.n
     k : int
         Aggregates.
     """
+    from cutkit.collision.adjacency import csr_adjacency
     from cutkit.relax._graph_kernels import graph_components
 
     n = cell.shape[0]
     rows = np.repeat(np.arange(n), np.diff(blocks.ptr))
     keep = movable[rows] & movable[blocks.col] & (cell[rows] == cell[blocks.col])
-    src = np.concatenate([rows[keep], blocks.col[keep]])
-    dst = np.concatenate([blocks.col[keep], rows[keep]])
-    offsets = np.zeros(n + 1, np.int64)
-    np.cumsum(np.bincount(src, minlength=n), out=offsets[1:])
-    _, labels = graph_components(offsets, np.ascontiguousarray(dst[np.argsort(src, kind="stable")]))
+    offsets, neighbours, _ = csr_adjacency(np.stack([rows[keep], blocks.col[keep]], axis=1), n)
+    _, labels = graph_components(offsets, neighbours)
     # components are numbered by their smallest node; the movable ones, renumbered in that order
     kept, agg = np.unique(labels[movable], return_inverse=True)
     out = np.full(n, -1, np.int64)
