@@ -1,7 +1,10 @@
 """Benchmark of the live-session periphery: the window's drawing rate and the reference device's rate.
 
     .venv/bin/python benchmarks/live.py --json [--triangles 80000] [--frames 120] [--seconds 5]
-    .venv/bin/python benchmarks/live.py --json --session cutkit-demo/knee.h5 [--strokes two|one|second]
+    .venv/bin/python benchmarks/live.py --json --session cutkit-demo/knee.h5 [--strokes two|one|second] [--drawing auto|full|fast]
+
+Every frame of the off-screen window is drawn as on screen (``--drawing``, default ``auto``:
+``cutkit.live.window.DRAWINGS``); ``window`` in the results says how it drew (``full``/``fast``).
 
 * window: an off-screen ``WindowView`` draws a textured sphere of about
   ``--triangles`` boundary triangles with a cut surface, moving every frame
@@ -42,7 +45,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def window_rate(triangles: int, frames: int) -> dict:
+def window_rate(triangles: int, frames: int, drawing: str = "auto") -> dict:
     import pyvista as pv
 
     from cutkit.live import LiveFrame
@@ -58,7 +61,7 @@ def window_rate(triangles: int, frames: int) -> dict:
     frame = LiveFrame(points=pts, boundary_faces=faces, cut_faces=cut, rgb=rgb, tip=np.array([0.0, 0.0, 45.0]),
                       a=np.array([0.0, 0.0, -1.0]), n=np.array([1.0, 0.0, 0.0]), force=np.array([0.5, 0.0, 0.2]),
                       rates={"haptic_hz": 1000.0, "relax_passes_per_s": 200.0})
-    view = WindowView(off_screen=True, window_size=(1024, 768))
+    view = WindowView(off_screen=True, window_size=(1024, 768), drawing=drawing)
     view.show(frame)  # builds the window
     times = []
     for i in range(frames):
@@ -68,7 +71,7 @@ def window_rate(triangles: int, frames: int) -> dict:
         times.append(time.perf_counter() - t0)
     view.close()
     t = np.array(times)
-    return {"triangles": int(len(faces)), "nodes": int(len(pts)), "frames": frames,
+    return {"triangles": int(len(faces)), "nodes": int(len(pts)), "frames": frames, "drawn_as": view.drawn_as,
             "fps": float(1.0 / t.mean()), "show_ms_p50": float(np.percentile(t, 50) * 1e3),
             "show_ms_p99": float(np.percentile(t, 99) * 1e3)}
 
@@ -214,7 +217,7 @@ def _gaps_in(times, spans):
     return max(gaps) if gaps else None
 
 
-def _session_views(window: bool, igtl_rate: float):
+def _session_views(window: str | None, igtl_rate: float):
     views, closers, clock = [], [], None
     if window:
         import pyvista as pv
@@ -222,7 +225,7 @@ def _session_views(window: bool, igtl_rate: float):
         from cutkit.live.window import WindowView
 
         pv.OFF_SCREEN = True
-        views.append(WindowView(off_screen=True, window_size=(1024, 768)))
+        views.append(WindowView(off_screen=True, window_size=(1024, 768), drawing=window))
     if igtl_rate > 0:
         from cutkit.live.igtl import IGTLEndpoint, IGTLPolyDataView
 
@@ -233,10 +236,11 @@ def _session_views(window: bool, igtl_rate: float):
     return views, closers, clock
 
 
-def run_session(model, trajectory_path: str, priority: str, window: bool, igtl_rate: float,
+def run_session(model, trajectory_path: str, priority: str, window: str | None, igtl_rate: float,
                 solver: str | None = None) -> dict:
     """`cutkit haptics play` streams ``trajectory_path`` through the service into a live session on ``model``
-    (element ``solver``); ``step_walls`` is, for each tissue stepped, (perf_counter, tissue time) at
+    (element ``solver``), drawn by an off-screen window drawing as ``window`` says (None: no
+    window); ``step_walls`` is, for each tissue stepped, (perf_counter, tissue time) at
     the end of each of its relaxation steps."""
     import subprocess
     import sys
@@ -279,7 +283,8 @@ def run_session(model, trajectory_path: str, priority: str, window: bool, igtl_r
                 v.close()
         device = json.loads(plays[0].communicate(timeout=60)[0]) if plays else {}
     return {"summary": s, "frames": frames, "messages": [] if clock is None else clock.arrivals,
-            "device": device, "recording": str(out), "step_walls": list(step_walls.values())}
+            "device": device, "recording": str(out), "step_walls": list(step_walls.values()),
+            "drawn_as": next((v.drawn_as for v in views if hasattr(v, "drawn_as")), None)}
 
 
 def rest_to_balance(relax: dict, steps_of_tissues: list, stroke_end: float | None, perf_at_zero: float) -> dict | None:
@@ -320,7 +325,7 @@ def rest_to_balance(relax: dict, steps_of_tissues: list, stroke_end: float | Non
             "residual_then": None if done is None else rel[done], "final_residual": rel[-1]}
 
 
-def session_rate(model_path: str, priority: str, window: bool, which: str = "two", igtl_rate: float = 30.0,
+def session_rate(model_path: str, priority: str, window: str | None, which: str = "two", igtl_rate: float = 30.0,
                  solver: str | None = None) -> dict:
     """A live session on ``model_path`` with the strokes ``which`` (:func:`strokes`): rates, gaps, tets cut."""
     import tempfile
@@ -357,7 +362,7 @@ def session_rate(model_path: str, priority: str, window: bool, which: str = "two
               "latency_p50_ms": lat.get("p50"), "latency_p95_ms": lat.get("p95"),
               "latency_outside_rebase_ms": live.get("latency_outside_rebase_ms"),
               "geometry_updates_skipped": live.get("geometry_updates_skipped"),
-              "device_rate_hz": run["device"].get("rate_hz"), "window": window, "recording": run["recording"],
+              "device_rate_hz": run["device"].get("rate_hz"), "window": run["drawn_as"], "recording": run["recording"],
               "solver": s["relax_steps"].get("solver", solver), "relax_not_converged": s["relax_steps"]["not_converged"],
               "rest_to_balance": rest_to_balance(s["relax_steps"], run["step_walls"],
                                                  (live.get("stroke_ends_s") or [None])[-1], t0)}
@@ -380,6 +385,8 @@ def main() -> None:
     ap.add_argument("--session", metavar="MODEL", help="Also a live session on this model (the demo knee: "
                     "cutkit-demo/knee.h5) driven by `cutkit haptics play`, drawn off screen.")
     ap.add_argument("--no-window", action="store_true", help="The session without the window.")
+    ap.add_argument("--drawing", choices=["auto", "full", "fast"], default="auto",
+                    help="How the off-screen window draws (cutkit.live.window.DRAWINGS).")
     ap.add_argument("--strokes", choices=["two", "one", "second"], default="two",
                     help="The session's incisions (see strokes()); two also runs the second alone.")
     ap.add_argument("--igtl-rate", type=float, default=30.0,
@@ -399,10 +406,10 @@ def main() -> None:
     result = {"machine": platform.machine(), "python": platform.python_version(),
               "load_1min": __import__("os").getloadavg()[0]}
     if not args.skip_periphery:
-        result["window"] = window_rate(args.triangles, args.frames)
+        result["window"] = window_rate(args.triangles, args.frames, args.drawing)
         result["play"] = play_rate(args.seconds, args.priority)
     if args.session:
-        result["session"] = session_rate(args.session, args.priority, not args.no_window, args.strokes,
+        result["session"] = session_rate(args.session, args.priority, None if args.no_window else args.drawing, args.strokes,
                                          args.igtl_rate, args.solver)
     if args.json:
         print(json.dumps(result))

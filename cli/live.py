@@ -32,6 +32,9 @@ from cutkit.cli._ui import overwrite_option, solver_option
 @click.option("--camera", type=click.Choice(["follow", "model", "fixed"]), default="follow", show_default=True,
               help="The window's camera: follow the blade and the wound, the whole model, or fixed (moved "
                    "only with the mouse).")
+@click.option("--drawing", type=click.Choice(["auto", "full", "fast"]), default="auto", show_default=True,
+              help="How the window draws: full (anti-aliased, five lights), fast (one light at the camera, no "
+                   "anti-aliasing), or auto: fast where OpenGL runs on the processor (e.g. Mesa's llvmpipe).")
 @click.option("--no-window", is_flag=True, help="No window (needs no display); without a pose option the mouse needs one.")
 @click.option("--fps", default=30.0, show_default=True, type=click.FloatRange(min=1.0), help="Frames per second to the views.")
 @click.option("--seconds", type=click.FloatRange(min=0.0), default=None, help="End after this many seconds.")
@@ -46,8 +49,8 @@ from cutkit.cli._ui import overwrite_option, solver_option
 @click.option("--material-model", type=click.Choice(["neohookean", "springs"]), default=None,
               help="Tissue model [default: what the model file names].")
 @solver_option
-def command(model, out_dir, overwrite, haptics, trajectory, speed, igtl_port, igtl_device, camera, no_window, fps,
-            seconds, clock, until_idle, geometry_rate_hz, blade_length, material_model, solver, **igtl_opts):
+def command(model, out_dir, overwrite, haptics, trajectory, speed, igtl_port, igtl_device, camera, drawing, no_window,
+            fps, seconds, clock, until_idle, geometry_rate_hz, blade_length, material_model, solver, **igtl_opts):
     """Cut MODEL live; Ctrl-C (or closing the window) ends the session, its recording stays valid."""
     from cutkit.cli._ui import console
     from cutkit.errors import InputError
@@ -77,8 +80,8 @@ def command(model, out_dir, overwrite, haptics, trajectory, speed, igtl_port, ig
         from cutkit.simulate.clock import SteppedClock
 
         session_clock = SteppedClock()
-    source, views, closers = _open(haptics, trajectory, speed, igtl_port, igtl_device, no_window, igtl, camera,
-                                   session_clock)
+    source, views, closers = _open(haptics, trajectory, speed, igtl_port, igtl_device, no_window, igtl,
+                                   (camera, drawing), session_clock)
     try:
         with folder_guard(out_dir):
             summary = run_live(tet_model, source, views, out_dir, opt, max_seconds=seconds, fps=fps,
@@ -149,7 +152,8 @@ def _show_igtl_log() -> None:
         log.setLevel(logging.INFO)
 
 
-def _open(haptics, trajectory, speed, igtl_port, igtl_device, no_window, igtl, camera="follow", clock=None):
+def _open(haptics, trajectory, speed, igtl_port, igtl_device, no_window, igtl, window=("follow", "auto"),
+          clock=None):
     """The pose source, the views and what else to close; a trajectory on ``clock`` when one is given."""
     views, closers = [], []
     mouse = None
@@ -179,7 +183,8 @@ def _open(haptics, trajectory, speed, igtl_port, igtl_device, no_window, igtl, c
     if not no_window:
         from cutkit.live.window import WindowView
 
-        views.insert(0, WindowView(pose_source=mouse, camera=camera))
+        camera, drawing = window
+        views.insert(0, WindowView(pose_source=mouse, camera=camera, drawing=drawing))
     return source, views, closers
 
 

@@ -269,6 +269,35 @@ def test_a_strokes_rebase_waits_for_rest_or_the_time_limit_and_a_blade_back_in_g
     assert not due(loop(1.0, at_rest=True, busy=True), 5.0)  # one is running already
 
 
+def test_a_frame_waits_while_device_poses_wait_for_their_ticks_but_not_past_its_age():
+    """The frame clock's rule: a frame is drawn when due or when a cut waits to be shown, but not while
+    poses the device sent wait for their ticks (a frame then costs the poses its drawing time, and on a
+    software OpenGL the backlog grew through a whole stroke), unless the newest frame is
+    MAX_FRAME_AGE_S old."""
+    import collections
+    from types import SimpleNamespace
+
+    from cutkit.simulate.live_loop import MAX_FRAME_AGE_S
+
+    def loop(waiting=0, pending_cut=(), meter=True):
+        queue = collections.deque(range(waiting))
+        return SimpleNamespace(meter=SimpleNamespace(queue=queue) if meter else None,
+                               pending_cut=list(pending_cut), frame_s=[10.0],
+                               _behind_device=lambda: meter and bool(queue))
+
+    due = LiveLoop._frame_due
+    assert not due(loop(), 10.01, 10.03)  # not yet due, no cut to show
+    assert due(loop(), 10.03, 10.03)
+    assert due(loop(pending_cut=[10.005]), 10.01, 10.03)  # a cut is shown at once
+    assert not due(loop(waiting=3), 10.03, 10.03)  # due, but three poses wait: their ticks first
+    assert not due(loop(waiting=3, pending_cut=[10.005]), 10.01, 10.03)
+    assert due(loop(waiting=3), 10.0 + MAX_FRAME_AGE_S, 10.03)  # the newest frame too old: drawn anyway
+    assert due(loop(meter=False), 10.03, 10.03)  # poses of this process: no queue to wait for
+    assert LiveLoop._behind_device(SimpleNamespace(meter=SimpleNamespace(queue=collections.deque([1]))))
+    assert not LiveLoop._behind_device(SimpleNamespace(meter=SimpleNamespace(queue=collections.deque())))
+    assert not LiveLoop._behind_device(SimpleNamespace(meter=None))
+
+
 def test_a_stroke_begun_before_the_last_ones_rebase_goes_on_without_holding_a_pose(joined_strokes):
     """A blade back in the tissue while the first stroke's rebase still waits goes on in the same cut
     state: no pose is held, one rebase comes after the second stroke, both strokes cut, and the cut mesh

@@ -422,9 +422,11 @@ def test_a_backlog_of_a_fast_blade_cuts_every_millimetre():
     assert cut_on == [0, 60, 120, 180, 200]
 
 
-def _geometry_loop(pending: bool, frame_age_periods: float):
+def _geometry_loop(pending: bool, frame_age_periods: float, waiting: int = 0):
     """A stand-in session whose geometry update cuts one tet when ``pending``; the newest frame is
-    ``frame_age_periods`` frame periods old.  Returns the order of frames and cuts."""
+    ``frame_age_periods`` frame periods old; ``waiting`` device poses wait for their ticks.  Returns
+    the order of frames and cuts."""
+    import collections
     from types import SimpleNamespace
 
     from cutkit.simulate.live_loop import LiveLoop
@@ -444,6 +446,7 @@ def _geometry_loop(pending: bool, frame_age_periods: float):
     loop.relax, loop.rebaser, loop.on_frame = SimpleNamespace(f_ext=None), SimpleNamespace(busy=False), None
     loop.frame_period, loop.now = 1.0 / 30.0, lambda: 10.0
     loop.frame_s = [10.0 - frame_age_periods / 30.0]
+    loop.meter = SimpleNamespace(queue=collections.deque(range(waiting)))
     loop._frame = lambda on_frame: events.append("frame")
     loop._geometry()
     return events, loop.pending_cut
@@ -455,6 +458,8 @@ def test_a_cut_is_preceded_by_a_frame_when_the_newest_frame_is_half_a_period_old
     assert _geometry_loop(pending=True, frame_age_periods=0.8) == (["frame", "cut"], [1.0])
     assert _geometry_loop(pending=True, frame_age_periods=0.2) == (["cut"], [1.0])
     assert _geometry_loop(pending=False, frame_age_periods=0.8) == (["cut"], [])
+    # device poses wait for their ticks: they come first (the frame clock's rule, MAX_FRAME_AGE_S)
+    assert _geometry_loop(pending=True, frame_age_periods=0.8, waiting=5) == (["cut"], [1.0])
 
 
 def test_the_warm_up_loads_the_kernels_a_stroke_needs_that_its_short_cut_misses():

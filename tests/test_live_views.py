@@ -130,7 +130,7 @@ def test_window_draws_the_cut_surface_in_its_colour(window, tmp_path):
     assert view._tissue.n_points == len(grown.points) and view._cut.n_cells == len(grown.cut_faces)
     assert dict(view._pl.renderer.actors) == actors
     assert view.frames_shown == 8 and view.fps > 0.0
-    status = view._text.GetText(2)
+    status = view.status_text
     assert "haptics 1000 Hz" in status and "relaxation 250 passes/s" in status and "tets cut 42" in status
 
 
@@ -188,6 +188,70 @@ def test_window_turns_a_mouse_drag_into_blade_poses(window):
     assert not view.on_press(2, 2)
     view._key("x")
     assert not view.cut_mode
+
+
+def test_an_off_screen_window_draws_every_frame(window):
+    """Off screen every frame is drawn as on screen (pyvista's render() would draw nothing before its
+    show(), so the frames a session times would cost nothing): VTK's own count of drawn pictures."""
+    view, _ = window
+    drawn = []
+    frame = slab_with_wound()
+    view.show(frame)  # builds the window
+    view._pl.render_window.AddObserver("EndEvent", lambda *_: drawn.append(1))
+    for _ in range(4):
+        frame.points = frame.points + np.array([0.0, 0.0, 0.01])
+        view.show(frame)
+    assert len(drawn) == 4
+
+
+@pytest.mark.parametrize("drawing", ["full", "fast"])
+def test_a_window_draws_as_asked_and_shows_the_cut_either_way(drawing, tmp_path):
+    import pyvista
+
+    from cutkit.live.window import WindowView, cut_colour_fraction
+
+    pyvista.OFF_SCREEN = True
+    view = WindowView(off_screen=True, window_size=(400, 300), drawing=drawing)
+    try:
+        view.show(slab_with_wound())
+        view._pl.camera_position = CAMERA
+        view.show(slab_with_wound())
+        rw, lights = view._pl.render_window, view._pl.renderer.lights
+        assert view.drawn_as == drawing
+        if drawing == "fast":  # no multisampling, one light at the camera
+            assert rw.GetMultiSamples() == 0
+            assert len(lights) == 1 and lights[0].is_headlight
+        else:  # the plotter's own multisampling and light kit
+            assert rw.GetMultiSamples() > 0
+            assert len(lights) == 5
+        assert cut_colour_fraction(view.screenshot()) > 0.003
+    finally:
+        view.close()
+    with pytest.raises(InputError, match="drawing must be one of auto, full, fast, not 'nice'"):
+        WindowView(off_screen=True, drawing="nice")
+
+
+def test_software_opengl_is_told_by_the_renderer_string():
+    from cutkit.live.window import software_opengl
+
+    def report(renderer):
+        return f"OpenGL vendor string:  Mesa\nOpenGL renderer string:  {renderer}\nOpenGL version string:  4.5"
+
+    assert software_opengl(report("llvmpipe (LLVM 15.0.6, 256 bits)"))
+    assert software_opengl(report("softpipe"))
+    assert software_opengl(report("Google SwiftShader"))
+    assert not software_opengl(report("NVIDIA GeForce RTX 4090/PCIe/SSE2"))
+    assert not software_opengl(report("AMD Radeon Pro W6800 (radeonsi, navi21, LLVM 15.0.6)"))
+    assert not software_opengl("Display ID not set")  # no context yet: drawn in full
+
+
+def test_auto_draws_fast_exactly_where_opengl_runs_on_the_processor(window):
+    from cutkit.live.window import software_opengl
+
+    view, _ = window
+    view.show(slab_with_wound())
+    software = software_opengl(view._pl.render_window.ReportCapabilities())
+    assert view.drawing == "auto" and view.drawn_as == ("fast" if software else "full")
 
 
 # ---------------------------------------------------------------------------- OpenIGTLink

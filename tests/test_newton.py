@@ -445,6 +445,24 @@ def test_a_waiting_cut_stops_the_assembly_and_the_resting_sweeps():
     assert not info.taken and swept == 0 and np.array_equal(st.positions, p) and st.time == 0.0
 
 
+def test_a_solve_with_a_cut_already_waiting_evaluates_nothing(monkeypatch):
+    """Raised before the solve begins, the flag ends it before its first residual (a pass over every
+    element that the waiting cut would wait for): not taken, nothing moved, no residual evaluated."""
+    from cutkit.relax import newton as N
+
+    p, em, f, tip = cantilever()
+    calls = []
+    residual = N._Potential.residual
+    monkeypatch.setattr(N._Potential, "residual", lambda self, x: calls.append(1) or residual(self, x))
+    st = ElementState(p.copy(), np.zeros_like(p))
+    info = N.newton_step(em, st, 0.02, f, atol=0.0, max_iterations=2, solver=NewtonSolver(em),
+                         stop=np.ones(1, np.int64))
+    assert not info.taken and calls == [] and np.array_equal(st.positions, p) and st.time == 0.0
+    info = N.newton_step(em, st, 0.02, f, atol=0.0, max_iterations=1, solver=NewtonSolver(em),
+                         stop=np.zeros(1, np.int64))
+    assert info.taken and len(calls) >= 2 and st.time == 0.02  # down: the step as ever
+
+
 def _step_residual(em, x, x0, h, f):
     """(n, 3) N: the backward Euler residual at x of a step of h s from x0 at rest, written here
     (elastic forces and load less inertia and damping, 0 at held dofs)."""

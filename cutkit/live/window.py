@@ -3,10 +3,16 @@
 The window is built on the first frame and then updated in place: the
 tissue, the cut surface, the blade and the arrow keep their actors and
 meshes; a frame only copies positions (and faces, when they changed) into
-them and renders once.  It works on screen (``pyvista.Plotter`` with
+them and draws once.  It works on screen (``pyvista.Plotter`` with
 ``interactive_update``; events are processed at each frame) and off screen
-(``off_screen=True``, no display needed), where :meth:`WindowView.screenshot`
-returns the picture.
+(``off_screen=True``, no display needed), where every frame is drawn as on
+screen and :meth:`WindowView.screenshot` returns the picture.
+
+How a frame is drawn (``drawing``, :data:`DRAWINGS`): on a graphics card with
+the plotter's multisampling and its five-light kit; on a software OpenGL
+(Mesa's llvmpipe, where a frame of the demo knee at 1024 x 768 took 130-150
+ms that way on a 2-core machine) without multisampling and with one light at
+the camera, about 15-30 ms (docs/live.md, "Drawing").
 
 With a :class:`~cutkit.live.sources.MouseKeyboardPoseSource` the window
 hands it the user's input: a left-button drag that starts on the tissue
@@ -29,7 +35,8 @@ from cutkit.live.views import LiveFrame, blade_quad
 
 log = logging.getLogger("cutkit.live")
 
-__all__ = ["WindowView", "CUT_RGB", "TISSUE_RGB", "vertex_normals", "cut_colour_fraction"]
+__all__ = ["WindowView", "CUT_RGB", "TISSUE_RGB", "DRAWINGS", "vertex_normals", "cut_colour_fraction",
+           "software_opengl"]
 
 #: Colour of the cut surface: a magenta that no tissue of the phantoms has.
 CUT_RGB = (220, 30, 150)
@@ -40,6 +47,31 @@ BLADE_RGB = (60, 60, 70)
 ARROW_RGB = (20, 120, 230)
 #: Weight of the newest frame period in the fps estimate.
 FPS_SMOOTHING = 0.1
+#: How a window draws: ``"full"`` with the plotter's anti-aliasing (multisampling) and its light
+#: kit; ``"fast"`` without multisampling, lit by one headlight (a light at the camera, which
+#: follows the blade); ``"auto"`` fast on a software OpenGL (:func:`software_opengl`), else full.
+DRAWINGS = ("auto", "full", "fast")
+#: Words in OpenGL's renderer string that name a rasteriser running on the processor.
+SOFTWARE_RENDERERS = ("llvmpipe", "softpipe", "swrast", "swiftshader", "software rasterizer", "gdi generic")
+#: Height of the status lines, pixels.
+STATUS_FONT_PX = 14
+
+
+def software_opengl(capabilities: str) -> bool:
+    """Whether a render window's capability report names a software rasteriser.
+
+    Parameters
+    ----------
+    capabilities : str
+        ``vtkRenderWindow.ReportCapabilities()`` of a window that has drawn once; its line
+        ``OpenGL renderer string: ...`` names the rasteriser (e.g. ``llvmpipe (LLVM 15.0.6, 256
+        bits)``).  A report without that line (no context yet) gives False.
+    """
+    for line in capabilities.splitlines():
+        low = line.lower()
+        if "renderer string" in low:
+            return any(word in low for word in SOFTWARE_RENDERERS)
+    return False
 
 
 def vertex_normals(points: np.ndarray, faces: np.ndarray) -> np.ndarray:
@@ -137,12 +169,21 @@ class WindowView:
         only with the mouse.
     camera_position : [position, focal point, up], optional
         The camera at the start (pyvista's ``camera_position``; 3 floats each).
+    drawing : {"auto", "full", "fast"}
+        How frames are drawn (:data:`DRAWINGS`); :attr:`drawn_as` says what ``"auto"`` chose
+        once the window is built.
     """
 
     def __init__(self, off_screen: bool = False, window_size=(1024, 768), title: str = "cutkit live",
                  pose_source=None, cut_rgb=CUT_RGB, tissue_rgb=TISSUE_RGB, force_scale: float = 10.0,
                  background="white", max_fps: float | None = None, camera: str = "follow",
-                 camera_position=None):
+                 camera_position=None, drawing: str = "auto"):
+        if drawing not in DRAWINGS:
+            from cutkit.errors import InputError
+
+            raise InputError(f"drawing must be one of {', '.join(DRAWINGS)}, not {drawing!r}")
+        self.drawing = drawing
+        self.drawn_as = None  # "full" or "fast" once the window is built
         self._rig = CameraRig(camera)
         self.camera_position = camera_position
         self.off_screen = bool(off_screen)
@@ -196,7 +237,7 @@ class WindowView:
         self._arrow_base = np.array(arrow.points, np.float64)
         self._arrow = arrow
         self._arrow_actor = pl.add_mesh(arrow, color=ARROW_RGB, name="force")
-        self._text = pl.add_text("", position="upper_left", font_size=10, color="black")
+        self._text = self._status_actor(pl)
         pl.reset_camera()
         if self.camera_position is not None:
             pl.camera_position = self.camera_position
@@ -207,6 +248,38 @@ class WindowView:
         if not self.off_screen:
             pl.show(interactive_update=True, auto_close=False)
             self._install_input()
+        else:
+            pl.render_window.Render()  # the first picture: OpenGL's context and its renderer string
+        self._choose_drawing(pl)
+
+    @staticmethod
+    def _status_actor(pl):
+        """The status lines in the upper left corner: one text actor (a corner annotation scales
+        its font again at every frame, 10-15 ms a frame on a software OpenGL)."""
+        import vtk
+
+        actor = vtk.vtkTextActor()
+        prop = actor.GetTextProperty()
+        prop.SetFontSize(STATUS_FONT_PX)
+        prop.SetColor(0.0, 0.0, 0.0)
+        prop.SetVerticalJustificationToTop()
+        coord = actor.GetPositionCoordinate()
+        coord.SetCoordinateSystemToNormalizedViewport()
+        coord.SetValue(0.01, 0.99)
+        pl.renderer.AddViewProp(actor)
+        return actor
+
+    def _choose_drawing(self, pl) -> None:
+        """Draw as :attr:`drawing` says; ``"auto"`` reads the OpenGL renderer the window got."""
+        fast = self.drawing == "fast" or (
+            self.drawing == "auto" and software_opengl(pl.render_window.ReportCapabilities()))
+        self.drawn_as = "fast" if fast else "full"
+        if fast:
+            import pyvista as pv
+
+            pl.disable_anti_aliasing()
+            pl.remove_all_lights()
+            pl.add_light(pv.Light(light_type="headlight"))
 
     def _install_input(self) -> None:
         if self.source is None or self._pl.iren is None:
@@ -322,6 +395,11 @@ class WindowView:
         renderer.ResetCameraClippingRange()
 
     @property
+    def status_text(self) -> str:
+        """The status lines as last drawn (rates, session time, tets cut, force)."""
+        return self._text.GetInput() if self._pl is not None else ""
+
+    @property
     def camera_mode(self) -> str:
         return self._rig.mode
 
@@ -347,8 +425,12 @@ class WindowView:
             self._upload(frame)
         self._update_tools(frame)
         self._aim(frame)
-        self._text.SetText(2, self._status(frame))  # corner 2: upper left
-        if self.off_screen or not self.interactive:
+        self._text.SetInput(self._status(frame))
+        if self.off_screen:
+            # pyvista's render() draws nothing before its show(), which an off-screen window never
+            # calls: draw through VTK, so that off screen every frame costs what it does on screen
+            self._pl.render_window.Render()
+        elif not self.interactive:
             self._pl.render()
         else:
             try:

@@ -361,7 +361,9 @@ class NewtonSolver:
             iterate keeps every upright element upright; an iteration whose
             linear solve it stops is abandoned, so a waiting cut waits for one
             product with the matrix, not for a Newton iteration).  Stopped
-            before its first iteration is done, the result says ``taken`` False.
+            before its first iteration is done, the result says ``taken`` False
+            (stopped before the solve began, its residuals are NaN: none was
+            evaluated).
         smoother : callable, optional
             ``smoother(x) -> bool``: called after each Newton iteration that leaves the
             residual above ``atol``; moves x in place (keeping every upright element
@@ -382,6 +384,10 @@ class NewtonSolver:
     def _solve(self, x: np.ndarray, terms: KE.NodeTerms, *, atol: float, max_iterations: int,
                stop, smoother=None) -> SolveInfo:
         """:meth:`solve` with BLAS already on one thread."""
+        if stop is not None and stop[0]:
+            # a cut already waits: not even the first residual (a pass over every element, 20-50 ms
+            # on the knee's relaxation thread in a live session, which the cut would wait for)
+            return SolveInfo(0, float("nan"), float("nan"), False, taken=False)
         em = self.em
         free = ~terms.fixed & (em.adj_degree > 0)[:, None]
         problem = _Potential(em, terms, free, self._elements())

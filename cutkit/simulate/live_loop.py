@@ -34,6 +34,12 @@ REBASE_WAIT_MAX_S = 4.0
 MAX_SKIPPED_SWEEP_MM = 1.0
 #: A cut is preceded by a frame when the newest frame is older than this many frame periods.
 PRE_CUT_FRAME_AGE = 0.5
+#: While device poses wait for their ticks, a frame waits until they are ticked, unless the newest
+#: frame is this old, s.  A frame costs this thread what drawing costs (20-30 ms for the demo knee
+#: at 1024 x 768 on a software OpenGL, 2-core machine); frames drawn between chunks of a backlog made
+#: it grow through a whole stroke there (pose to picture p50 1.2 s).  The poses first keeps the
+#: backlog at a pass; this bound keeps frames coming at least about 12 times a second.
+MAX_FRAME_AGE_S = 0.08
 #: Relaxation steps a live session makes before its clock starts: the settled tissue's resting steps
 #: go on in stages to the rest tolerance (docs/relaxation.md, "Resting steps"), and a stage that
 #: needs a Newton solve made after the clock started held the relaxation until the first cut
@@ -273,7 +279,7 @@ class LiveLoop:
                 next_geo = max(next_geo + self.geo_period, now)
             # a cut is drawn at once (a frame costs a few ms; waiting for the frame clock would
             # add up to a frame period to the latency from the pose to the drawn cut)
-            if now >= next_frame or self.pending_cut:
+            if self._frame_due(now, next_frame):
                 due = now >= next_frame
                 self._frame(on_frame)
                 if due:  # a cut's extra frame leaves the frame clock as it is
@@ -283,6 +289,18 @@ class LiveLoop:
                 if now - finished_at >= idle_end_s:
                     break
             self.sleep(LOOP_IDLE_S)
+
+    def _frame_due(self, now: float, next_frame: float) -> bool:
+        """Whether a frame is drawn now: the frame clock says so or a cut waits to be shown, and no
+        device pose waits for its tick (:meth:`_behind_device`) or the newest frame is
+        :data:`MAX_FRAME_AGE_S` old."""
+        if now < next_frame and not self.pending_cut:
+            return False
+        return not self._behind_device() or not self.frame_s or now - self.frame_s[-1] >= MAX_FRAME_AGE_S
+
+    def _behind_device(self) -> bool:
+        """Whether poses the device sent wait for their ticks (a pass left a backlog)."""
+        return self.meter is not None and bool(self.meter.queue)
 
     def _finished(self, until_idle_s) -> bool:
         """The source is finished, or idle: the tissue has relaxed ``until_idle_s`` of its own time past
@@ -472,7 +490,7 @@ class LiveLoop:
 
     def _geometry(self) -> None:
         s = self.session
-        if s.cut.pending and self.still is None and self._frame_stale():
+        if s.cut.pending and self.still is None and self._frame_stale() and not self._behind_device():
             # a cut holds this thread for tens of ms: draw first, so that the longest gap between
             # frames (and OpenIGTLink messages) is about one cut and one frame, not a frame period more
             self._frame(self.on_frame)
