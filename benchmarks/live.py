@@ -272,17 +272,27 @@ def run_session(model, trajectory_path: str, priority: str, window: str | None, 
             step_walls.setdefault(id(self), []).append((time.perf_counter(), self.time))
 
         ElasticTissue._count = counted
+        from cutkit.simulate.live_loop import LiveLoop
+
+        idle_views, still = LiveLoop._idle_views, []
+
+        def left_out(self):  # a frame clock tick with nothing moved: the picture is current
+            idle_views(self)
+            still.append((time.perf_counter(), self.now()))
+
+        LiveLoop._idle_views = left_out
         try:
             s = run_live(model, source, views, out, SimulateOptions(solver=solver), max_seconds=300,
                          until_idle_s=2.0, on_start=start_device,
                          on_frame=lambda f: frames.append((time.perf_counter(), f.t)))
         finally:
             ElasticTissue._count = count
+            LiveLoop._idle_views = idle_views
             source.close()
             for v in views + closers:
                 v.close()
         device = json.loads(plays[0].communicate(timeout=60)[0]) if plays else {}
-    return {"summary": s, "frames": frames, "messages": [] if clock is None else clock.arrivals,
+    return {"summary": s, "frames": frames, "still": still, "messages": [] if clock is None else clock.arrivals,
             "device": device, "recording": str(out), "step_walls": list(step_walls.values()),
             "drawn_as": next((v.drawn_as for v in views if hasattr(v, "drawn_as")), None)}
 
@@ -345,6 +355,9 @@ def session_rate(model_path: str, priority: str, window: str | None, which: str 
     span = (frames[0, 1], frames[-1, 1]) if len(frames) else (0.0, 0.0)
     messages = [t - t0 for t, _ in run["messages"] if span[0] <= t - t0 <= span[1]]
     windows = live.get("rebase_windows_s") or []
+    # the picture is current at every frame drawn and at every frame clock tick left out because
+    # nothing had moved (LiveLoop._scene_still): the gaps between frames are taken over both
+    current = np.sort(np.concatenate([frames[:, 1], [t for _, t in run["still"]]]))
     # across every stroke's end: from half a second before it to two seconds after it, and after
     # each rebase (a stroke begun before the last one's rebase started goes on without one)
     spans = [(e - 0.5, e + 2.0) for e in live.get("stroke_ends_s") or []] + [(a - 0.5, b + 2.0) for a, b in windows]
@@ -353,7 +366,9 @@ def session_rate(model_path: str, priority: str, window: str | None, which: str 
               "opening_mean_mm": s["cut_opening_mm"]["final_mean"], "haptic_hz": live["haptic_hz"],
               "haptic_period_p99_ms": live.get("period_p99_ms"),
               "haptic_periods_over_2ms": live.get("periods_over_2ms"), "fps": live["fps"],
-              "frame_gap_max_ms": _gaps_ms(frames[:, 1]), "frame_gap_max_ms_at_stroke_end": _gaps_in(frames[:, 1], spans),
+              "fps_up_to_date": live.get("fps_up_to_date"), "frames_left_out_still": live.get("frames_left_out_still"),
+              "frame_gap_max_ms": _gaps_ms(current), "frame_gap_max_ms_at_stroke_end": _gaps_in(current, spans),
+              "frame_gap_max_ms_drawn": _gaps_ms(frames[:, 1]),
               "igtl_rate_hz": igtl_rate, "igtl_messages": len(messages),
               "igtl_gap_max_ms": _gaps_ms(messages),
               "igtl_gap_max_ms_at_stroke_end": _gaps_in(messages, spans),

@@ -298,6 +298,41 @@ def test_a_frame_waits_while_device_poses_wait_for_their_ticks_but_not_past_its_
     assert not LiveLoop._behind_device(SimpleNamespace(meter=None))
 
 
+def test_a_frame_clock_tick_is_left_out_only_while_nothing_a_frame_shows_has_moved():
+    """Left out (the picture is current): the nodes, the blade, the force and the cut as the newest
+    frame showed them, that frame younger than IDLE_FRAME_S, and no rebase running; any of them
+    changed, the frame is drawn."""
+    from types import SimpleNamespace
+
+    from cutkit.simulate.live_loop import IDLE_FRAME_S
+
+    points = np.arange(12.0).reshape(4, 3)
+    pose = (np.zeros(3), np.array([0.0, 0.0, -1.0]), np.array([1.0, 0.0, 0.0]))
+
+    def loop(**change):
+        positions = change.get("positions", points.copy())
+        cm = SimpleNamespace(n_rebases=0, n_tets_total=change.get("tets", 7))
+        newest = change.get("newest", tuple(v.copy() for v in pose))
+        force = change.get("force", np.zeros(3))
+        return SimpleNamespace(shown=(points.copy(), pose, np.zeros(3), (0, 7)), still=change.get("still"),
+                               frame_s=[10.0], newest=newest, _hand_force=lambda: force,
+                               session=SimpleNamespace(cut_mesh=cm, tis=SimpleNamespace(positions=positions)))
+
+    still = LiveLoop._scene_still
+    assert still(loop(), 10.1)
+    assert not still(loop(), 10.0 + IDLE_FRAME_S)  # the status lines are drawn again now and then
+    moved = points.copy()
+    moved[2, 1] += 1e-9
+    assert not still(loop(positions=moved), 10.1)
+    assert not still(loop(positions=np.vstack([points, points[:1]])), 10.1)  # a cut added a node
+    assert not still(loop(tets=8), 10.1)
+    assert not still(loop(newest=(np.array([0.0, 0.0, 1e-6]), pose[1], pose[2])), 10.1)
+    assert not still(loop(newest=None), 10.1)
+    assert not still(loop(force=np.array([0.0, 0.1, 0.0])), 10.1)
+    assert not still(loop(still=object()), 10.1)  # a rebase's still picture: the blade moves on it
+    assert not still(SimpleNamespace(shown=None, still=None, frame_s=[]), 10.1)  # nothing drawn yet
+
+
 def test_a_stroke_begun_before_the_last_ones_rebase_goes_on_without_holding_a_pose(joined_strokes):
     """A blade back in the tissue while the first stroke's rebase still waits goes on in the same cut
     state: no pose is held, one rebase comes after the second stroke, both strokes cut, and the cut mesh

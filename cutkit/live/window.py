@@ -448,6 +448,18 @@ class WindowView:
         self._last_render = now
         self.frames_shown += 1
 
+    def idle(self) -> None:
+        """A frame left out (nothing moved): the window's pending events are processed, nothing is
+        drawn (the interactor draws a camera the mouse moves itself)."""
+        if self._pl is None or self.closed or self.off_screen or not self.interactive:
+            return
+        try:
+            self._pl.iren.process_events()
+        except Exception as err:  # as show(): an EGL window under X takes no events
+            log.warning("the window cannot process events (%s); drawing without interaction.",
+                        str(err).split(".")[0])
+            self.interactive = False
+
     # ------------------------------------------------------------------ input
     def pick(self, x: int, y: int):
         """The tissue surface under display pixel (x, y) (origin bottom left).

@@ -40,6 +40,13 @@ PRE_CUT_FRAME_AGE = 0.5
 #: it grow through a whole stroke there (pose to picture p50 1.2 s).  The poses first keeps the
 #: backlog at a pass; this bound keeps frames coming at least about 12 times a second.
 MAX_FRAME_AGE_S = 0.08
+#: While nothing a frame shows has moved since the last one (the tissue's nodes, the blade, the
+#: force, the cut), the frame clock's frames are left out, but for one every this many seconds
+#: (the status lines' rates and time); views still process their window's events.  After the hand
+#: stops, the resting step's Newton iterations leave the nodes where they are for 0.3-1 s at a time,
+#: and frames drawn meanwhile took the processor from it (a frame of the knee costs 20-30 ms of
+#: drawing on a software OpenGL).
+IDLE_FRAME_S = 0.25
 #: Relaxation steps a live session makes before its clock starts: the settled tissue's resting steps
 #: go on in stages to the rest tolerance (docs/relaxation.md, "Resting steps"), and a stage that
 #: needs a Newton solve made after the clock started held the relaxation until the first cut
@@ -163,6 +170,8 @@ class LiveLoop:
         self.held: collections.deque = collections.deque()  # in-process ticks: poses not yet ticked
         self.cut_tip = None  # the blade's tip at the last geometry update
         self.newest = None  # the newest pose (tip, a, n): the drawn blade
+        self.shown = None  # what the newest frame showed: (points, blade pose, force, cut version)
+        self.frames_idle = 0  # frame clock ticks left out: nothing had moved (_scene_still)
         self.tets_at_rebases: list[int] = []  # tets cut when each stroke ended
         self.stroke_ends: list[float] = []  # session seconds when each stroke that cut ended
         self.frame_period = 1.0 / float(fps)
@@ -281,7 +290,10 @@ class LiveLoop:
             # add up to a frame period to the latency from the pose to the drawn cut)
             if self._frame_due(now, next_frame):
                 due = now >= next_frame
-                self._frame(on_frame)
+                if self.pending_cut or not self._scene_still(now):
+                    self._frame(on_frame)
+                else:
+                    self._idle_views()
                 if due:  # a cut's extra frame leaves the frame clock as it is
                     next_frame = self._next_frame(next_frame)
             if self._finished(until_idle_s):
@@ -297,6 +309,33 @@ class LiveLoop:
         if now < next_frame and not self.pending_cut:
             return False
         return not self._behind_device() or not self.frame_s or now - self.frame_s[-1] >= MAX_FRAME_AGE_S
+
+    def _scene_still(self, now: float) -> bool:
+        """Whether a frame now would show what the newest one did, but for the status lines, and
+        that frame is younger than :data:`IDLE_FRAME_S` (no rebase running: its still picture
+        moves the blade alone)."""
+        if self.shown is None or self.still is not None or not self.frame_s:
+            return False
+        if now - self.frame_s[-1] >= IDLE_FRAME_S:
+            return False
+        points, pose, force, version = self.shown
+        cm, positions = self.session.cut_mesh, self.session.tis.positions
+        if version != (cm.n_rebases, cm.n_tets_total) or positions.shape != points.shape:
+            return False
+        if (pose is None) != (self.newest is None):
+            return False
+        if pose is not None and not all(np.array_equal(u, v) for u, v in zip(pose, self.newest)):
+            return False
+        return bool(np.array_equal(self._hand_force(), force) and np.array_equal(positions, points))
+
+    def _idle_views(self) -> None:
+        """A frame left out (:meth:`_scene_still`): each view that has a window processes its events."""
+        for view in self.views:
+            idle = getattr(view, "idle", None)
+            if idle is not None:
+                idle()
+        self.frames_idle += 1
+        self.view_closed = any(getattr(v, "closed", False) for v in self.views)
 
     def _behind_device(self) -> bool:
         """Whether poses the device sent wait for their ticks (a pass left a backlog)."""
@@ -551,6 +590,8 @@ class LiveLoop:
         self.pending_cut.clear()
         self.frames += 1
         self.frame_s.append(drawn)
+        self.shown = (points, None if self.newest is None else tuple(np.array(v) for v in self.newest),
+                      frame.force, (s.cut_mesh.n_rebases, s.cut_mesh.n_tets_total))
         s.task_s["output"] += time.perf_counter() - t1
         if on_frame is not None:
             on_frame(frame)
@@ -622,6 +663,9 @@ class LiveLoop:
                  "trajectory_recorded": recorded, "frames": self.frames,
                  "geometry_updates_skipped": self.geometry_skipped,
                  "fps": float(1.0 / f.mean()) if f.size else 0.0,
+                 "frames_left_out_still": self.frames_idle,
+                 "fps_up_to_date": (float((self.frames + self.frames_idle - 1) / (self.frame_s[-1] - self.frame_s[0]))
+                                    if f.size and self.frame_s[-1] > self.frame_s[0] else 0.0),
                  "frame_gap_max_ms": float(f.max() * 1e3) if f.size else None,
                  "rebases": len(rebase_s),
                  "rebase_s_max": float(max(rebase_s)) if rebase_s else None,
