@@ -320,7 +320,7 @@ def rest_to_balance(relax: dict, steps_of_tissues: list, stroke_end: float | Non
     def first(bound, tissue_time=False):
         for k in range(1, len(steps)):
             begun_after = steps[k - 1][0] > end_wall and (not tissue_time or steps[k][1] > stroke_end)
-            if begun_after and rel[k] <= bound:
+            if begun_after and rel[k] is not None and rel[k] <= bound:  # None: a step a cut ended early
                 return k
         return None
 

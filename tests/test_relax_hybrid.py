@@ -413,3 +413,51 @@ def test_prepare_resting_builds_the_pattern_the_resting_steps_then_keep():
     vbd, _ = pressed("vbd", 0.1)
     vbd.prepare_resting()
     assert vbd.hessian_pattern.builds == 0
+
+
+def test_a_step_a_waiting_cut_ends_early_is_not_converged_and_its_residual_not_evaluated(monkeypatch):
+    """The flag raised as a step's sweeps end (a cut arrives): the step is taken (its sweeps moved the
+    nodes), counted not converged, its true residual not evaluated (a pass over every element the cut
+    would wait for: no residual is asked for with the flag up) and reported as None; the same for a
+    resting step; the closing line says so."""
+    import cutkit.relax.elastic_tissue as ET
+    import cutkit.relax.newton as N
+    from cutkit.simulate.run import relax_steps_line
+
+    tis, f = pressed("hybrid", 0.05, rest_rtol=1e-4)
+    flag = np.zeros(1, np.int64)
+    evaluated = []
+    residual = ET.ElasticTissue._residual
+    monkeypatch.setattr(ET.ElasticTissue, "_residual",
+                        lambda self, *a: evaluated.append(int(flag[0])) or residual(self, *a))
+    sweeps, rest = ET.local_step, N.rest_step
+
+    def cut_arrives(step):
+        def then(*a, **k):
+            out = step(*a, **k)
+            flag[0] = 1
+            return out
+        return then
+
+    monkeypatch.setattr(ET, "local_step", cut_arrives(sweeps))
+    x0 = tis.positions.copy()
+    tis.advance(f, H, stop=flag)
+    rep = tis.relax_report()
+    assert rep["count"] == 1 and rep["relative_residual"] == [None] and rep["steps_without_residual"] == 1
+    assert rep["not_converged"] == 1 and 1 not in evaluated and not np.array_equal(tis.positions, x0)
+    assert relax_steps_line(rep).endswith("a waiting cut ended it early, its residual not evaluated")
+    # the next step rests (the same load): a cut ends it after its sweeps
+    monkeypatch.setattr(ET, "local_step", sweeps)
+    monkeypatch.setattr(N, "rest_step", cut_arrives(rest))
+    flag[0] = 0
+    tis.advance(f, 2 * H, stop=flag)
+    rep = tis.relax_report()
+    assert rep["count"] == 2 and rep["resting"][-1] and rep["relative_residual"] == [None, None]
+    assert rep["steps_without_residual"] == 2 and rep["not_converged"] == 2 and 1 not in evaluated
+    # unstopped steps as ever: evaluated, and the worst residual is over them alone
+    monkeypatch.setattr(N, "rest_step", rest)
+    flag[0] = 0
+    tis.advance(f, 5 * H, stop=flag)
+    rep = tis.relax_report()
+    assert rep["count"] == 5 and all(r is not None for r in rep["relative_residual"][2:]) and 0 in evaluated
+    assert rep["worst_relative_residual"] == max(rep["relative_residual"][2:])

@@ -459,8 +459,9 @@ def relax_steps_line(report: dict) -> str | None:
     ok = report["count"] - report["not_converged"]
     resting = f", {report['resting_steps']} resting" if report.get("resting_steps") else ""
     last = report["relative_residual"][-1]
-    return (f"relaxation ({report['solver']}): {ok} of {report['count']} steps within tolerance{resting}; "
-            f"the last ended at {last:.1e} of the force scale ({report['force_scale_N']:.3g} N)")
+    ended = ("a waiting cut ended it early, its residual not evaluated" if last is None
+             else f"the last ended at {last:.1e} of the force scale ({report['force_scale_N']:.3g} N)")
+    return f"relaxation ({report['solver']}): {ok} of {report['count']} steps within tolerance{resting}; {ended}"
 
 
 def relax_steps_warning(report: dict) -> str | None:
