@@ -281,6 +281,13 @@ def run_session(model, trajectory_path: str, priority: str, window: str | None, 
             still.append((time.perf_counter(), self.now()))
 
         LiveLoop._idle_views = left_out
+        record, zero = LiveLoop._record, []
+
+        def recorded(self):  # the loop's own origin: perf_counter at session time 0 (the wall clock's scale)
+            zero.append(self.t0)
+            return record(self)
+
+        LiveLoop._record = recorded
         try:
             s = run_live(model, source, views, out, SimulateOptions(solver=solver), max_seconds=300,
                          until_idle_s=2.0, on_start=start_device,
@@ -288,11 +295,12 @@ def run_session(model, trajectory_path: str, priority: str, window: str | None, 
         finally:
             ElasticTissue._count = count
             LiveLoop._idle_views = idle_views
+            LiveLoop._record = record
             source.close()
             for v in views + closers:
                 v.close()
         device = json.loads(plays[0].communicate(timeout=60)[0]) if plays else {}
-    return {"summary": s, "frames": frames, "still": still, "messages": [] if clock is None else clock.arrivals,
+    return {"summary": s, "frames": frames, "still": still, "perf_at_zero": zero[-1] if zero else None, "messages": [] if clock is None else clock.arrivals,
             "device": device, "recording": str(out), "step_walls": list(step_walls.values()),
             "drawn_as": next((v.drawn_as for v in views if hasattr(v, "drawn_as")), None)}
 
@@ -350,7 +358,9 @@ def session_rate(model_path: str, priority: str, window: str | None, which: str 
     s, live = run["summary"], run["summary"]["live"]
     lat = live.get("latency_ms") or {}
     frames = np.array(run["frames"]) if run["frames"] else np.zeros((0, 2))
-    t0 = float(np.median(frames[:, 0] - frames[:, 1])) if len(frames) else 0.0  # perf_counter at session time 0
+    t0 = run["perf_at_zero"]  # perf_counter at session time 0
+    if t0 is None:  # from the frames: each stamped after its drawing, so later by that much
+        t0 = float(np.median(frames[:, 0] - frames[:, 1])) if len(frames) else 0.0
     # the messages while the session's loop ran (before it, the client waits for the settle)
     span = (frames[0, 1], frames[-1, 1]) if len(frames) else (0.0, 0.0)
     messages = [t - t0 for t, _ in run["messages"] if span[0] <= t - t0 <= span[1]]
