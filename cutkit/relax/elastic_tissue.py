@@ -22,7 +22,6 @@ colour classes.
 from __future__ import annotations
 
 import dataclasses
-
 import time
 
 import numpy as np

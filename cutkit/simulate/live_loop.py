@@ -286,8 +286,8 @@ class LiveLoop:
             elif not (self.rebaser.busy or self.held) and now >= next_geo:
                 self._geometry()
                 next_geo = max(next_geo + self.geo_period, now)
-            # a cut is drawn at once (a frame costs a few ms; waiting for the frame clock would
-            # add up to a frame period to the latency from the pose to the drawn cut)
+            # a cut is drawn at once (waiting for the frame clock would add up to a frame period to
+            # the latency from the pose to the drawn cut), unless device poses wait (_frame_due)
             if self._frame_due(now, next_frame):
                 due = now >= next_frame
                 if self.pending_cut or not self._scene_still(now):
