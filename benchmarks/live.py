@@ -278,7 +278,7 @@ def run_session(model, trajectory_path: str, priority: str, window: str | None, 
 
         def left_out(self):  # a frame clock tick with nothing moved: the picture is current
             idle_views(self)
-            still.append((time.perf_counter(), self.now()))
+            still.append(self.now())
 
         LiveLoop._idle_views = left_out
         record, zero = LiveLoop._record, []
@@ -367,7 +367,7 @@ def session_rate(model_path: str, priority: str, window: str | None, which: str 
     windows = live.get("rebase_windows_s") or []
     # the picture is current at every frame drawn and at every frame clock tick left out because
     # nothing had moved (LiveLoop._scene_still): the gaps between frames are taken over both
-    current = np.sort(np.concatenate([frames[:, 1], [t for _, t in run["still"]]]))
+    current = np.sort(np.concatenate([frames[:, 1], run["still"]]))
     # across every stroke's end: from half a second before it to two seconds after it, and after
     # each rebase (a stroke begun before the last one's rebase started goes on without one)
     spans = [(e - 0.5, e + 2.0) for e in live.get("stroke_ends_s") or []] + [(a - 0.5, b + 2.0) for a, b in windows]

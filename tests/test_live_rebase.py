@@ -314,7 +314,7 @@ def test_a_frame_clock_tick_is_left_out_only_while_nothing_a_frame_shows_has_mov
         cm = SimpleNamespace(n_rebases=0, n_tets_total=change.get("tets", 7))
         newest = change.get("newest", tuple(v.copy() for v in pose))
         force = change.get("force", np.zeros(3))
-        return SimpleNamespace(shown=(points.copy(), pose, np.zeros(3), (0, 7)), still=change.get("still"),
+        return SimpleNamespace(shown=(points.copy(), pose, np.zeros(3)), faces_version=(0, 7), still=change.get("still"),
                                frame_s=[10.0], newest=newest, _hand_force=lambda: force,
                                session=SimpleNamespace(cut_mesh=cm, tis=SimpleNamespace(positions=positions)))
 

@@ -170,7 +170,7 @@ class LiveLoop:
         self.held: collections.deque = collections.deque()  # in-process ticks: poses not yet ticked
         self.cut_tip = None  # the blade's tip at the last geometry update
         self.newest = None  # the newest pose (tip, a, n): the drawn blade
-        self.shown = None  # what the newest frame showed: (points, blade pose, force, cut version)
+        self.shown = None  # what the newest frame showed: (points, blade pose, force); its cut: faces_version
         self.frames_idle = 0  # frame clock ticks left out: nothing had moved (_scene_still)
         self.tets_at_rebases: list[int] = []  # tets cut when each stroke ended
         self.stroke_ends: list[float] = []  # session seconds when each stroke that cut ended
@@ -318,9 +318,9 @@ class LiveLoop:
             return False
         if now - self.frame_s[-1] >= IDLE_FRAME_S:
             return False
-        points, pose, force, version = self.shown
+        points, pose, force = self.shown
         cm, positions = self.session.cut_mesh, self.session.tis.positions
-        if version != (cm.n_rebases, cm.n_tets_total) or positions.shape != points.shape:
+        if self.faces_version != (cm.n_rebases, cm.n_tets_total) or positions.shape != points.shape:
             return False
         if (pose is None) != (self.newest is None):
             return False
@@ -590,8 +590,7 @@ class LiveLoop:
         self.pending_cut.clear()
         self.frames += 1
         self.frame_s.append(drawn)
-        self.shown = (points, None if self.newest is None else tuple(np.array(v) for v in self.newest),
-                      frame.force, (s.cut_mesh.n_rebases, s.cut_mesh.n_tets_total))
+        self.shown = (points, None if self.newest is None else tuple(np.array(v) for v in self.newest), frame.force)
         s.task_s["output"] += time.perf_counter() - t1
         if on_frame is not None:
             on_frame(frame)
