@@ -344,8 +344,10 @@ def rest_to_balance(relax: dict, steps_of_tissues: list, stroke_end: float | Non
 
 
 def session_rate(model_path: str, priority: str, window: str | None, which: str = "two", igtl_rate: float = 30.0,
-                 solver: str | None = None) -> dict:
-    """A live session on ``model_path`` with the strokes ``which`` (:func:`strokes`): rates, gaps, tets cut."""
+                 solver: str | None = None, keep: bool = False) -> dict:
+    """A live session on ``model_path`` with the strokes ``which`` (:func:`strokes`): rates, gaps, tets cut.
+    The session's recording and trajectory are temporary folders, removed unless ``keep``."""
+    import shutil
     import tempfile
 
     from cutkit.cutting.trajectory import write_trajectory
@@ -355,6 +357,10 @@ def session_rate(model_path: str, priority: str, window: str | None, which: str 
     path = Path(tempfile.mkdtemp(prefix="cutkit-live-strokes-")) / f"{which}.csv"
     write_trajectory(path, strokes(which))
     run = run_session(model, str(path), priority, window, igtl_rate, solver)
+    if not keep:  # a knee's recording is about 12 MB a session
+        shutil.rmtree(run["recording"], ignore_errors=True)
+        shutil.rmtree(path.parent, ignore_errors=True)
+        run["recording"] = None
     s, live = run["summary"], run["summary"]["live"]
     lat = live.get("latency_ms") or {}
     frames = np.array(run["frames"]) if run["frames"] else np.zeros((0, 2))
@@ -394,7 +400,7 @@ def session_rate(model_path: str, priority: str, window: str | None, which: str 
     at = live.get("tets_cut_at_rebases") or []
     if which == "two" and at:
         result["second_stroke_cut_tets"] = s["cut_tets"] - at[0]
-        alone = session_rate(model_path, priority, window, "second", igtl_rate, solver)
+        alone = session_rate(model_path, priority, window, "second", igtl_rate, solver, keep)
         result["second_alone_cut_tets"] = alone["cut_tets"]
         result["second_vs_alone"] = result["second_stroke_cut_tets"] / max(alone["cut_tets"], 1)
         result["alone"] = alone
@@ -422,6 +428,8 @@ def main() -> None:
     ap.add_argument("--rest-smoothing", type=int, default=None,
                     help="Sweeps between a resting step's Newton iterations (default: the runtime's "
                          "REST_SMOOTHING_SWEEPS; 0: none), for a before/after on the same machine.")
+    ap.add_argument("--keep-recording", action="store_true",
+                    help="Keep the session's recording (its folder is the result's recording; else removed).")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args()
     if args.rest_smoothing is not None:
@@ -435,7 +443,7 @@ def main() -> None:
         result["play"] = play_rate(args.seconds, args.priority)
     if args.session:
         result["session"] = session_rate(args.session, args.priority, None if args.no_window else args.drawing, args.strokes,
-                                         args.igtl_rate, args.solver)
+                                         args.igtl_rate, args.solver, args.keep_recording)
     if args.json:
         print(json.dumps(result))
     else:
