@@ -66,8 +66,11 @@ def _run(out_dir, fps, no_png, movie, trajectory, warm, t0, material_model=None,
         model_path, reused, _ = build_or_reuse(out_dir, on_stage=stage_reporter(bar, task))
         bar.update(task, completed=len(STAGES), description="build-model: " + ("reused" if reused else "done"))
     if warm is not None and warm.poll() is None:
-        with progress() as bar:  # the simulation waits for the kernels the second process compiles
+        from cutkit.simulate.warmup import warm_up_extras
+
+        with progress() as bar:  # this process's share of the run's kernels, then those the second one compiles
             bar.add_task("compiling kernels (first run only)", total=None)
+            warm_up_extras()
             warm.wait()
     model = read_model(model_path)
     say(f"model {model_path}: {model.tets.shape[0]} tets, {model.points.shape[0]} nodes"

@@ -165,6 +165,32 @@ def test_a_first_run_is_told_that_kernels_compile(tmp_path, monkeypatch):
     assert kernels_compiled(tmp_path) is None  # the cache lives elsewhere: unknown
 
 
+def test_the_demos_two_processes_compile_different_kernels(monkeypatch):
+    """`cutkit demo`'s second process cuts the warm-up slab and nothing else: not the decimation (the
+    build, in the first process, needs it first and compiled it too) nor the kernels the short cut
+    misses (the first process's share once its build is done).  The live session's warm-up in one
+    process still takes them all."""
+    import cutkit.simulate as simulate_module
+    import cutkit.simulate.warmup as run_warmup
+    from cutkit.demo.warmup import warm_up as demo_warm_up
+
+    calls = []
+    monkeypatch.setattr(simulate_module, "simulate", lambda *a, **k: calls.append("cut"))
+    monkeypatch.setattr(run_warmup, "warm_up_conjugate_gradients", lambda: calls.append("cg"))
+    monkeypatch.setattr(run_warmup, "warm_up_missed_kernels", lambda: calls.append("missed"))
+    import cutkit.decimate as decimate_module
+
+    monkeypatch.setattr(decimate_module, "decimate", lambda *a, **k: calls.append("decimate"))
+    demo_warm_up()
+    assert calls == ["cut"]
+    calls.clear()
+    run_warmup.warm_up(outputs=False)
+    assert calls == ["cut", "cg", "missed"]
+    calls.clear()
+    run_warmup.warm_up_extras()
+    assert calls == ["cg", "missed"]
+
+
 def test_a_worker_thread_takes_the_configured_count_less_one(monkeypatch):
     """numba's thread count is per thread: a thread started after configure_threads runs on all of
     numba's threads unless it sets its own; the live workers set worker_threads(), one fewer than

@@ -1,8 +1,15 @@
-"""Compile (and cache) the numba kernels of decimation and simulation on a tiny model, beside the demo's build.
+"""Compile (and cache) the numba kernels of the simulation on a tiny model, beside the demo's build.
 
 ``cutkit demo`` runs this in a second process while the first one builds
 the model: on a fresh installation numba compiles each kernel once (then
 loads it from its cache), and this way the two cores compile side by side.
+The shares do not overlap: the build compiles its own kernels (isovolume,
+decimation: needed within its first minute, before a second process could
+have them ready), this process the cut of the run side's warm-up slab, and
+the first process, once its build is done, the kernels that short cut
+misses (:func:`cutkit.simulate.warmup.warm_up_extras`).  A kernel two
+processes both compile costs its time twice: numba has no lock between
+processes.
 
     python -m cutkit.demo.warmup
 """
@@ -13,15 +20,11 @@ import subprocess
 import sys
 
 
-
 def warm_up() -> None:
-    """Decimate the run side's warm-up slab (the build's kernels), then cut it (the run's)."""
-    from cutkit.decimate import decimate
+    """This process's share: cut the run side's warm-up slab with its outputs, nothing else."""
     from cutkit.simulate.warmup import warm_up as warm_up_run
-    from cutkit.simulate.warmup import warm_up_model
 
-    decimate(warm_up_model(fixed_ends=False), ratio=0.7)
-    warm_up_run()
+    warm_up_run(extras=False)
 
 
 #: Kernel modules whose numba cache tells whether this installation has compiled the demo's

@@ -39,7 +39,7 @@ def warm_up_model(fixed_ends: bool = True):
                                                     prestrain=np.array([0.08])))
 
 
-def warm_up(outputs: bool = True, material_model: str | None = None) -> None:
+def warm_up(outputs: bool = True, material_model: str | None = None, extras: bool = True) -> None:
     """Cut the warm-up slab (:func:`warm_up_model`) along a short incision; nothing is kept.
 
     Parameters
@@ -48,6 +48,8 @@ def warm_up(outputs: bool = True, material_model: str | None = None) -> None:
         Also write frames and the cut model (their kernels).
     material_model : str, optional
         The tissue model to cut (``SimulateOptions.material_model``); default the model's.
+    extras : bool
+        Also :func:`warm_up_extras`: the kernels a large model's run calls that the short cut misses.
     """
     from cutkit.cutting.trajectory import straight_incision
     from cutkit.simulate import SimulateOptions, simulate
@@ -57,6 +59,15 @@ def warm_up(outputs: bool = True, material_model: str | None = None) -> None:
     with tempfile.TemporaryDirectory() as d:
         simulate(warm_up_model(), traj, d, SimulateOptions(frames=outputs, fps=2, write_model=outputs, hold_s=0.05,
                                                            settle_iterations=2, material_model=material_model))
+    if extras:
+        warm_up_extras()
+
+
+def warm_up_extras() -> None:
+    """The kernels a large model's run calls that :func:`warm_up`'s short cut misses: the resting
+    steps' conjugate gradients (:func:`warm_up_conjugate_gradients`) and those of
+    :func:`warm_up_missed_kernels`.  The short cut compiles hardly any of them (it shares the
+    element model's), so a second process can compile these beside it (``cutkit demo``)."""
     warm_up_conjugate_gradients()
     warm_up_missed_kernels()
 
