@@ -221,7 +221,7 @@ def blade_entry(points, surface, tree, p0, q0, p1, q1, flat_eps, point):
         quad[0, 0, d], quad[0, 1, d], quad[0, 2, d] = p0[d], q0[d], q1[d]
         quad[1, 0, d], quad[1, 1, d], quad[1, 2, d] = p0[d], q1[d], p1[d]
     faces, pts = np.empty(64, np.int64), np.empty((64, 3))
-    faces, pts, n = _swept_triangle(points, surface, tree, quad[0], flat_eps, faces, pts, 0)
+    faces, pts, n = _swept_triangle(points, surface, tree, quad[0], flat_eps, faces, pts, np.int64(0))  # one compile
     faces, pts, n = _swept_triangle(points, surface, tree, quad[1], flat_eps, faces, pts, n)
     if n + n_blade > faces.shape[0]:
         grown_f, grown_p = np.empty(n + n_blade, np.int64), np.empty((n + n_blade, 3))

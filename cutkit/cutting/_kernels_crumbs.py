@@ -40,6 +40,8 @@ Incidence = namedtuple("Incidence", "node_tet_off node_tet_idx def_nodes n_orig 
 
 #: States of a tet in one call, stored as ``mark[t] - base`` (below ``base``: not seen in this call).
 _GROWING, _LARGE, _CRUMB = 1, 2, 3
+# (passed as np.int64(_GROWING): a constant argument is typed as its literal, and numba would compile
+# _set_state and _set_block once for it and once for the states read from the marks)
 
 
 @njit(cache=True, nogil=True)
@@ -139,7 +141,7 @@ def _count_blocks(inc, marks, b, room):
     volume passes ``room``.  Returns (volume, large): ``large`` if one of them was found large before."""
     stack = marks[3]  # (B + 1,) int64 scratch: entry 0 how many blocks this growth counted, then they
     top = stack[0]
-    _set_block(marks, b, _GROWING)
+    _set_block(marks, b, np.int64(_GROWING))
     stack[0] += 1
     stack[stack[0]] = b
     volume = 0.0
@@ -155,7 +157,7 @@ def _count_blocks(inc, marks, b, room):
             if st == _LARGE:
                 return volume, True
             if st == 0:
-                _set_block(marks, d, _GROWING)
+                _set_block(marks, d, np.int64(_GROWING))
                 stack[0] += 1
                 stack[stack[0]] = d
     return volume, False
@@ -282,9 +284,9 @@ def _visit_uncut(X, tets, inc, alive, marks, t, q, hk, room):
         if st == _LARGE:
             return q, hk, 2, added
         if st == 0:
-            _set_state(marks, nb, _GROWING)
+            _set_state(marks, nb, np.int64(_GROWING))
             own = _rest_volume(X, tets[nb])
-            q, hk = _enqueue(q, hk, nb, True, own)
+            q, hk = _enqueue(q, hk, nb, np.bool_(True), own)  # np.bool_: one compile
             v, large = _join_volume(inc, marks, nb, own, room - added)
             added += v
             if large:
@@ -314,7 +316,7 @@ def _scan_nodes(X, tets, alive, inc, t, marks, q, hk, room):
                     continue
                 if _state(marks, c) == _LARGE:
                     return q, hk, True, added
-                _set_state(marks, c, _GROWING)
+                _set_state(marks, c, np.int64(_GROWING))
                 own = _rest_volume(X, tets[c])
                 q, hk = _enqueue(q, hk, c, c < m0, own)
                 w, large = _join_volume(inc, marks, c, own, room - added)
@@ -337,7 +339,7 @@ def _grow(X, tets, alive, inc, s, limit, marks, q, hk):
     """
     q[:, 0] = 0
     marks[3][0] = 0  # no block counted yet
-    _set_state(marks, s, _GROWING)
+    _set_state(marks, s, np.int64(_GROWING))
     own = _rest_volume(X, tets[s])
     q, hk = _enqueue(q, hk, s, s < inc.sub_count.shape[0], own)
     vol, large = _join_volume(inc, marks, s, own, limit)
@@ -385,7 +387,7 @@ def loose_small_pieces(X, tets, alive, inc, seeds, limit, mark, block_mark, base
     q = np.zeros((3, 256), np.int64)
     hk = np.zeros(256)
     out = np.empty(64, np.int64)
-    n_out = 0
+    n_out = np.int64(0)  # not the literal 0: _push compiles once
     n_pieces = 0
     for i in range(seeds.shape[0]):
         s = seeds[i]

@@ -87,7 +87,7 @@ def poor_tets(mesh, originals, below):
             if not mesh.alive[t]:
                 continue
             one[0] = mesh.tets[t]
-            tet_dihedrals(mesh.x, one, 0, normals, angles)
+            tet_dihedrals(mesh.x, one, np.int64(0), normals, angles)  # one compile
             if angles[0].min() < below:
                 tets[p] = t
                 owner[p] = o

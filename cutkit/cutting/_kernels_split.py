@@ -42,8 +42,8 @@ def _put(tris, corner, face, k, a, b, c, owner, lf):
 def _face_cut_edges(mask, lf):
     """How many of local face ``lf``'s edges ``mask`` cuts, its first cut and first uncut edge (-1: none)."""
     n_cut = 0
-    first_cut = -1
-    first_uncut = -1
+    first_cut = np.int64(-1)  # not the literal -1: the callees it is passed to compile once
+    first_uncut = np.int64(-1)
     for j in range(3):
         if mask >> FACE_EDGES[lf, j] & 1:
             n_cut += 1
@@ -163,7 +163,7 @@ def face_triangles(ct, o, mask, centre_nodes):
     corner = np.empty(MAX_FACE_TRIANGLES, np.int64)
     face = np.empty(MAX_FACE_TRIANGLES, np.int64)
     out = (tris, corner, face)
-    k = 0
+    k = np.int64(0)  # not the literal 0: the face kernels that take it compile once
     for lf in range(4):
         lc = TET_FACES[lf]  # local corners in outward cyclic order
         n_cut, first_cut, first_uncut = _face_cut_edges(mask, lf)

@@ -228,7 +228,7 @@ def push_all(state, counters, params):
     """
     ver, qkey, qlow, heap_key, heap_u, heap_stamp = state.queue
     costs = _all_best_costs(state.mesh, state.stars, params)
-    size = 0
+    size = np.int64(0)  # not the literal 0: heap_build compiles once
     for w in range(costs.shape[0]):
         ver[w] += 1
         qkey[w] = costs[w]
@@ -326,7 +326,7 @@ def _try_vertex(u, nc, cand, scratch, state, counters, params):
         # when popped).
         st = _new_stamp(counters)
         touched = np.empty(4 * n, np.int64)
-        nt = 0
+        nt = np.int64(0)  # not the literal 0: _requeue_touched compiles once
         for i in range(n):
             t = pool[s0 + i]
             for k in range(4):

@@ -119,7 +119,7 @@ def heap_push(k, x, st, key, u, stamp, ver, counters):
     """Push ``(k, x, st)``; a full heap is first purged of stale entries."""
     size = counters[C_HEAP_SIZE]
     if size == key.shape[0]:
-        kept = 0
+        kept = np.int64(0)  # not the literal 0: heap_build compiles once
         for i in range(size):
             if stamp[i] == ver[u[i]]:
                 key[kept] = key[i]
@@ -153,5 +153,5 @@ def heap_pop(key, u, stamp, counters):
     u[0] = u[size]
     stamp[0] = stamp[size]
     counters[C_HEAP_SIZE] = size
-    _sift_down(key, u, stamp, 0, size)
+    _sift_down(key, u, stamp, np.int64(0), size)  # one compile, not one for the literal
     return k0, x0, s0

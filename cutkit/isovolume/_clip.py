@@ -242,8 +242,8 @@ def _clip_side(x, lab, on, label, cell, sets, n):
             no += 1
     if ni == 0:
         return n
-    if no == 0:
-        return _emit(0, 1, 2, 3, label, cell, n)
+    if no == 0:  # np.int64: one compile of _emit, not one per literal (docs/performance.md, "Compiling")
+        return _emit(np.int64(0), np.int64(1), np.int64(2), np.int64(3), label, cell, n)
     if ni == 1:
         i0 = ins[0]
         if no == 3:
@@ -283,6 +283,7 @@ def _cone(lab, cell, n):
     tet are cones that match up between the labels.
     """
     key = cell.key
+    centre = np.int64(10)  # the local centre node, not a literal: one compile of _emit
     for o in range(4):
         a = (o + 1) % 4
         b = (o + 2) % 4
@@ -292,17 +293,17 @@ def _cone(lab, cell, n):
         lc = lab[c]
         if la == lb and lb == lc:
             if la != 0:
-                n = _emit(10, a, b, c, la, cell, n)
+                n = _emit(centre, a, b, c, la, cell, n)
         elif la != lb and lb != lc and la != lc:
             eab = 4 + LOCAL_EDGE[a, b]
             ebc = 4 + LOCAL_EDGE[b, c]
             eca = 4 + LOCAL_EDGE[c, a]
             if la != 0:
-                n = _emit(10, a, eab, eca, la, cell, n)
+                n = _emit(centre, a, eab, eca, la, cell, n)
             if lb != 0:
-                n = _emit(10, b, ebc, eab, lb, cell, n)
+                n = _emit(centre, b, ebc, eab, lb, cell, n)
             if lc != 0:
-                n = _emit(10, c, eca, ebc, lc, cell, n)
+                n = _emit(centre, c, eca, ebc, lc, cell, n)
             # the middle goes to the tissue corner of smallest key: never to
             # the background, so a tissue triple junction does not pinch the
             # outer surface
@@ -313,7 +314,7 @@ def _cone(lab, cell, n):
                     lm = lab[v]
                     km = key[v]
             if lm != 0:
-                n = _emit(10, eab, ebc, eca, lm, cell, n)
+                n = _emit(centre, eab, ebc, eca, lm, cell, n)
         else:
             # y is the odd corner, x0 x1 the pair
             if la == lb:
@@ -325,15 +326,15 @@ def _cone(lab, cell, n):
             e0 = 4 + LOCAL_EDGE[y, x0]
             e1 = 4 + LOCAL_EDGE[y, x1]
             if lab[y] != 0:
-                n = _emit(10, y, e0, e1, lab[y], cell, n)
+                n = _emit(centre, y, e0, e1, lab[y], cell, n)
             lx = lab[x0]
             if lx != 0:
                 if _quad(x0, x1, e1, e0, key):
-                    n = _emit(10, x0, x1, e1, lx, cell, n)
-                    n = _emit(10, x0, e1, e0, lx, cell, n)
+                    n = _emit(centre, x0, x1, e1, lx, cell, n)
+                    n = _emit(centre, x0, e1, e0, lx, cell, n)
                 else:
-                    n = _emit(10, x1, e1, e0, lx, cell, n)
-                    n = _emit(10, x1, e0, x0, lx, cell, n)
+                    n = _emit(centre, x1, e1, e0, lx, cell, n)
+                    n = _emit(centre, x1, e0, x0, lx, cell, n)
     return n
 
 

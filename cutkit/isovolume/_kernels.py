@@ -201,10 +201,12 @@ def _cube_pieces(i, j, k, dims, field, scratch):
                     new = False
             if new:
                 nlab += 1
-        m = 0
+        # np.int64: a constant argument is typed as its literal, and numba compiles a callee once
+        # for each literal it is called with (docs/performance.md, "Compiling")
+        m = np.int64(0)
         if nlab == 1:
             if tlab[0] != 0:
-                m = _emit(0, 1, 2, 3, tlab[0], cell, 0)
+                m = _emit(np.int64(0), np.int64(1), np.int64(2), np.int64(3), tlab[0], cell, m)
         else:
             for e in range(6):
                 a = EDGE_A[e]
